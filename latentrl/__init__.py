@@ -1,0 +1,3 @@
+"""latentrl: RL controllers whose actions are the latent noise of a frozen DART motion model."""
+
+__version__ = "0.1.0"

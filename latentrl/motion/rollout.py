@@ -1,0 +1,314 @@
+"""MotionModel: the frozen DART runtime, (history, text, noise) -> frames, history, world joints.
+
+One call of :meth:`MotionModel.sample_primitive` is what one RL env step costs: 10 denoiser
+passes, each a single batched forward of size 2B for classifier-free guidance (conditional and
+unconditional halves; DART runs them as two passes), then one VAE decode.
+
+Frames of reference: ``history`` and ``future`` are **canonical** (the frame of the history's
+first frame) and **unnormalized**; :class:`RolloutState` carries the canonical-to-world transform
+so rollouts of any length come back in world coordinates (metres, z up).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from latentrl.errors import LatentRLError, TextError
+from latentrl.motion.canonical import WorldTransform, canonicalize
+from latentrl.motion.denoiser import Denoiser
+from latentrl.motion.diffusion import DiffusionConfig, GaussianDiffusion
+from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, Normalizer, joints_of
+from latentrl.motion.text import TextEncoder
+from latentrl.motion.vae import PrimitiveVAE
+
+
+class PrimitiveSample(NamedTuple):
+    """Result of sampling one primitive."""
+
+    latent: torch.Tensor  # (B, 1, D) clean latent from the sampler (unit-variance space)
+    future: torch.Tensor  # (B, 8, 276) unnormalized, canonical frame of the history
+    future_normalized: torch.Tensor  # (B, 8, 276)
+
+
+class RolloutState(NamedTuple):
+    """Per-sequence state between primitives."""
+
+    history: torch.Tensor  # (B, 2, 276) unnormalized canonical history
+    world: WorldTransform  # canonical -> world
+
+
+class StepResult(NamedTuple):
+    """One autoregressive step."""
+
+    future: torch.Tensor  # (B, 8, 276) canonical frame of the *previous* state's history
+    joints_world: torch.Tensor  # (B, 8, 22, 3) metres, z up
+    latent: torch.Tensor  # (B, 1, D)
+    state: RolloutState  # the next state (last 2 future frames, re-canonicalized)
+
+
+class Rollout(NamedTuple):
+    """A whole rollout: seed frames followed by 8 frames per step."""
+
+    joints_world: torch.Tensor  # (B, 2 + 8 S, 22, 3)
+    latents: torch.Tensor  # (S, B, 1, D)
+    state: RolloutState  # final state, to continue
+
+
+class MotionModel(nn.Module):
+    """Frozen VAE + denoiser + diffusion + normalization + text encoder, ready to sample.
+
+    Args:
+        vae: the primitive VAE (eval mode, frozen).
+        denoiser: the latent denoiser.
+        diffusion_config: schedule; sampling visits ``respacing`` (default: all steps, DART's ddim10).
+        normalizer: mean/std of the 276-D frames.
+        text_encoder: prompt encoder, or ``None`` when the model ships no text table.
+        rescale_latent: decode ``z * latent_std`` (DART's ``rescale_latent``).
+        pelvis_delta: (3,) rest pelvis offset (``pelvis = transl + pelvis_delta``), or ``None``.
+        seed_history: (K, 2, 276) canonical seed histories for resets, or ``None``.
+        info: provenance (source path, content hash, training metadata).
+    """
+
+    def __init__(
+        self,
+        vae: PrimitiveVAE,
+        denoiser: Denoiser,
+        diffusion_config: DiffusionConfig,
+        normalizer: Normalizer,
+        text_encoder: TextEncoder | None = None,
+        rescale_latent: bool = True,
+        pelvis_delta: torch.Tensor | None = None,
+        seed_history: torch.Tensor | None = None,
+        info: dict | None = None,
+    ):
+        super().__init__()
+        self.vae = vae.eval().requires_grad_(False)
+        self.denoiser = denoiser.eval().requires_grad_(False)
+        self.diffusion_config = diffusion_config
+        self.diffusion = GaussianDiffusion(diffusion_config)
+        self.register_buffer("mean", normalizer.mean.clone())
+        self.register_buffer("std", normalizer.std.clone())
+        self.text_encoder = text_encoder
+        self.rescale_latent = bool(rescale_latent)
+        self.register_buffer("pelvis_delta", None if pelvis_delta is None else torch.as_tensor(pelvis_delta).float())
+        self.register_buffer("seed_history", None if seed_history is None else torch.as_tensor(seed_history).float())
+        self.info = dict(info or {})
+        self.amp_dtype: torch.dtype | None = None
+        self._text_cache: dict[str, torch.Tensor] = {}
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def device(self) -> torch.device:
+        return self.mean.device
+
+    @property
+    def latent_shape(self) -> tuple[int, int]:
+        """(tokens, width) of the latent = the RL action shape."""
+        return tuple(self.denoiser.config.noise_shape)
+
+    @property
+    def latent_dim(self) -> int:
+        return self.latent_shape[0] * self.latent_shape[1]
+
+    @property
+    def text_dim(self) -> int:
+        return self.denoiser.config.clip_dim
+
+    @property
+    def normalizer(self) -> Normalizer:
+        return Normalizer(self.mean, self.std).to(self.device)
+
+    def set_respacing(self, respacing: str) -> None:
+        """Visit fewer diffusion steps when sampling ('' = all, 'ddim5', ...)."""
+        cfg = DiffusionConfig(**{**self.diffusion_config.__dict__, "respacing": respacing})
+        self.diffusion = GaussianDiffusion(cfg)
+
+    # ------------------------------------------------------------------ text
+    def encode_text(self, texts: Sequence[str]) -> torch.Tensor:
+        """(N,) prompts -> (N, E) embeddings on the model's device (cached per prompt)."""
+        if isinstance(texts, str):
+            texts = [texts]
+        missing = [t for t in dict.fromkeys(texts) if t not in self._text_cache]
+        if missing:
+            if self.text_encoder is None:
+                raise TextError("this motion model has no text encoder or table; pass text embeddings directly")
+            vecs = self.text_encoder.encode(missing)
+            if vecs.shape[-1] != self.text_dim:
+                raise TextError(
+                    f"text encoder '{self.text_encoder.name}' gives {vecs.shape[-1]} dims, "
+                    f"the denoiser expects {self.text_dim}"
+                )
+            self._text_cache.update(zip(missing, vecs.float()))
+        return torch.stack([self._text_cache[t] for t in texts]).to(self.device)
+
+    # ------------------------------------------------------------------ sampling
+    def _autocast(self):
+        if self.amp_dtype is not None and self.device.type == "cuda":
+            return torch.autocast("cuda", dtype=self.amp_dtype)
+        return contextlib.nullcontext()
+
+    def _check_inputs(self, history: torch.Tensor, text_embedding: torch.Tensor, noise: torch.Tensor) -> None:
+        b = history.shape[0]
+        if history.shape[1:] != (HISTORY_LENGTH, FEATURE_DIM):
+            raise ValueError(f"history must be (B, {HISTORY_LENGTH}, {FEATURE_DIM}), got {tuple(history.shape)}")
+        if text_embedding.shape != (b, self.text_dim):
+            raise ValueError(f"text_embedding must be ({b}, {self.text_dim}), got {tuple(text_embedding.shape)}")
+        if noise.shape != (b, *self.latent_shape):
+            raise ValueError(
+                f"noise must be ({b}, {self.latent_shape[0]}, {self.latent_shape[1]}), got {tuple(noise.shape)}"
+            )
+
+    @torch.inference_mode()
+    def sample_primitive(
+        self,
+        history: torch.Tensor,
+        text_embedding: torch.Tensor,
+        noise: torch.Tensor,
+        guidance_scale: float | torch.Tensor = 5.0,
+        sampler: str = "ddim",
+        step_noise: torch.Tensor | None = None,
+        generator: torch.Generator | None = None,
+        trace: list | None = None,
+    ) -> PrimitiveSample:
+        """Sample the next 8 frames.
+
+        Args:
+            history: (B, 2, 276) unnormalized canonical history.
+            text_embedding: (B, E); zero rows mean "no text".
+            noise: (B, 1, D) initial latent x_T (the RL action); DDIM maps it deterministically.
+            guidance_scale: classifier-free guidance w (float or (B,) tensor); 1 disables the
+                unconditional half (same result, half the work).
+            sampler: 'ddim' (eta 0) or 'ddpm'.
+            step_noise: (T, B, 1, D) DDPM per-step noises (else drawn from ``generator``).
+            trace: optional list receiving ``(t, x_t, x0_pred)`` per step.
+        """
+        self._check_inputs(history, text_embedding, noise)
+        with self._autocast():
+            history_n = (history - self.mean) / self.std
+            latent = self._denoise(
+                history_n, text_embedding, noise, guidance_scale, sampler, step_noise, generator, trace
+            )
+            future_n = self.vae.decode(latent, history_n, FUTURE_LENGTH, scale_latent=self.rescale_latent)
+        future_n = future_n.float()
+        return PrimitiveSample(latent.float(), future_n * self.std + self.mean, future_n)
+
+    def _denoise(self, history_n, text, noise, guidance_scale, sampler, step_noise, generator, trace):
+        b = history_n.shape[0]
+        scale_is_one = isinstance(guidance_scale, (int, float)) and guidance_scale == 1.0
+        if scale_is_one:
+            cond = self.denoiser.condition(history_n, text)
+
+            def model_fn(x, t):
+                return self.denoiser.denoise(x, t, cond)
+        else:
+            w = torch.as_tensor(guidance_scale, dtype=noise.dtype, device=noise.device).reshape(-1, 1, 1)
+            cond2 = self.denoiser.condition(
+                torch.cat((history_n, history_n)), torch.cat((text, torch.zeros_like(text)))
+            )
+
+            def model_fn(x, t):
+                out = self.denoiser.denoise(torch.cat((x, x)), t, cond2)
+                c, u = out[:b], out[b:]
+                return u + w * (c - u)
+
+        return self.diffusion.sample_loop(
+            model_fn, noise, sampler=sampler, step_noise=step_noise, generator=generator, trace=trace
+        )
+
+    # ------------------------------------------------------------------ rollout
+    def initial_state(
+        self, batch: int, generator: torch.Generator | None = None, seed_index: torch.Tensor | None = None
+    ) -> RolloutState:
+        """Reset state: a seed history per sequence.
+
+        The world starts at the pelvis xy origin facing +y, shifted up so the lowest joint touches
+        the floor (z = 0), as DART's env does.
+        """
+        if self.seed_history is None:
+            raise LatentRLError(
+                "this motion model has no seed history; load one with seed_history=... "
+                "(see docs/motion.md) or pass a history to rollout_step"
+            )
+        if seed_index is None:
+            seed_index = torch.randint(
+                self.seed_history.shape[0],
+                (batch,),
+                generator=generator,
+                device=generator.device if generator is not None else "cpu",
+            )
+        history = self.seed_history[seed_index.to(self.device)]
+        world = WorldTransform.identity(batch, self.device)
+        lowest = joints_of(history)[..., 2].amin(dim=(1, 2))
+        world = WorldTransform(world.rotation, torch.stack((torch.zeros_like(lowest),) * 2 + (-lowest,), dim=-1))
+        return RolloutState(history, world)
+
+    def rollout_step(
+        self,
+        state: RolloutState,
+        text_embedding: torch.Tensor,
+        noise: torch.Tensor,
+        guidance_scale: float | torch.Tensor = 5.0,
+        sampler: str = "ddim",
+        generator: torch.Generator | None = None,
+    ) -> StepResult:
+        """Sample one primitive, place it in the world, and re-canonicalize its last 2 frames."""
+        if self.pelvis_delta is None:
+            raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")
+        sample = self.sample_primitive(
+            state.history, text_embedding, noise, guidance_scale, sampler, generator=generator
+        )
+        with torch.inference_mode():
+            joints_world = state.world.apply(joints_of(sample.future))
+            history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
+            world = state.world.compose(rotation, origin)
+        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world))
+
+    def rollout(
+        self,
+        texts: Sequence[str] | Sequence[Sequence[str]],
+        num_steps: int,
+        batch: int = 1,
+        noise: torch.Tensor | None = None,
+        generator: torch.Generator | None = None,
+        guidance_scale: float = 5.0,
+        state: RolloutState | None = None,
+    ) -> Rollout:
+        """Autoregressive rollout.
+
+        Args:
+            texts: one prompt for everything, a list with one prompt per step, or per step a list
+                of ``batch`` prompts.
+            num_steps: primitives to generate (8 frames each).
+            noise: (S, B, 1, D) initial latents per step; N(0, I) from ``generator`` if omitted.
+        """
+        if isinstance(texts, str):
+            texts = [texts] * num_steps
+        if len(texts) != num_steps:
+            raise ValueError(f"got {len(texts)} step prompts for {num_steps} steps")
+        state = state or self.initial_state(batch, generator)
+        frames = [state.world.apply(joints_of(state.history))]
+        latents = []
+        for step in range(num_steps):
+            prompts = texts[step]
+            prompts = [prompts] * batch if isinstance(prompts, str) else list(prompts)
+            emb = self.encode_text(prompts)
+            x_t = (
+                noise[step]
+                if noise is not None
+                else torch.randn(
+                    batch,
+                    *self.latent_shape,
+                    generator=generator,
+                    device=generator.device if generator is not None else "cpu",
+                ).to(self.device)
+            )
+            out = self.rollout_step(state, emb, x_t, guidance_scale)
+            frames.append(out.joints_world)
+            latents.append(out.latent)
+            state = out.state
+        return Rollout(torch.cat(frames, dim=1), torch.stack(latents), state)

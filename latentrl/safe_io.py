@@ -1,0 +1,194 @@
+"""Loading files from strangers without executing them, and writing files atomically.
+
+- :func:`load_torch` wraps ``torch.load(weights_only=True)`` (tensors and plain containers only).
+- :func:`load_pickle` reads DART's pickles (mean/std tuples, text-embedding tables) through a
+  restricted unpickler that admits tensors, numpy arrays and plain containers, nothing else.
+- :func:`load_tyro_yaml` parses DART's ``args.yaml`` (YAML text inside YAML, with tyro and python
+  tags) into plain dicts, lists and strings without constructing any Python object.
+- :func:`atomic_write_bytes` / :func:`save_torch_atomic` write to a temporary file in the same
+  folder, fsync, then ``os.replace`` it: a reader sees the old file or the new one, never half.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import pickle
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+
+from latentrl.errors import CheckpointError
+
+
+# --------------------------------------------------------------------------- torch files
+def load_torch(path: str | Path, map_location: str | torch.device = "cpu", what: str = "checkpoint") -> Any:
+    """``torch.load(path, weights_only=True)`` with one-line errors naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{what} file not found: {path}")
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise CheckpointError(
+            f"{path}: refused to load: the file holds Python objects other than tensors and plain "
+            f"containers (weights_only=True): {first[:200]}"
+        ) from None
+    except (RuntimeError, EOFError, OSError, ValueError, KeyError, AttributeError) as exc:
+        raise CheckpointError(f"{path}: not a readable torch file (corrupt or truncated?): {str(exc)[:200]}") from None
+
+
+def save_torch_atomic(obj: Any, path: str | Path) -> Path:
+    """``torch.save`` to a temporary sibling, fsync, then rename over ``path``."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (same-folder temp file + fsync + ``os.replace``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+# --------------------------------------------------------------------------- pickles
+def _tensor_from_legacy_bytes(data: bytes) -> Any:
+    """Stand-in for ``torch.storage._load_from_bytes`` that refuses code (weights_only)."""
+    return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+
+
+_ALLOWED: dict[tuple[str, str], Any] = {
+    ("collections", "OrderedDict"): __import__("collections").OrderedDict,
+    ("torch._utils", "_rebuild_tensor_v2"): torch._utils._rebuild_tensor_v2,
+    ("torch.storage", "_load_from_bytes"): _tensor_from_legacy_bytes,
+    ("numpy.core.multiarray", "_reconstruct"): None,
+    ("numpy._core.multiarray", "_reconstruct"): None,
+    ("numpy", "ndarray"): np.ndarray,
+    ("numpy", "dtype"): np.dtype,
+    ("numpy.core.multiarray", "scalar"): None,
+    ("numpy._core.multiarray", "scalar"): None,
+    ("builtins", "set"): set,
+    ("builtins", "frozenset"): frozenset,
+    ("builtins", "tuple"): tuple,
+    ("builtins", "list"): list,
+    ("builtins", "dict"): dict,
+    ("builtins", "complex"): complex,
+    ("_codecs", "encode"): None,
+}
+
+
+def _numpy_attr(module: str, name: str):
+    import importlib
+
+    try:
+        return getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError):
+        alt = (
+            module.replace("numpy._core", "numpy.core")
+            if "_core" in module
+            else module.replace("numpy.core", "numpy._core")
+        )
+        return getattr(importlib.import_module(alt), name)
+
+
+class _RestrictedUnpickler(pickle.Unpickler):
+    def find_class(self, module: str, name: str):
+        key = (module, name)
+        if key not in _ALLOWED:
+            raise pickle.UnpicklingError(f"global '{module}.{name}' is not allowed")
+        obj = _ALLOWED[key]
+        if obj is None:
+            if module == "_codecs":
+                import codecs
+
+                return codecs.encode
+            return _numpy_attr(module, name)
+        return obj
+
+    def persistent_load(self, pid):
+        raise pickle.UnpicklingError("persistent ids are not allowed in plain pickles")
+
+
+def load_pickle(path: str | Path, what: str = "pickle") -> Any:
+    """Read a pickle that may hold only tensors, numpy arrays and plain containers."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{what} file not found: {path}")
+    try:
+        with open(path, "rb") as f:
+            return _RestrictedUnpickler(f).load()
+    except pickle.UnpicklingError as exc:
+        raise CheckpointError(
+            f"{path}: refused to unpickle: {exc} (only tensors, numpy arrays and plain containers are accepted)"
+        ) from None
+    except (EOFError, ValueError, TypeError, RuntimeError, ImportError) as exc:
+        raise CheckpointError(f"{path}: not a readable pickle (corrupt or truncated?): {str(exc)[:200]}") from None
+
+
+# --------------------------------------------------------------------------- YAML
+class _PlainLoader(yaml.SafeLoader):
+    """SafeLoader that turns tyro/python tags into plain data instead of objects."""
+
+
+def _tagged_mapping(loader: _PlainLoader, suffix: str, node: yaml.Node) -> Any:
+    if isinstance(node, yaml.MappingNode):
+        return loader.construct_mapping(node, deep=True)
+    if isinstance(node, yaml.SequenceNode):
+        return loader.construct_sequence(node, deep=True)
+    return loader.construct_scalar(node)
+
+
+def _python_tag(loader: _PlainLoader, suffix: str, node: yaml.Node) -> Any:
+    if suffix == "tuple":
+        return list(loader.construct_sequence(node, deep=True))
+    if suffix.startswith("object/apply:pathlib") and isinstance(node, yaml.SequenceNode):
+        parts = loader.construct_sequence(node, deep=True)
+        return str(Path(*[str(p) for p in parts])) if parts else ""
+    return _tagged_mapping(loader, suffix, node)
+
+
+_PlainLoader.add_multi_constructor("!", _tagged_mapping)
+_PlainLoader.add_multi_constructor("tag:yaml.org,2002:python/", _python_tag)
+
+
+def load_plain_yaml(text: str, source: str = "<yaml>") -> Any:
+    """Parse YAML into plain Python data; unknown tags become plain values, never objects."""
+    try:
+        return yaml.load(text, Loader=_PlainLoader)  # noqa: S506 - loader builds plain data only
+    except yaml.YAMLError as exc:
+        raise CheckpointError(f"{source}: invalid YAML: {str(exc).splitlines()[0]}") from None
+
+
+def load_tyro_yaml(path: str | Path) -> dict:
+    """DART's ``args.yaml``: a YAML string holding tyro YAML, parsed to nested dicts."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"args file not found: {path}")
+    outer = load_plain_yaml(path.read_text(encoding="utf-8"), str(path))
+    data = load_plain_yaml(outer, str(path)) if isinstance(outer, str) else outer
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{path}: expected a mapping of DART arguments, got {type(data).__name__}")
+    return data

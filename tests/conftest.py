@@ -1,0 +1,26 @@
+import os
+from pathlib import Path
+
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("LATENTRL_SHARED", ROOT.parent / "shared"))
+PARITY = SHARED / "reference" / "dart_parity_A"
+
+torch.set_num_threads(min(2, torch.get_num_threads()))
+
+
+@pytest.fixture(scope="session")
+def parity_dir() -> Path:
+    if not (PARITY / "expected.pt").is_file():
+        pytest.skip(f"DART parity data not found at {PARITY} (set LATENTRL_SHARED to the shared folder)")
+    return PARITY
+
+
+@pytest.fixture(scope="session")
+def tiny_model():
+    """A small random-weight motion model with a hashed text encoder and a synthetic seed."""
+    from tests.helpers import make_tiny_model
+
+    return make_tiny_model()

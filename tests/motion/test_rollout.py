@@ -1,0 +1,70 @@
+import pytest
+import torch
+
+from latentrl.motion.representation import SLICES, joints_of
+
+
+def test_sample_shapes_and_dtypes(tiny_model):
+    b = 3
+    hist = tiny_model.seed_history.expand(b, -1, -1)
+    text = tiny_model.encode_text(["walk", "run", "walk"])
+    noise = torch.randn(b, 1, 16)
+    out = tiny_model.sample_primitive(hist, text, noise)
+    assert out.latent.shape == (b, 1, 16) and out.future.shape == (b, 8, 276)
+    assert out.future.dtype == torch.float32 and torch.isfinite(out.future).all()
+
+
+def test_deterministic_for_given_noise(tiny_model):
+    hist = tiny_model.seed_history.expand(2, -1, -1)
+    text = tiny_model.encode_text(["walk", "run"])
+    noise = torch.randn(2, 1, 16, generator=torch.Generator().manual_seed(4))
+    a = tiny_model.sample_primitive(hist, text, noise)
+    b = tiny_model.sample_primitive(hist, text, noise)
+    assert torch.equal(a.future, b.future)
+
+
+def test_batch_rows_are_independent(tiny_model):
+    hist = tiny_model.seed_history.expand(4, -1, -1)
+    text = tiny_model.encode_text(["walk", "run", "hop on left leg", "walk"])
+    noise = torch.randn(4, 1, 16, generator=torch.Generator().manual_seed(5))
+    full = tiny_model.sample_primitive(hist, text, noise)
+    one = tiny_model.sample_primitive(hist[2:3], text[2:3], noise[2:3])
+    torch.testing.assert_close(full.future[2:3], one.future, atol=1e-5, rtol=1e-5)
+
+
+def test_rollout_step_recanonicalizes_and_tracks_world(tiny_model):
+    state = tiny_model.initial_state(2, seed_index=torch.tensor([0, 0]))
+    # lowest seed joint is on the floor in world coordinates
+    seed_world = state.world.apply(joints_of(state.history))
+    assert seed_world[..., 2].amin().abs() < 1e-5
+    text = tiny_model.encode_text(["walk", "walk"])
+    step = tiny_model.rollout_step(state, text, torch.randn(2, 1, 16))
+    assert step.joints_world.shape == (2, 8, 22, 3)
+    # new history: pelvis at canonical origin, same world joints as the last two future frames
+    torch.testing.assert_close(joints_of(step.state.history)[:, 0, 0], torch.zeros(2, 3), atol=1e-5, rtol=0)
+    torch.testing.assert_close(
+        step.state.world.apply(joints_of(step.state.history)), step.joints_world[:, -2:], atol=1e-5, rtol=0
+    )
+
+
+def test_rollout_length_and_reproducibility(tiny_model):
+    g1, g2 = torch.Generator().manual_seed(9), torch.Generator().manual_seed(9)
+    a = tiny_model.rollout(["walk", "run", "walk"], num_steps=3, batch=2, generator=g1)
+    b = tiny_model.rollout(["walk", "run", "walk"], num_steps=3, batch=2, generator=g2)
+    assert a.joints_world.shape == (2, 2 + 8 * 3, 22, 3)
+    assert torch.equal(a.joints_world, b.joints_world)
+
+
+def test_bad_shapes_are_clear_errors(tiny_model):
+    hist = tiny_model.seed_history
+    text = tiny_model.encode_text(["walk"])
+    with pytest.raises(ValueError, match=r"noise must be \(1, 1, 16\)"):
+        tiny_model.sample_primitive(hist, text, torch.randn(1, 16))
+    with pytest.raises(ValueError, match="text_embedding must be"):
+        tiny_model.sample_primitive(hist, torch.zeros(1, 7), torch.randn(1, 1, 16))
+
+
+def test_pelvis_delta_from_seed_matches(tiny_model):
+    seed = tiny_model.seed_history[0, 0]
+    d = seed[SLICES["joints"]][:3] - seed[SLICES["transl"]]
+    torch.testing.assert_close(d, tiny_model.pelvis_delta, atol=1e-5, rtol=0)
