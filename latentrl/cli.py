@@ -29,6 +29,28 @@ def _motion_commands(sub) -> None:
     info.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
     info.set_defaults(func=lambda a: _call("latentrl.motion.commands", "info", a))
 
+    sample = msub.add_parser("sample", help="roll a motion model out over a text timeline; write .npz (and .gif)")
+    sample.add_argument("--motion", default="default", help="'default', a latentrl model file, or a DART checkpoint")
+    sample.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
+    sample.add_argument("--text", action="append", help="prompt; repeat to chain prompts, each gets an equal share")
+    sample.add_argument("--seconds", type=float, default=10.0, help="length of the motion")
+    sample.add_argument("--seed", type=int, default=0, help="random seed (noise and seed-history choice)")
+    sample.add_argument("--guidance", type=float, default=5.0, help="classifier-free guidance scale")
+    sample.add_argument("--batch", type=int, default=1, help="number of motions (files get _<i> suffixes)")
+    sample.add_argument("--device", default="cpu")
+    sample.add_argument("--out", default="motion.npz", help="output .npz (shared motion format)")
+    sample.add_argument("--render", help="also write a skeleton animation (.gif)")
+    sample.set_defaults(func=lambda a: _call("latentrl.motion.commands", "sample", a))
+
+    train = msub.add_parser("train", help="train a motion model (VAE, then denoiser) from a YAML config")
+    train.add_argument("config", nargs="?", help="YAML config (e.g. configs/motion/default.yaml)")
+    train.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
+    train.add_argument("--run-dir", help="run directory (default: runs/motion-<time>)")
+    train.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its last checkpoint")
+    train.add_argument("--out", help="where to write the model (default: <run_dir>/motion_model.pt)")
+    train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    train.set_defaults(func=lambda a: _call("latentrl.motion.trainer", "train_command", a))
+
 
 def _bench_commands(sub) -> None:
     bench = sub.add_parser("bench", help="measure speed and quality; figures go to --json")
@@ -48,6 +70,15 @@ def _bench_commands(sub) -> None:
     roll.add_argument("--dart-bench", default=None, help="path to dart_peer_bench.py (default: ../shared/tools)")
     roll.add_argument("--json", help="write all figures to this JSON file")
     roll.set_defaults(func=lambda a: _call("latentrl.bench", "bench_rollout", a))
+
+    motion = bsub.add_parser("motion", help="stability and text control of a motion model vs. its training data")
+    motion.add_argument("--motion", default="default", help="'default' or a model file")
+    motion.add_argument("--seconds", type=float, default=60.0, help="rollout length per prompt")
+    motion.add_argument("--batch", type=int, default=8, help="rollouts per prompt")
+    motion.add_argument("--guidance", type=float, default=5.0)
+    motion.add_argument("--seed", type=int, default=0)
+    motion.add_argument("--json", help="write all figures to this JSON file")
+    motion.set_defaults(func=lambda a: _call("latentrl.bench", "bench_motion", a))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -26,3 +26,47 @@ def info(args: argparse.Namespace) -> int:
     seeds = None if model.seed_history is None else model.seed_history.shape[0]
     print(f"seeds:       {seeds}")
     return 0
+
+
+def sample(args: argparse.Namespace) -> int:
+    """``latentrl motion sample``: roll the model out over a text timeline; write .npz (and a GIF)."""
+    import math
+
+    import torch
+
+    from latentrl.errors import ConfigError
+    from latentrl.render import render_gif, save_motion_npz
+
+    if args.seconds <= 0 or args.seconds > 3600:
+        raise ConfigError(f"--seconds must be in (0, 3600], got {args.seconds}")
+    if args.batch < 1:
+        raise ConfigError(f"--batch must be >= 1, got {args.batch}")
+    model = load_motion_model(args.motion, seed_history=args.seed_history, device=args.device)
+    texts = args.text or ["walk"]
+    model.encode_text(texts)  # fail early on unknown prompts
+    steps = max(1, math.ceil(args.seconds * 30 / 8))
+    # each text gets an equal share of the steps, in the order given
+    per_step = [texts[min(len(texts) - 1, i * len(texts) // steps)] for i in range(steps)]
+    g = torch.Generator().manual_seed(args.seed)
+    roll = model.rollout(per_step, steps, batch=args.batch, generator=g, guidance_scale=args.guidance)
+    frame_texts = [""] * 2 + [t for t in per_step for _ in range(8)]
+    primitive = [-1] * 2 + [i for i in range(steps) for _ in range(8)]
+    out = args.out
+    for b in range(args.batch):
+        path = out if args.batch == 1 else out.replace(".npz", f"_{b}.npz")
+        save_motion_npz(
+            path,
+            roll.joints_world[b].cpu(),
+            texts=frame_texts,
+            features=roll.features_world[b].cpu(),
+            actions=roll.noise[:, b, 0].cpu(),
+            primitive=primitive,
+            seed=args.seed,
+            guidance_scale=args.guidance,
+            motion_model=model.info.get("sha256", ""),
+        )
+        print(f"wrote {path} ({roll.joints_world.shape[1]} frames, {roll.joints_world.shape[1] / 30:.1f} s)")
+    if args.render:
+        render_gif(args.render, roll.joints_world[0].cpu().numpy(), texts=frame_texts)
+        print(f"wrote {args.render}")
+    return 0

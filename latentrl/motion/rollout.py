@@ -19,7 +19,7 @@ import torch
 from torch import nn
 
 from latentrl.errors import LatentRLError, TextError
-from latentrl.motion.canonical import WorldTransform, canonicalize
+from latentrl.motion.canonical import WorldTransform, canonicalize, features_to_world
 from latentrl.motion.denoiser import Denoiser
 from latentrl.motion.diffusion import DiffusionConfig, GaussianDiffusion
 from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, Normalizer, joints_of
@@ -52,10 +52,12 @@ class StepResult(NamedTuple):
 
 
 class Rollout(NamedTuple):
-    """A whole rollout: seed frames followed by 8 frames per step."""
+    """A whole rollout: the 2 seed frames followed by 8 frames per step."""
 
-    joints_world: torch.Tensor  # (B, 2 + 8 S, 22, 3)
-    latents: torch.Tensor  # (S, B, 1, D)
+    joints_world: torch.Tensor  # (B, 2 + 8 S, 22, 3) metres, z up
+    features_world: torch.Tensor  # (B, 2 + 8 S, 276) unnormalized, world frame
+    noise: torch.Tensor  # (S, B, 1, D) initial latents used (the actions)
+    latents: torch.Tensor  # (S, B, 1, D) clean latents
     state: RolloutState  # final state, to continue
 
 
@@ -291,24 +293,23 @@ class MotionModel(nn.Module):
         if len(texts) != num_steps:
             raise ValueError(f"got {len(texts)} step prompts for {num_steps} steps")
         state = state or self.initial_state(batch, generator)
-        frames = [state.world.apply(joints_of(state.history))]
-        latents = []
+        with torch.inference_mode():
+            joints = [state.world.apply(joints_of(state.history))]
+            feats = [features_to_world(state.history, state.world, self.pelvis_delta)]
+        latents, noises = [], []
         for step in range(num_steps):
             prompts = texts[step]
             prompts = [prompts] * batch if isinstance(prompts, str) else list(prompts)
             emb = self.encode_text(prompts)
-            x_t = (
-                noise[step]
-                if noise is not None
-                else torch.randn(
-                    batch,
-                    *self.latent_shape,
-                    generator=generator,
-                    device=generator.device if generator is not None else "cpu",
-                ).to(self.device)
-            )
+            x_t = noise[step] if noise is not None else torch.randn(
+                batch, *self.latent_shape, generator=generator,
+                device=generator.device if generator is not None else "cpu").to(self.device)
             out = self.rollout_step(state, emb, x_t, guidance_scale)
-            frames.append(out.joints_world)
+            with torch.inference_mode():
+                feats.append(features_to_world(out.future, state.world, self.pelvis_delta))
+            joints.append(out.joints_world)
             latents.append(out.latent)
+            noises.append(x_t)
             state = out.state
-        return Rollout(torch.cat(frames, dim=1), torch.stack(latents), state)
+        return Rollout(torch.cat(joints, dim=1), torch.cat(feats, dim=1), torch.stack(noises), torch.stack(latents),
+                       state)

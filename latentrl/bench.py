@@ -1,0 +1,374 @@
+"""``latentrl bench ...``: speed and quality figures, measured side by side, written to JSON.
+
+Absolute timings on shared machines are noisy, so every benchmark reports ratios measured in
+the same run next to absolute figures labelled with the hardware (:func:`hardware`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+
+from latentrl.errors import LatentRLError
+
+
+# --------------------------------------------------------------------------- shared helpers
+def hardware() -> dict:
+    """CPU model, core count, torch build and GPU name: the label every figure carries."""
+    cpu = platform.processor() or "unknown"
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.lower().startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    info = {
+        "cpu": cpu,
+        "cpu_count": os.cpu_count(),
+        "torch_threads": torch.get_num_threads(),
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+    }
+    if torch.cuda.is_available():
+        info["gpu"] = torch.cuda.get_device_name(0)
+    return info
+
+
+def median_time(fn: Callable[[], object], repeats: int = 5, warmup: int = 2, device: str = "cpu") -> float:
+    """Median wall time of ``fn`` in seconds (CUDA-synchronized on GPU)."""
+    sync = torch.cuda.synchronize if device.startswith("cuda") else (lambda: None)
+    for _ in range(warmup):
+        fn()
+    sync()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        sync()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def matmul_peak_gflops(n: int = 2048, repeats: int = 7) -> float:
+    """Median fp32 GFLOP/s of an n x n matmul on CPU (the reference for 'fraction of peak')."""
+    a, b, c = torch.randn(n, n), torch.randn(n, n), torch.empty(n, n)
+    t = median_time(lambda: torch.matmul(a, b, out=c), repeats=repeats, warmup=2)
+    return 2.0 * n**3 / t / 1e9
+
+
+def write_json(path: str | None, data: dict) -> None:
+    if path:
+        from latentrl.safe_io import atomic_write_text
+
+        atomic_write_text(path, json.dumps(data, indent=2) + "\n")
+        print(f"wrote {path}")
+
+
+def default_devices(requested: list[str] | None) -> list[str]:
+    if requested:
+        for d in requested:
+            if d.startswith("cuda") and not torch.cuda.is_available():
+                raise LatentRLError(f"device '{d}' requested but CUDA is not available on this machine")
+        return requested
+    return ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+# --------------------------------------------------------------------------- rollout
+def official_size_model():
+    """DART's released architecture with random weights, for timing only.
+
+    8-layer 512-wide transformer denoiser, 7-layer 256-wide VAE, latent (1, 256), CLIP 512.
+    """
+    from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
+    from latentrl.motion.diffusion import DiffusionConfig
+    from latentrl.motion.representation import Normalizer
+    from latentrl.motion.rollout import MotionModel
+    from latentrl.motion.vae import PrimitiveVAE, VAEConfig
+
+    g = torch.random.fork_rng()
+    with g:
+        torch.manual_seed(0)
+        vae = PrimitiveVAE(VAEConfig())
+        den = build_denoiser(DenoiserConfig())
+    return MotionModel(
+        vae,
+        den,
+        DiffusionConfig(),
+        Normalizer(torch.zeros(276), torch.ones(276)),
+        info={"source": "official-size (random weights)"},
+    )
+
+
+def analytic_flops_per_primitive(model) -> float:
+    """2 x multiply-adds per primitive: 10 steps x 2 (CFG) denoiser passes + one VAE decode.
+
+    Counts the work DART's sampler does (every token through every layer); our sampler skips
+    some of it (the last layer only computes the read-out token), so achieved GFLOP/s above the
+    matmul peak are possible and mean the same thing as a speed ratio.
+    """
+    den, vae = model.denoiser.config, model.vae.config
+
+    def layer(tokens: int, d: int, ff: int) -> float:
+        return tokens * 2 * (3 * d * d + d * d + 2 * d * ff) + 4 * tokens * tokens * d
+
+    steps = model.diffusion.num_timesteps
+    if den.model_type == "transformer":
+        tokens = 2 + den.history_shape[0] + den.noise_shape[0]
+        d = den.h_dim
+        embed = 2 * 2 * d * d + 2 * den.clip_dim * d + 2 * den.history_shape[0] * den.history_shape[1] * d
+        embed += 2 * den.noise_shape[0] * den.noise_shape[1] * d
+        per_pass = embed + den.num_layers * layer(tokens, d, den.ff_size) + 2 * d * den.noise_shape[1]
+    else:
+        d = den.h_dim
+        inp = d + den.clip_dim + den.history_shape[0] * den.history_shape[1] + den.noise_shape[0] * den.noise_shape[1]
+        per_pass = 2 * 2 * d * d + 2 * inp * d + den.n_blocks * 2 * 2 * d * d + 2 * d * den.noise_shape[1]
+    vtok = vae.latent_dim[0] + vae.history_length + vae.future_length
+    h = vae.h_dim
+    decode = (
+        2 * vae.latent_dim[1] * h
+        + 2 * vae.history_length * vae.nfeats * h
+        + vae.num_layers * layer(vtok, h, vae.ff_size)
+        + ((vae.num_layers - 1) // 2) * vtok * 4 * h * h
+        + 2 * vae.future_length * h * vae.nfeats
+    )
+    return steps * 2 * per_pass + decode
+
+
+def time_sampler(model, batch: int, device: str, repeats: int) -> dict:
+    """Ms per primitive-batch of :meth:`MotionModel.sample_primitive` with CFG 5 (DDIM 10)."""
+    g = torch.Generator().manual_seed(0)
+    hist = torch.randn(batch, 2, 276, generator=g).to(device) * 0.1
+    text = torch.randn(batch, model.text_dim, generator=g).to(device)
+    noise = torch.randn(batch, *model.latent_shape, generator=g).to(device)
+    sec = median_time(
+        lambda: model.sample_primitive(hist, text, noise, guidance_scale=5.0), repeats=repeats, device=device
+    )
+    return {
+        "batch": batch,
+        "ms_per_batch": sec * 1e3,
+        "ms_per_primitive": sec * 1e3 / batch,
+        "primitives_per_s": batch / sec,
+        "frames_per_s": 8 * batch / sec,
+    }
+
+
+def run_dart_peer(args: argparse.Namespace, batches: list[int]) -> dict | None:
+    """Run shared/tools/dart_peer_bench.py (DART's own sampler) in its own Python environment."""
+    src = args.dart_src or os.environ.get("DART_SRC")
+    if not src:
+        return None
+    script = (
+        Path(args.dart_bench)
+        if args.dart_bench
+        else Path(__file__).resolve().parents[2] / "shared/tools/dart_peer_bench.py"
+    )
+    if not script.is_file():
+        raise LatentRLError(f"DART peer benchmark not found at {script}; pass --dart-bench PATH")
+    stubs = os.environ.get("DART_STUBS", str(script.parent / "dart_stubs"))
+    python = args.dart_python or os.environ.get("DART_PYTHON") or sys.executable
+    cmd = [python, str(script), "--batches", *map(str, batches)]
+    if args.threads:
+        cmd += ["--threads", str(args.threads)]
+    env = {**os.environ, "DART_SRC": src, "DART_STUBS": stubs}
+    print(f"running DART's sampler: {' '.join(cmd)}", file=sys.stderr)
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise LatentRLError(
+            f"DART peer benchmark failed (exit {proc.returncode}): "
+            f"{proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ''}"
+        )
+    lines = [ln for ln in proc.stdout.splitlines() if ln.strip().startswith("{")]
+    return json.loads(lines[-1])
+
+
+def _dart_ms(dart: dict, batch: int) -> float | None:
+    for row in dart.get("results", dart.get("batches", [])):
+        if int(row.get("batch", row.get("batch_size", -1))) == batch:
+            return float(row.get("ms_per_batch", row.get("ms_median", 0.0)))
+    return None
+
+
+def bench_rollout(args: argparse.Namespace) -> int:
+    """Primitives/s and frames/s per model, device and batch size; DART's sampler side by side."""
+    from latentrl.motion.checkpoint import load_motion_model
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    devices = default_devices(args.device)
+    peak = matmul_peak_gflops()
+    out = {"benchmark": "rollout", "hardware": hardware(), "matmul_peak_gflops": peak, "models": {}}
+    print(
+        f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads); "
+        f"fp32 matmul peak {peak:.1f} GFLOP/s"
+    )
+    for name in args.models:
+        try:
+            model = official_size_model() if name == "official" else load_motion_model(name)
+        except LatentRLError as exc:
+            print(f"skipping model '{name}': {exc}", file=sys.stderr)
+            continue
+        flops = analytic_flops_per_primitive(model)
+        rows = []
+        for device in devices:
+            model = model.to(device)
+            for batch in args.batches:
+                row = {"device": device, **time_sampler(model, batch, device, args.repeats)}
+                if device == "cpu":
+                    row["gflops"] = flops * row["primitives_per_s"] / 1e9
+                    row["fraction_of_matmul_peak"] = row["gflops"] / peak
+                rows.append(row)
+                print(
+                    f"{name:>10} {device:>5} batch {batch:>4}: {row['ms_per_primitive']:8.2f} ms/primitive "
+                    f"{row['primitives_per_s']:8.1f} primitives/s {row['frames_per_s']:9.1f} frames/s"
+                )
+            if device == "cuda" and getattr(args, "compile", False):
+                pass
+        out["models"][name] = {
+            "flops_per_primitive": flops,
+            "latent_shape": list(model.latent_shape),
+            "source": model.info.get("source"),
+            "results": rows,
+        }
+    dart = run_dart_peer(args, args.batches)
+    if dart is not None:
+        out["dart_peer"] = dart
+        ours = out["models"].get("official", {}).get("results", [])
+        ratios = {}
+        for row in ours:
+            ref = _dart_ms(dart, row["batch"])
+            if row["device"] == "cpu" and ref:
+                ratios[str(row["batch"])] = ref / row["ms_per_batch"]
+        out["speedup_vs_dart_official_cpu"] = ratios
+        for b, r in ratios.items():
+            print(f"official size, CPU fp32, batch {b}: {r:.2f}x DART's sampler speed (same run)")
+    write_json(args.json, out)
+    return 0
+
+
+# --------------------------------------------------------------------------- motion quality
+#: Prompts probed by ``bench motion`` and the training skill whose data they are compared with.
+MOTION_PROBES = {
+    "walk": "walk",
+    "run": "run",
+    "stand still": "stand",
+    "hop on left leg": "hop_left",
+    "hop on right leg": "hop_right",
+    "turn left": "turn_left",
+    "turn right": "turn_right",
+    "jump forward": "jump_forward",
+    "walk backwards": "walk_backward",
+}
+
+
+def _data_reference(model) -> dict | None:
+    """Per-skill statistics of the model's own training data (regenerated from its config)."""
+    cfg = (model.info.get("config") or {}).get("data") or {}
+    if cfg.get("source") != "locomotion":
+        return None
+    from latentrl.datasets.locomotion import LocomotionConfig, dataset_statistics, generate_sequences
+
+    loco = cfg.get("locomotion") or {}
+    fields = {k: tuple(v) if isinstance(v, list) else v for k, v in loco.items()}
+    seqs = generate_sequences(LocomotionConfig(**fields))
+    pelvis_z = [float(s["joints"][:, 0, 2].min()) for s in seqs] + [float(s["joints"][:, 0, 2].max()) for s in seqs]
+    stats = dataset_statistics(seqs)
+    stats["pelvis_z_range"] = [min(pelvis_z), max(pelvis_z)]
+    return stats
+
+
+def bench_motion(args: argparse.Namespace) -> int:
+    """Rollout stability and text control of a motion model, against its training data."""
+    from latentrl.evaluation import metrics as M
+    from latentrl.motion.checkpoint import load_motion_model
+
+    model = load_motion_model(args.motion)
+    steps = max(1, round(args.seconds * 30 / 8))
+    ref = _data_reference(model)
+    out = {
+        "benchmark": "motion",
+        "hardware": hardware(),
+        "motion": model.info.get("source"),
+        "sha256": model.info.get("sha256"),
+        "seconds": args.seconds,
+        "batch": args.batch,
+        "probes": {},
+    }
+    print(
+        f"{'prompt':>18} {'speed m/s':>9} {'skate cm/s':>10} {'floor cm':>8} {'pelvis z':>13} "
+        f"{'turn deg/s':>10} {'L-only':>6} {'R-only':>6}"
+    )
+    for text, skill in MOTION_PROBES.items():
+        g = torch.Generator().manual_seed(args.seed)
+        t0 = time.perf_counter()
+        roll = model.rollout(text, steps, batch=args.batch, generator=g, guidance_scale=args.guidance)
+        elapsed = time.perf_counter() - t0
+        j = roll.joints_world[:, 2:]  # generated frames only
+        finite = bool(torch.isfinite(j).all())
+        shares = M.foot_contact_shares(j)
+        row = {
+            "skill": skill,
+            "finite": finite,
+            "speed_m_s": float(M.pelvis_speed_m_s(j).mean()),
+            "skate_cm_s": float(M.foot_skate_cm_s(j).mean()),
+            "floor_cm": float(M.foot_floor_distance_cm(j).mean()),
+            "pelvis_z_min": float(j[..., 0, 2].min()),
+            "pelvis_z_max": float(j[..., 0, 2].max()),
+            "turn_deg_s": float(M.heading_change_rad(j).mean()) * 180 / 3.14159265 / (j.shape[1] / 30),
+            "left_only": float(shares["left_only"].mean()),
+            "right_only": float(shares["right_only"].mean()),
+            "frames_per_s": args.batch * steps * 8 / elapsed,
+        }
+        if ref and skill in ref["skills"]:
+            row["data"] = ref["skills"][skill]
+        out["probes"][text] = row
+        print(
+            f"{text:>18} {row['speed_m_s']:9.2f} {row['skate_cm_s']:10.2f} {row['floor_cm']:8.2f} "
+            f"{row['pelvis_z_min']:6.2f}-{row['pelvis_z_max']:<6.2f} {row['turn_deg_s']:10.1f} "
+            f"{row['left_only']:6.2f} {row['right_only']:6.2f}"
+        )
+    p = out["probes"]
+    checks = {
+        "stable (finite, pelvis height in data range +-10 cm)": all(r["finite"] for r in p.values())
+        and (
+            ref is None
+            or all(
+                ref["pelvis_z_range"][0] - 0.1 <= r["pelvis_z_min"]
+                and r["pelvis_z_max"] <= ref["pelvis_z_range"][1] + 0.1
+                for r in p.values()
+            )
+        ),
+        "run faster than walk": p["run"]["speed_m_s"] > p["walk"]["speed_m_s"],
+        "stand still < 0.1 m/s": p["stand still"]["speed_m_s"] < 0.1,
+        "hop on left leg: left-foot-only contact dominates": p["hop on left leg"]["left_only"]
+        > max(p["hop on left leg"]["right_only"], p["walk"]["left_only"]),
+        "hop on right leg: right-foot-only contact dominates": p["hop on right leg"]["right_only"]
+        > max(p["hop on right leg"]["left_only"], p["walk"]["right_only"]),
+        "turn left curves left": p["turn left"]["turn_deg_s"] > 5,
+        "turn right curves right": p["turn right"]["turn_deg_s"] < -5,
+    }
+    if ref and "walk" in ref["skills"]:
+        data_walk = ref["skills"]["walk"]
+        checks["walk skate within 1.5x of data"] = p["walk"]["skate_cm_s"] <= 1.5 * max(data_walk["skate_cm_s"], 0.1)
+        checks["walk floor within 1.5x of data"] = p["walk"]["floor_cm"] <= 1.5 * max(data_walk["floor_cm"], 0.1)
+        out["data_reference"] = {"pelvis_z_range": ref["pelvis_z_range"], "walk": data_walk}
+    train_s = model.info.get("train_seconds")
+    if train_s is not None:
+        out["train_seconds"] = train_s
+        checks["training <= 20 min"] = train_s <= 1200
+    out["checks"] = checks
+    for name, ok in checks.items():
+        print(f"[{'pass' if ok else 'FAIL'}] {name}")
+    write_json(args.json, out)
+    return 0

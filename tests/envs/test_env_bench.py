@@ -1,0 +1,49 @@
+"""``latentrl bench env`` body: figures, ratios, skips and notes, on the tiny model."""
+
+import argparse
+import json
+
+import torch
+
+from latentrl.envs.bench import bench_env, bench_model, standing_seed
+
+
+def bench_args(tmp_path, **kwargs) -> argparse.Namespace:
+    base = {
+        "models": ["tiny"],
+        "num_envs": [1, 2],
+        "device": ["cpu"],
+        "steps": 1,
+        "max_seconds": 60.0,
+        "baseline": True,
+        "threads": None,
+        "json": str(tmp_path / "env.json"),
+    }
+    return argparse.Namespace(**{**base, **kwargs})
+
+
+def test_bench_reports_both_kinds_and_the_ratio(tmp_path):
+    assert bench_env(bench_args(tmp_path, models=["tiny", str(tmp_path / "missing.pt")])) == 0
+    out = json.loads((tmp_path / "env.json").read_text())
+    rows = out["models"]["tiny"]["results"]
+    assert [r["num_envs"] for r in rows] == [1, 2]
+    for row in rows:
+        assert row["vector"]["frames_per_s"] == 8 * row["vector"]["env_steps_per_s"]
+        assert row["speedup"] == row["vector"]["env_steps_per_s"] / row["loop"]["env_steps_per_s"]
+    assert any("missing.pt" in note for note in out["notes"])
+
+
+def test_bench_skips_figures_over_budget(tmp_path):
+    bench_env(bench_args(tmp_path, max_seconds=0.0, baseline=False))
+    rows = json.loads((tmp_path / "env.json").read_text())["models"]["tiny"]["results"]
+    assert "env_steps_per_s" in rows[0]["vector"]  # the first N always runs: nothing to estimate from
+    assert "skipped" in rows[1]["vector"] and "loop" not in rows[1]
+
+
+def test_standing_seed_is_canonical_and_on_its_feet():
+    seed, pelvis_delta = standing_seed()
+    assert seed.shape == (1, 2, 276)
+    torch.testing.assert_close(seed[0, :, 144:147], torch.zeros(2, 3))  # pelvis at the canonical origin
+    model = bench_model("tiny")
+    assert model.seed_history is not None and model.text_encoder is not None
+    assert model.pelvis_delta.shape == (3,) and torch.equal(pelvis_delta, model.pelvis_delta)

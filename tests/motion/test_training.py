@@ -1,0 +1,124 @@
+"""The motion training pipeline on a seconds-long config (real data generator, real models)."""
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from latentrl.config import load_config
+from latentrl.errors import ConfigError
+from latentrl.motion import load_motion_model
+from latentrl.motion.representation import FEATURE_DIM
+from latentrl.motion.trainer import MotionTrainConfig, MotionTrainer
+from latentrl.motion.training import StageConfig, consistency_losses
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = ROOT / "configs" / "motion" / "tiny.yaml"
+
+
+def tiny_config(**overrides) -> MotionTrainConfig:
+    return load_config(MotionTrainConfig, TINY, [f"{k}={v}" for k, v in overrides.items()])
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    run = tmp_path_factory.mktemp("motion_run")
+    trainer = MotionTrainer(tiny_config(), run, progress=False)
+    out = trainer.run()
+    return run, out
+
+
+def test_run_writes_model_log_events_and_checkpoint(trained):
+    run, out = trained
+    assert out.is_file() and (run / "config.yaml").is_file() and (run / "checkpoints" / "state.pt").is_file()
+    assert any(p.name.startswith("events.out.tfevents") for p in run.iterdir())
+    lines = (run / "train.log").read_text().splitlines()
+    assert lines[0].startswith("vae step 0:") and any(line.startswith("denoiser step") for line in lines)
+    model = load_motion_model(out)
+    assert model.latent_shape == (1, 16) and model.text_dim == 64
+    assert model.seed_history is not None and model.seed_history.shape[1:] == (2, FEATURE_DIM)
+    assert 0.0 < float(model.vae.latent_std) < 10.0
+    roll = model.rollout("walk", num_steps=3, batch=2, generator=torch.Generator().manual_seed(0))
+    assert torch.isfinite(roll.joints_world).all()
+
+
+def test_tensorboard_scalars(trained):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    run, _ = trained
+    acc = EventAccumulator(str(run))
+    acc.Reload()
+    tags = set(acc.Tags()["scalars"])
+    assert {"motion/vae/rec", "motion/vae/kl", "motion/vae/joints_delta", "motion/denoiser/latent_rec",
+            "motion/denoiser/feature_rec", "motion/denoiser/learning_rate"} <= tags
+
+
+def test_seeded_runs_are_identical(trained, tmp_path):
+    _, out = trained
+    again = MotionTrainer(tiny_config(), tmp_path / "again", progress=False).run()
+    a, b = torch.load(out, weights_only=True), torch.load(again, weights_only=True)
+    for key in a["denoiser_state"]:
+        assert torch.equal(a["denoiser_state"][key], b["denoiser_state"][key]), key
+
+
+def test_resume_continues_to_the_same_result(trained, tmp_path):
+    _, out = trained
+    run = tmp_path / "resumed"
+    trainer = MotionTrainer(tiny_config(), run, progress=False)
+    trainer._train_vae(_NullBar(), 0.0)  # a run killed right after its VAE stage
+    trainer.stage, trainer.step = "denoiser", 0
+    trainer.save_checkpoint()
+    fresh = MotionTrainer(tiny_config(), run, progress=False)
+    fresh.load_checkpoint(run / "checkpoints" / "state.pt")
+    assert fresh.stage == "denoiser" and fresh.step == 0
+    result = fresh.run()
+    a, b = torch.load(out, weights_only=True), torch.load(result, weights_only=True)
+    for key in a["vae_state"]:
+        assert torch.equal(a["vae_state"][key], b["vae_state"][key]), key
+
+
+def test_resume_refuses_other_config(trained, tmp_path):
+    run, _ = trained
+    other = MotionTrainer(tiny_config(seed=1), tmp_path / "other", progress=False)
+    with pytest.raises(Exception, match="different config"):
+        other.load_checkpoint(run / "checkpoints" / "state.pt")
+
+
+class _NullBar:
+    def update(self, n):
+        pass
+
+    def set_postfix(self, **kw):
+        pass
+
+
+def test_config_errors_name_the_field(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("vae_train: {stepz: 10}\n")
+    with pytest.raises(ConfigError, match=r"(?i)bad.yaml: vae_train.stepz: .*did you mean.*steps"):
+        load_config(MotionTrainConfig, bad)
+    with pytest.raises(ConfigError, match=r"vae_train.learning_rate: must be > 0"):
+        load_config(MotionTrainConfig, TINY, ["vae_train.learning_rate=-1"])
+    with pytest.raises(ConfigError, match="text_encoder"):
+        load_config(MotionTrainConfig, TINY, ["text_encoder=clip"])
+
+
+def test_rollout_probability_schedule():
+    cfg = StageConfig(steps=300, supervised_fraction=1 / 3, scheduled_fraction=1 / 3)
+    assert cfg.rollout_probability(0) == 0.0 and cfg.rollout_probability(99) == 0.0
+    assert cfg.rollout_probability(150) == pytest.approx(0.5)
+    assert cfg.rollout_probability(200) == 1.0 and cfg.rollout_probability(299) == 1.0
+
+
+def test_consistency_losses_zero_for_consistent_frames():
+    from latentrl.motion.representation import compute_features
+    from tests.helpers import walking_clip
+
+    clip = walking_clip(12, seed=2)
+    feats = compute_features(clip["transl"], clip["rotations"], clip["joints"])[None]
+    terms = consistency_losses(feats[:, 1:2], feats[:, 2:10])
+    for value in terms.values():
+        assert float(value) < 1e-10
+    shifted = feats.clone()
+    shifted[:, 3:10, 144:210] += 0.5
+    assert float(consistency_losses(shifted[:, 1:2], shifted[:, 2:10])["joints_delta"]) > 1e-3
