@@ -244,3 +244,56 @@ def world_rotations(local_rot: np.ndarray) -> np.ndarray:
     for j in range(1, NUM_JOINTS):
         world[:, j] = world[:, PARENTS[j]] @ local_rot[:, j]
     return world
+
+
+# --- numpy twins of latentrl.motion.rotations / skeleton for the generator's hot path ----------------------
+# The generator works in numpy on a few hundred frames at a time, where torch's per-op overhead (and thread
+# start-up on a busy 2-core machine) costs more than the arithmetic. Results agree with the torch versions to
+# float64 precision; tests check this.
+
+
+def axis_angle_to_matrix_np(axis_angle: np.ndarray) -> np.ndarray:
+    """(..., 3) axis-angle (radians) -> (..., 3, 3) by Rodrigues' formula; first order below 1e-8 rad."""
+    angle = np.linalg.norm(axis_angle, axis=-1)[..., None, None]
+    x, y, z = np.moveaxis(axis_angle, -1, 0)
+    zero = np.zeros_like(x)
+    skew = np.stack((zero, -z, y, z, zero, -x, -y, x, zero), axis=-1).reshape(*x.shape, 3, 3)
+    safe = np.where(angle < 1e-8, 1.0, angle)
+    k = skew / safe
+    rot = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    return np.where(angle < 1e-8, np.eye(3) + skew, rot)
+
+
+def matrix_to_axis_angle_np(matrix: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotations -> (..., 3) axis-angle with angle in [0, pi] (via Shepperd's quaternion)."""
+    m = matrix
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    d21, d02, d10 = m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]
+    s10, s02, s21 = m[..., 1, 0] + m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 2, 1] + m[..., 1, 2]
+    diag = np.stack((1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), -1)
+    root = np.sqrt(np.maximum(diag, 1e-12))
+    cands = np.stack((  # (w, x, y, z) * 4 * component, one row per choice of the largest component
+        np.stack((root[..., 0] ** 2, d21, d02, d10), -1),
+        np.stack((d21, root[..., 1] ** 2, s10, s02), -1),
+        np.stack((d02, s10, root[..., 2] ** 2, s21), -1),
+        np.stack((d10, s02, s21, root[..., 3] ** 2), -1),
+    ), -2) / (2.0 * root[..., None])
+    best = np.argmax(diag, axis=-1)[..., None, None]
+    quat = np.take_along_axis(cands, np.broadcast_to(best, (*best.shape[:-2], 1, 4)), -2)[..., 0, :]
+    quat = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    quat = np.where(quat[..., :1] < 0, -quat, quat)
+    sin_half = np.linalg.norm(quat[..., 1:], axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(sin_half, quat[..., :1])
+    scale = np.where(sin_half < 1e-8, 2.0, angle / np.maximum(sin_half, 1e-12))
+    return quat[..., 1:] * scale
+
+
+def forward_kinematics_np(rest: np.ndarray, local_rot: np.ndarray, transl: np.ndarray) -> np.ndarray:
+    """(T, 22, 3) world joints from (22, 3) rest joints, (T, 22, 3, 3) local rotations, (T, 3) translation."""
+    world = world_rotations(local_rot)
+    pos = np.empty((len(local_rot), NUM_JOINTS, 3))
+    pos[:, 0] = transl + rest[0]
+    for j in range(1, NUM_JOINTS):
+        p = PARENTS[j]
+        pos[:, j] = pos[:, p] + world[:, p] @ (rest[j] - rest[p])
+    return pos

@@ -109,11 +109,12 @@ def _check_segments(name: str, seq: Mapping, num_frames: int) -> None:
 
 
 def _check_kinematics(name: str, seq: Mapping) -> None:
-    """``pelvis_delta`` equals ``rest_joints[0]`` and ``joints`` equals forward kinematics of the pose."""
-    import torch
+    """``pelvis_delta`` equals ``rest_joints[0]`` and ``joints`` equals forward kinematics of the pose.
 
-    from latentrl.motion.rotations import axis_angle_to_matrix
-    from latentrl.motion.skeleton import forward_kinematics
+    Uses the numpy twins of ``latentrl.motion.skeleton.forward_kinematics`` (equal to float64 precision, see
+    tests/datasets/test_locomotion.py), which avoid torch's per-call overhead when checking many files.
+    """
+    from latentrl.datasets.body import axis_angle_to_matrix_np, forward_kinematics_np
 
     rest = seq["rest_joints"].astype(np.float64)
     if np.max(np.abs(seq["pelvis_delta"] - rest[0])) > 1e-6:
@@ -121,9 +122,9 @@ def _check_kinematics(name: str, seq: Mapping) -> None:
             f"{name}: field 'pelvis_delta' = {np.round(seq['pelvis_delta'], 4).tolist()} differs from "
             f"rest_joints[0] = {np.round(rest[0], 4).tolist()}, expected them equal"
         )
-    rot = axis_angle_to_matrix(torch.from_numpy(seq["poses"].astype(np.float64)))
-    fk, _ = forward_kinematics(torch.from_numpy(rest), rot, torch.from_numpy(seq["transl"].astype(np.float64)))
-    err = np.linalg.norm(fk.numpy() - seq["joints"].astype(np.float64), axis=-1)
+    rot = axis_angle_to_matrix_np(seq["poses"].astype(np.float64))
+    fk = forward_kinematics_np(rest, rot, seq["transl"].astype(np.float64))
+    err = np.linalg.norm(fk - seq["joints"].astype(np.float64), axis=-1)
     if err.size and err.max() > FK_TOLERANCE_M:
         frame, joint = np.unravel_index(int(np.argmax(err)), err.shape)
         raise DataError(
@@ -192,6 +193,8 @@ def read_sequence(path: str | os.PathLike, check_fk: bool = True) -> dict[str, n
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: file not found, expected a motion-text .npz file")
+    if not zipfile.is_zipfile(path):  # np.load would otherwise try to unpickle it
+        raise DataError(f"{path.name}: cannot read as .npz (not a zip archive), expected a numpy .npz archive")
     try:
         with np.load(path, allow_pickle=False) as npz:
             seq = {}
