@@ -71,6 +71,18 @@ def _bench_commands(sub) -> None:
     roll.add_argument("--json", help="write all figures to this JSON file")
     roll.set_defaults(func=lambda a: _call("latentrl.bench", "bench_rollout", a))
 
+    env = bsub.add_parser("env", help="env steps/s of the batched env vs. a per-env SyncVectorEnv loop")
+    env.add_argument("--models", nargs="+", default=["default", "official"],
+                     help="'default', 'official' (DART size, random weights), 'tiny', or model paths")
+    env.add_argument("--num-envs", type=int, nargs="+", default=[1, 64, 256, 1024], help="env counts")
+    env.add_argument("--device", nargs="+", default=None, help="devices (default: cpu, plus cuda when present)")
+    env.add_argument("--steps", type=int, default=5, help="timed steps per figure")
+    env.add_argument("--max-seconds", type=float, default=120.0, help="skip combinations estimated to take longer")
+    env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
+    env.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    env.add_argument("--json", help="write all figures to this JSON file")
+    env.set_defaults(func=lambda a: _call("latentrl.envs.bench", "bench_env", a))
+
     motion = bsub.add_parser("motion", help="stability and text control of a motion model vs. its training data")
     motion.add_argument("--motion", default="default", help="'default' or a model file")
     motion.add_argument("--seconds", type=float, default=60.0, help="rollout length per prompt")

@@ -1,0 +1,260 @@
+"""PPO checkpoints: one atomic torch file per save, readable with ``weights_only=True``.
+
+A checkpoint is a dict of tensors and plain containers::
+
+    format, version          "latentrl.ppo/1", latentrl.__version__
+    trainer                  "native" | "sb3"
+    iteration, env_steps     iterations done, env steps done (transitions summed over envs)
+    elapsed_s                training wall time so far
+    policy_spec, policy      ActorCritic.spec() and state_dict() (normalizer statistics included)
+    optimizer                Adam state_dict
+    rng                      python, numpy, torch (+cuda) and, when the env has get_rng_state, env
+    config, config_hash      the resolved run config (plain dict) and sha256 of its canonical JSON
+    motion                   {"path", "sha256"} of the motion model the env used, or None
+    extra                    trainer-specific plain data (SB3 counters)
+
+Run layout: ``<run_dir>/checkpoints/iter_<N>.pt`` every ``checkpoint_every`` iterations (the newest
+``keep_checkpoints`` kept) and ``<run_dir>/final.pt`` at the end. Every file is written to a
+temporary sibling and renamed, so a kill leaves the previous checkpoint intact; a truncated or
+corrupt newest file is skipped with a warning by :func:`load_latest`.
+"""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+import json
+import random
+import re
+import warnings
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch
+
+from latentrl.errors import CheckpointError
+from latentrl.ppo.policy import ActorCritic
+from latentrl.safe_io import load_torch, save_torch_atomic
+
+FORMAT = "latentrl.ppo/1"
+CHECKPOINT_DIR = "checkpoints"
+FINAL = "final.pt"
+RESUME_MAY_DIFFER = ("ppo.device", "ppo.log_every", "ppo.checkpoint_every", "ppo.keep_checkpoints", "ppo.eval_every")
+"""Dotted config keys that may change between a run and its ``--resume`` (they do not change the result)."""
+
+_ITER_RE = re.compile(r"^iter_(\d+)\.pt$")
+
+
+class LoadedCheckpoint(NamedTuple):
+    path: Path
+    state: dict
+
+
+class LoadedPolicy(NamedTuple):
+    policy: ActorCritic
+    """In eval mode, on the requested device; its normalizer (if any) is frozen."""
+    checkpoint: dict
+    """The checkpoint's metadata (everything except the weights and optimizer)."""
+
+
+# --------------------------------------------------------------------------- config identity
+def plain_config(config: Any) -> dict:
+    """A config dataclass or mapping as JSON-compatible nested dicts (tuples become lists)."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(config):
+        from latentrl.config import to_dict
+
+        config = to_dict(config)
+    return json.loads(json.dumps(config, default=_jsonable))
+
+
+def _jsonable(value: Any) -> Any:
+    import dataclasses
+
+    if dataclasses.is_dataclass(value):
+        from latentrl.config import to_dict
+
+        return to_dict(value)
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, Mapping):
+        return dict(value)
+    if hasattr(value, "_asdict"):
+        return value._asdict()
+    raise TypeError(f"config value {value!r} of type {type(value).__name__} is not plain data")
+
+
+def config_hash(config: Any) -> str:
+    """sha256 of the canonical JSON of ``config``."""
+    text = json.dumps(plain_config(config), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested dicts as {dotted key: leaf}."""
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        if isinstance(value, Mapping):
+            out.update(flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def config_differences(saved: Mapping, current: Mapping, ignore: Iterable[str] = RESUME_MAY_DIFFER) -> list[str]:
+    """``key: saved -> current`` for every dotted key whose value differs, except ``ignore``."""
+    a, b, skip = flatten(plain_config(saved)), flatten(plain_config(current)), set(ignore)
+    keys = sorted((set(a) | set(b)) - skip)
+    return [f"{k}: {a.get(k, '<absent>')!r} -> {b.get(k, '<absent>')!r}" for k in keys if a.get(k) != b.get(k)]
+
+
+# --------------------------------------------------------------------------- RNG
+def capture_rng(env: Any = None) -> dict:
+    """States of python's, numpy's and torch's global generators (and the env's, if it exposes one)."""
+    np_state = np.random.get_state(legacy=False)
+    state = {
+        "python": random.getstate(),
+        "numpy": {**np_state, "state": {"key": torch.from_numpy(np_state["state"]["key"].astype(np.int64)),
+                                        "pos": int(np_state["state"]["pos"])}},
+        "torch": torch.get_rng_state(),
+        "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() and torch.cuda.is_initialized() else [],
+    }
+    if env is not None and callable(getattr(env, "get_rng_state", None)):
+        state["env"] = env.get_rng_state()
+    return state
+
+
+def restore_rng(state: Mapping[str, Any], env: Any = None) -> None:
+    """Inverse of :func:`capture_rng`; CUDA states are restored only onto the same number of GPUs."""
+    version, internal, gauss = state["python"]
+    random.setstate((version, tuple(internal), gauss))
+    np_state = dict(state["numpy"])
+    np_state["state"] = {"key": state["numpy"]["state"]["key"].numpy().astype(np.uint32),
+                         "pos": state["numpy"]["state"]["pos"]}
+    np.random.set_state(np_state)
+    torch.set_rng_state(state["torch"])
+    cuda = state.get("cuda") or []
+    if cuda and torch.cuda.is_available() and len(cuda) == torch.cuda.device_count():
+        torch.cuda.set_rng_state_all(cuda)
+    if "env" in state and env is not None and callable(getattr(env, "set_rng_state", None)):
+        env.set_rng_state(state["env"])
+
+
+# --------------------------------------------------------------------------- save
+def make_checkpoint(*, trainer: str, iteration: int, env_steps: int, elapsed_s: float, policy: ActorCritic,
+                    optimizer: torch.optim.Optimizer, config: Any, motion: Mapping[str, Any] | None,
+                    env: Any = None, extra: Mapping[str, Any] | None = None) -> dict:
+    """Assemble the checkpoint dict described in the module docstring."""
+    from latentrl import __version__
+
+    return {
+        "format": FORMAT, "version": __version__, "trainer": trainer,
+        "iteration": int(iteration), "env_steps": int(env_steps), "elapsed_s": float(elapsed_s),
+        "policy_spec": policy.spec(), "policy": policy.state_dict(), "optimizer": optimizer.state_dict(),
+        "rng": capture_rng(env), "config": plain_config(config), "config_hash": config_hash(config),
+        "motion": dict(motion) if motion else None, "extra": dict(extra or {}),
+    }
+
+
+def iteration_path(run_dir: str | Path, iteration: int) -> Path:
+    return Path(run_dir) / CHECKPOINT_DIR / f"iter_{iteration}.pt"
+
+
+def save_checkpoint(state: Mapping[str, Any], path: str | Path) -> Path:
+    """Write atomically (temporary sibling, fsync, rename)."""
+    return save_torch_atomic(dict(state), path)
+
+
+def prune_checkpoints(run_dir: str | Path, keep: int, suffixes: tuple[str, ...] = ()) -> None:
+    """Delete all but the newest ``keep`` ``iter_N.pt`` (0 keeps all), with same-stem ``suffixes`` siblings."""
+    if keep <= 0:
+        return
+    for path in iteration_checkpoints(run_dir)[keep:]:
+        for p in (path, *(path.with_suffix(s) for s in suffixes)):
+            p.unlink(missing_ok=True)
+
+
+# --------------------------------------------------------------------------- load
+def iteration_checkpoints(run_dir: str | Path) -> list[Path]:
+    """``checkpoints/iter_N.pt`` files, newest (largest N) first."""
+    folder = Path(run_dir) / CHECKPOINT_DIR
+    found = [(int(m.group(1)), p) for p in folder.glob("iter_*.pt") if (m := _ITER_RE.match(p.name))]
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def read_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict:
+    """Load and check the format; ``CheckpointError`` for unreadable, truncated or foreign files."""
+    state = load_torch(path, map_location=map_location, what="PPO checkpoint")
+    if not isinstance(state, dict) or state.get("format") != FORMAT:
+        found = state.get("format") if isinstance(state, dict) else type(state).__name__
+        raise CheckpointError(f"{path}: not a latentrl PPO checkpoint (format {found!r}, expected {FORMAT!r})")
+    return state
+
+
+def load_latest(run_dir: str | Path, map_location: str | torch.device = "cpu") -> LoadedCheckpoint | None:
+    """The newest readable checkpoint of a run (``final.pt``, then ``iter_N.pt`` by N), or None if there is none.
+
+    An unreadable newer file (killed mid-copy by a foreign tool, disk error) is skipped with a warning.
+    """
+    candidates = [p for p in [Path(run_dir) / FINAL] if p.is_file()] + iteration_checkpoints(run_dir)
+    for path in candidates:
+        try:
+            return LoadedCheckpoint(path, read_checkpoint(path, map_location))
+        except CheckpointError as exc:
+            warnings.warn(f"skipping unusable checkpoint: {exc}", stacklevel=2)
+    return None
+
+
+def check_motion(state: Mapping[str, Any], path: Path, motion: Mapping[str, Any] | None,
+                 allow_motion_mismatch: bool) -> None:
+    """Refuse a checkpoint trained on another motion model (by content hash) unless explicitly allowed."""
+    saved = state.get("motion") or {}
+    if not saved.get("sha256") or not motion or not motion.get("sha256") or allow_motion_mismatch:
+        return
+    if saved["sha256"] != motion["sha256"]:
+        raise CheckpointError(
+            f"{path}: policy was trained on motion model {saved.get('path')} (sha256 {saved['sha256'][:12]}) but the "
+            f"env uses {motion.get('path')} (sha256 {motion['sha256'][:12]}); the latent action spaces differ. "
+            "Pass allow_motion_mismatch=True (--allow-motion-mismatch) only if you know they are compatible")
+
+
+def check_resumable(state: Mapping[str, Any], path: Path, *, trainer: str, config: Any,
+                    motion: Mapping[str, Any] | None, allow_motion_mismatch: bool = False,
+                    may_differ: Iterable[str] = RESUME_MAY_DIFFER) -> None:
+    """Refuse to resume with another trainer, another config or another motion model."""
+    if state.get("trainer") != trainer:
+        raise CheckpointError(f"{path}: written by the '{state.get('trainer')}' trainer; resume it with "
+                              f"--trainer {state.get('trainer')} (not '{trainer}')")
+    diffs = config_differences(state["config"], config, may_differ)
+    if diffs:
+        shown = "; ".join(diffs[:5]) + (f"; ... ({len(diffs)} in all)" if len(diffs) > 5 else "")
+        raise CheckpointError(f"{path}: config differs from the run's: {shown}. Resume with the run's own "
+                              "config.yaml, or start a new run")
+    check_motion(state, path, motion, allow_motion_mismatch)
+
+
+def check_shapes(state: Mapping[str, Any], path: Path, obs_dim: int, action_dim: int) -> None:
+    spec = state["policy_spec"]
+    if (spec["obs_dim"], spec["action_dim"]) != (obs_dim, action_dim):
+        raise CheckpointError(f"{path}: policy expects observations of {spec['obs_dim']} and actions of "
+                              f"{spec['action_dim']} dims; the env has {obs_dim} and {action_dim}")
+
+
+def load_policy(path: str | Path, device: str | torch.device = "cpu", motion: Mapping[str, Any] | None = None,
+                allow_motion_mismatch: bool = False) -> LoadedPolicy:
+    """Rebuild the trained ``ActorCritic`` of a checkpoint for evaluation (eval mode, frozen normalizer)."""
+    path = Path(path)
+    state = read_checkpoint(path, map_location=device)
+    check_motion(state, path, motion, allow_motion_mismatch)
+    policy = ActorCritic.from_spec(state["policy_spec"]).to(device)
+    try:
+        policy.load_state_dict(state["policy"])
+    except RuntimeError as exc:
+        raise CheckpointError(f"{path}: policy weights do not match its policy_spec: {str(exc)[:300]}") from None
+    meta = {k: v for k, v in state.items() if k not in ("policy", "optimizer", "rng")}
+    return LoadedPolicy(policy.eval(), meta)

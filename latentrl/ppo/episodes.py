@@ -1,0 +1,86 @@
+"""Episode statistics and reward-term means gathered on the device during collection.
+
+:meth:`EpisodeRecorder.record` only copies tensors (no host sync inside the step loop);
+:meth:`EpisodeRecorder.summarize` moves everything to the host once per rollout and keeps SB3's
+rolling window of the last ``window`` finished episodes, so ``rollout/ep_rew_mean`` means the same
+thing in native and SB3 runs.
+
+Env info keys read (Gymnasium vector conventions, SAME_STEP autoreset):
+``episode = {"r": (N,), "l": (N,)}`` with mask ``_episode``; ``is_success`` (N,) bool, read at
+episode ends; every ``reward/<term>`` (N,) float.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+import torch
+
+from latentrl.monitor import REWARD_PREFIX, RolloutStats
+
+
+class RolloutSummary(NamedTuple):
+    stats: RolloutStats
+    """Means over the rolling window of finished episodes."""
+    reward_terms: dict[str, float]
+    """Term name (without ``reward/``) -> mean over the rollout's T * N steps."""
+    episodes: int
+    """Episodes that ended during this rollout."""
+
+
+class EpisodeRecorder:
+    """(T, N) device buffers of episode ends, returns, lengths and successes, plus per-term reward sums."""
+
+    def __init__(self, num_steps: int, num_envs: int, device: str | torch.device = "cpu", window: int = 100):
+        T, N, dev = num_steps, num_envs, torch.device(device)
+        self.num_steps, self.num_envs, self.device = T, N, dev
+        self.ended = torch.zeros(T, N, dtype=torch.bool, device=dev)
+        self.returns = torch.zeros(T, N, device=dev)
+        self.lengths = torch.zeros(T, N, device=dev)
+        self.success = torch.zeros(T, N, dtype=torch.bool, device=dev)
+        self.has_success = False
+        self.term_sums: dict[str, torch.Tensor] = {}
+        self.window_returns: deque[float] = deque(maxlen=window)
+        self.window_lengths: deque[float] = deque(maxlen=window)
+        self.window_success: deque[float] = deque(maxlen=window)
+
+    def _put(self, dst: torch.Tensor, src: Any) -> None:
+        dst.copy_(torch.as_tensor(src, device=self.device))
+
+    def record(self, t: int, infos: Mapping[str, Any]) -> None:
+        """Copy step ``t``'s episode ends, success flags and reward terms (no host sync)."""
+        if "_episode" in infos:
+            self._put(self.ended[t], infos["_episode"])
+            self._put(self.returns[t], infos["episode"]["r"])
+            self._put(self.lengths[t], infos["episode"]["l"])
+        else:
+            self.ended[t].zero_()
+        if "is_success" in infos:
+            self._put(self.success[t], infos["is_success"])
+            self.has_success = True
+        for key, value in infos.items():
+            if key.startswith(REWARD_PREFIX):
+                value = torch.as_tensor(value, device=self.device).float().sum()
+                self.term_sums[key] = self.term_sums[key] + value if key in self.term_sums else value
+
+    def summarize(self) -> RolloutSummary:
+        """One host transfer: extend the rolling window, average the reward terms, reset the sums."""
+        ended = self.ended
+        self.window_returns.extend(self.returns[ended].tolist())
+        self.window_lengths.extend(self.lengths[ended].tolist())
+        if self.has_success:
+            self.window_success.extend(self.success[ended].float().tolist())
+        names = list(self.term_sums)
+        means = (torch.stack([self.term_sums[k] for k in names]) / ended.numel()).tolist() if names else []
+        self.term_sums = {}
+        episodes = int(ended.sum())
+        return RolloutSummary(self.stats(), {k.removeprefix(REWARD_PREFIX): v for k, v in zip(names, means)}, episodes)
+
+    def stats(self) -> RolloutStats:
+        def mean(values: deque[float]) -> float | None:
+            return sum(values) / len(values) if values else None
+
+        return RolloutStats(mean(self.window_returns), mean(self.window_lengths), mean(self.window_success),
+                            len(self.window_returns))

@@ -1,0 +1,362 @@
+"""The Stable-Baselines3 path: ``stable_baselines3.PPO`` with our actor-critic, tags, checkpoints and resume.
+
+- :class:`LatentActorCriticPolicy` is an SB3 ``ActorCriticPolicy`` whose whole network is an
+  :class:`~latentrl.ppo.policy.ActorCritic` (``policy.net``): same encoders, ``4 tanh`` mean, clamped
+  log-std and zero init as the native trainer, and the same state dict, so ``final.pt`` of either
+  trainer loads with :func:`latentrl.ppo.checkpoint.load_policy`.
+- :func:`sb3_ppo_kwargs` maps :class:`PPOConfig` onto ``PPO(...)`` arguments.
+- :class:`Sb3Trainer` runs ``PPO.learn`` with a callback that routes SB3's logger into our
+  :class:`~latentrl.monitor.Monitor` (env steps on the x-axis, one events file per run), adds
+  ``reward/<term>``, ``time/collection_s`` and ``time/update_s``, and writes our checkpoints.
+
+Where SB3 and CleanRL/DART differ at equal settings (documented in docs/training.md): SB3 clips the
+value *prediction* (not ``max`` of clipped and unclipped losses) and always clips actions to the
+action space before stepping; the value weight is mapped so both scale ``(V - R)^2`` alike.
+
+The VecEnv must give per-env info dicts with ``episode`` and ``is_success`` at episode ends (SB3's
+convention), ``terminal_observation``/``TimeLimit.truncated`` (SB3's bootstrap), and every
+``reward/<term>`` at every step; its ``metadata["observation_layout"]`` (or the ``layout`` argument)
+gives the observation layout.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import KVWriter, Logger
+from stable_baselines3.common.policies import ActorCriticPolicy
+
+from latentrl.monitor import REWARD_PREFIX, TRAIN_PREFIX, EvalReport, Monitor, RolloutStats
+from latentrl.ppo import checkpoint as ckpt
+from latentrl.ppo.config import BatchPlan, PolicyConfig, PPOConfig
+from latentrl.ppo.policy import ActorCritic, plain_layout
+from latentrl.ppo.progress import RunProgress
+from latentrl.ppo.trainer import (
+    Evaluator,
+    IterationTime,
+    TrainResult,
+    adam_kwargs,
+    observation_layout,
+    run_evaluation,
+    seed_everything,
+)
+from latentrl.safe_io import atomic_write_bytes
+
+SB3_ZIP_SUFFIX = ".sb3.zip"
+
+
+# --------------------------------------------------------------------------- policy
+class LatentActorCriticPolicy(ActorCriticPolicy):
+    """SB3 policy whose network is ``self.net``, an :class:`ActorCritic` built from ``policy_config``.
+
+    Args:
+        observation_space: flat Box of D floats.
+        action_space: Box of A floats.
+        lr_schedule: SB3 learning-rate schedule.
+        policy_config: a :class:`PolicyConfig` as a dict (``to_dict``) or the dataclass.
+        observation_layout: name -> [start, stop) of the observation groups, or None.
+        **kwargs: ``ActorCriticPolicy`` arguments (``optimizer_kwargs``...); ``net_arch`` and friends are ignored.
+    """
+
+    def __init__(self, observation_space, action_space, lr_schedule, policy_config: Any = None,
+                 observation_layout: Mapping[str, Any] | None = None, **kwargs: Any):
+        if isinstance(policy_config, PolicyConfig):
+            policy_config = ckpt.plain_config(policy_config)
+        self.policy_config = dict(policy_config or {})
+        self.observation_layout = observation_layout
+        kwargs["ortho_init"] = False  # our own init (DART's zero init) happens in ActorCritic
+        super().__init__(observation_space, action_space, lr_schedule, **kwargs)
+
+    def _build(self, lr_schedule) -> None:
+        spec = {"obs_dim": int(np.prod(self.observation_space.shape)),
+                "action_dim": int(np.prod(self.action_space.shape)),
+                "layout": self.observation_layout,
+                "config": {**ckpt.plain_config(PolicyConfig()), **self.policy_config}}
+        self.net = ActorCritic.from_spec(spec)
+        self.optimizer = self.optimizer_class(self.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(policy_config=self.policy_config, observation_layout=self.observation_layout)
+        return data
+
+    @property
+    def log_std(self) -> torch.Tensor:
+        """(1, A) clamped log-std; SB3 logs ``train/std`` from it."""
+        return self.net.log_std
+
+    def forward(self, obs: torch.Tensor, deterministic: bool = False):
+        step = self.net.act(obs.float(), deterministic)
+        return step.action, step.value[:, None], step.log_prob
+
+    def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor):
+        out = self.net.evaluate(obs.float(), actions)
+        return out.value[:, None], out.log_prob, out.entropy
+
+    def predict_values(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.net.value(obs.float())[:, None]
+
+    def get_distribution(self, obs: torch.Tensor):
+        out = self.net(obs.float())
+        return self.action_dist.proba_distribution(out.mean, out.log_std)
+
+    def _predict(self, observation: torch.Tensor, deterministic: bool = False) -> torch.Tensor:
+        return self.net.act(observation.float(), deterministic).action
+
+
+# --------------------------------------------------------------------------- config mapping
+class IterationLinearSchedule:
+    """SB3 schedule reproducing the native annealing ``lr_k = (1 - k / K) lr_0`` of iteration k.
+
+    SB3 calls it with ``progress_remaining = 1 - steps / total_steps`` after collecting iteration k
+    (steps = (k + 1) * batch), so k is recovered from the progress.
+    """
+
+    def __init__(self, lr: float, total_steps: int, batch_size: int, num_iterations: int):
+        self.lr, self.total, self.batch, self.iterations = lr, total_steps, batch_size, num_iterations
+
+    def __call__(self, progress_remaining: float) -> float:
+        k = round((1.0 - progress_remaining) * self.total / self.batch) - 1
+        return self.lr * (1.0 - max(k, 0) / self.iterations)
+
+
+def sb3_ppo_kwargs(ppo: PPOConfig, policy: PolicyConfig, plan: BatchPlan,
+                   layout: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Keyword arguments for ``stable_baselines3.PPO(LatentActorCriticPolicy, venv, **kwargs)``."""
+    lr = (IterationLinearSchedule(ppo.learning_rate, ppo.total_steps, plan.batch_size, plan.num_iterations)
+          if ppo.anneal_lr else ppo.learning_rate)
+    return dict(
+        learning_rate=lr, n_steps=ppo.num_steps, batch_size=plan.minibatch_size, n_epochs=ppo.update_epochs,
+        gamma=ppo.gamma, gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_coef,
+        clip_range_vf=ppo.clip_coef if ppo.clip_vloss else None, normalize_advantage=ppo.norm_adv,
+        ent_coef=ppo.ent_coef,
+        vf_coef=0.5 * ppo.vf_coef,  # CleanRL/DART weigh 0.5 * MSE by vf_coef; SB3 weighs the MSE itself
+        max_grad_norm=ppo.max_grad_norm, target_kl=ppo.target_kl, stats_window_size=ppo.stats_window,
+        seed=ppo.seed, device=ppo.device, verbose=0,
+        policy_kwargs=dict(policy_config=ckpt.plain_config(policy), observation_layout=layout,
+                           optimizer_kwargs=adam_kwargs(ppo)),
+    )
+
+
+# --------------------------------------------------------------------------- logging bridge
+class MonitorOutput(KVWriter):
+    """SB3 logger output that writes through our :class:`Monitor` (same events file, same step axis)."""
+
+    def __init__(self, monitor: Monitor):
+        self.monitor = monitor
+        self.latest: dict[str, Any] = {}
+
+    def write(self, key_values: dict[str, Any], key_excluded: dict[str, Any], step: int = 0) -> None:
+        self.latest.update(key_values)
+        self.monitor.log_sb3(step, key_values, key_excluded)
+
+    def close(self) -> None:
+        pass
+
+
+class _TrainingHooks(BaseCallback):
+    """Per-iteration bookkeeping of :class:`Sb3Trainer`; an iteration ends when the next rollout starts."""
+
+    def __init__(self, trainer: Sb3Trainer):
+        super().__init__(verbose=0)
+        self.trainer = trainer
+        self.rollout_start: float | None = None
+        self.rollout_end: float | None = None
+        self.collection_s = 0.0
+        self.term_sums: dict[str, float] = {}
+        self.term_count = 0
+        self.moments: tuple[torch.Tensor, torch.Tensor, int] | None = None
+
+    def _on_training_start(self) -> None:
+        self.trainer._on_training_start()
+
+    def _on_rollout_start(self) -> None:
+        now = time.perf_counter()
+        if self.rollout_end is not None:
+            self._finish_iteration(now - self.rollout_end)
+        self.rollout_start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        for info in self.locals["infos"]:
+            for key, value in info.items():
+                if key.startswith(REWARD_PREFIX):
+                    self.term_sums[key] = self.term_sums.get(key, 0.0) + float(value)
+        self.term_count += len(self.locals["infos"])
+        return not self.trainer.stop_requested  # False aborts PPO.learn (an evaluation asked to stop)
+
+    def _on_rollout_end(self) -> None:
+        self.rollout_end = time.perf_counter()
+        self.collection_s = self.rollout_end - self.rollout_start
+        if self.trainer.policy.obs_normalizer is not None:
+            obs = torch.from_numpy(np.asarray(self.model.rollout_buffer.observations, dtype=np.float32))
+            flat = obs.reshape(-1, obs.shape[-1])
+            self.moments = (flat.mean(0), flat.var(0, unbiased=False), flat.shape[0])
+
+    def _on_training_end(self) -> None:
+        if self.rollout_end is not None:
+            self._finish_iteration(time.perf_counter() - self.rollout_end)
+
+    def _finish_iteration(self, update_s: float) -> None:
+        if self.moments is not None:  # fold the rollout into the normalizer after its update, as natively
+            self.trainer.policy.obs_normalizer.update_from_moments(*self.moments)
+            self.moments = None
+        terms = {k.removeprefix(REWARD_PREFIX): v / max(self.term_count, 1) for k, v in self.term_sums.items()}
+        self.term_sums, self.term_count = {}, 0
+        self.trainer._after_iteration(terms, self.collection_s, update_s)
+        self.rollout_end = None
+
+
+# --------------------------------------------------------------------------- trainer
+class Sb3Trainer:
+    """``stable_baselines3.PPO`` on an SB3 ``VecEnv`` with the native trainer's config, tags and checkpoints.
+
+    Args are those of :class:`latentrl.ppo.trainer.NativeTrainer`, except ``venv``: an SB3 ``VecEnv``
+    (e.g. ``latentrl.envs.Sb3VecEnv(env)``).
+    """
+
+    name = "sb3"
+
+    def __init__(self, venv: Any, run_dir: str | Path, ppo: PPOConfig, policy_cfg: PolicyConfig, *,
+                 config: Any = None, motion: Mapping[str, Any] | None = None, evaluate: Evaluator | None = None,
+                 layout: Mapping[str, Any] | None = None, progress: bool = True):
+        from stable_baselines3 import PPO
+
+        ppo.validate()
+        policy_cfg.validate()
+        self.venv, self.run_dir, self.cfg = venv, Path(run_dir), ppo
+        self.config = config if config is not None else {"ppo": ppo, "policy": policy_cfg}
+        self.motion, self.evaluate, self.progress = motion, evaluate, progress
+        self.plan = ppo.plan(venv.num_envs)
+        seed_everything(ppo.seed, ppo.torch_deterministic)
+        kwargs = sb3_ppo_kwargs(ppo, policy_cfg, self.plan, plain_layout(observation_layout(venv, layout)))
+        self.model = PPO(LatentActorCriticPolicy, venv, **kwargs)
+        self.policy: ActorCritic = self.model.policy.net
+        self.iteration, self.env_steps, self.elapsed_s = 0, 0, 0.0
+        self._pending_rng: dict | None = None
+        self.last_train: dict[str, float] = {}
+        self.last_eval: EvalReport | None = None
+        self.times: list[IterationTime] = []
+        self.stop_requested = False
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self) -> dict:
+        extra = {"num_timesteps": self.env_steps, "n_updates": int(self.model._n_updates)}
+        return ckpt.make_checkpoint(trainer=self.name, iteration=self.iteration, env_steps=self.env_steps,
+                                    elapsed_s=self.elapsed_s, policy=self.policy, optimizer=self.model.policy.optimizer,
+                                    config=self.config, motion=self.motion, env=self.venv, extra=extra)
+
+    def save(self, path: str | Path) -> Path:
+        """Our checkpoint at ``path`` plus SB3's own zip (``PPO.load``-able) beside it as ``*.sb3.zip``."""
+        path = ckpt.save_checkpoint(self.checkpoint(), path)
+        buf = io.BytesIO()
+        self.model.save(buf)
+        atomic_write_bytes(path.with_suffix(SB3_ZIP_SUFFIX), buf.getvalue())
+        return path
+
+    def resume(self, allow_motion_mismatch: bool = False) -> Path | None:
+        """Continue from the newest readable checkpoint in ``run_dir``; None (fresh start) if there is none."""
+        import warnings
+
+        found = ckpt.load_latest(self.run_dir, map_location=self.model.device)
+        if found is None:
+            warnings.warn(f"{self.run_dir}: no checkpoint to resume from; starting at step 0", stacklevel=2)
+            return None
+        path, state = found
+        ckpt.check_resumable(state, path, trainer=self.name, config=self.config, motion=self.motion,
+                             allow_motion_mismatch=allow_motion_mismatch)
+        ckpt.check_shapes(state, path, self.policy.obs_dim, self.policy.action_dim)
+        self.policy.load_state_dict(state["policy"])
+        self.model.policy.optimizer.load_state_dict(state["optimizer"])
+        self.iteration, self.env_steps, self.elapsed_s = state["iteration"], state["env_steps"], state["elapsed_s"]
+        self.model.num_timesteps = state["extra"]["num_timesteps"]
+        self.model._n_updates = state["extra"]["n_updates"]
+        self._pending_rng = state["rng"]
+        return path
+
+    # ------------------------------------------------------------------ loop
+    def train(self) -> TrainResult:
+        """``PPO.learn`` up to ``plan.num_iterations`` iterations; checkpoint periodically and write ``final.pt``."""
+        self.monitor = Monitor(self.run_dir, resume_step=self.env_steps if self.iteration else None)
+        self.output = MonitorOutput(self.monitor)
+        self.model.set_logger(Logger(str(self.run_dir), [self.output]))
+        self.bar = RunProgress(self.run_dir, self.plan.num_iterations * self.plan.batch_size, self.env_steps,
+                               self.progress)
+        if self.iteration == 0:
+            self.monitor.log_hparams(ckpt.plain_config(self.config))
+        self.bar.write(f"{self.name} trainer: start at iteration {self.iteration}, {self.env_steps} env steps, "
+                       f"{self.plan.num_iterations} iterations of {self.plan.batch_size} steps")
+        self.venv.seed(self.cfg.seed + self.iteration)
+        start_iteration = self.iteration
+        remaining = self.plan.num_iterations * self.plan.batch_size - self.env_steps
+        try:
+            if remaining > 0:
+                self.model.learn(remaining, callback=_TrainingHooks(self), log_interval=self.cfg.log_every,
+                                 reset_num_timesteps=self.iteration == 0)
+        finally:
+            self.monitor.close()
+            self.bar.close()
+        final = self.run_dir / ckpt.FINAL
+        if self.iteration > start_iteration or not final.is_file():
+            self.save(final)
+        return TrainResult(self.run_dir, final, self.iteration, self.env_steps, self.elapsed_s, self._rollout_stats(),
+                           self.last_train, self.last_eval, self.times, self.stop_requested)
+
+    def _on_training_start(self) -> None:
+        """After SB3 reset the env: restore the random streams of a resumed run; start the clocks."""
+        if self._pending_rng is not None:
+            ckpt.restore_rng(self._pending_rng, self.venv)
+            self._pending_rng = None
+        self._start, self._steps_at_start, self._elapsed_at_start = time.perf_counter(), self.env_steps, self.elapsed_s
+
+    def _rollout_stats(self) -> RolloutStats:
+        eps, succ = self.model.ep_info_buffer or [], self.model.ep_success_buffer or []
+        return RolloutStats(float(np.mean([e["r"] for e in eps])) if eps else None,
+                            float(np.mean([e["l"] for e in eps])) if eps else None,
+                            float(np.mean(succ)) if succ else None, len(eps))
+
+    def _after_iteration(self, reward_terms: dict[str, float], collection_s: float, update_s: float) -> None:
+        """Called after each PPO update: SB3's train/* dump, our extra tags, eval, checkpoint, progress."""
+        cfg = self.cfg
+        self.iteration, self.env_steps = self.iteration + 1, int(self.model.num_timesteps)
+        self.times.append(IterationTime(collection_s, update_s))
+        k, step, last = self.iteration, self.env_steps, self.iteration == self.plan.num_iterations
+        now = time.perf_counter()
+        self.elapsed_s = self._elapsed_at_start + (now - self._start)
+        fps = (step - self._steps_at_start) / max(now - self._start, 1e-9)
+        logging = k % cfg.log_every == 0 or last
+        if logging:
+            self.model.logger.dump(step=step)  # the train/* SB3 recorded during this iteration's update
+        else:
+            _clear(self.model.logger)
+        self.last_train = {k_[len(TRAIN_PREFIX):]: float(v) for k_, v in self.output.latest.items()
+                           if k_.startswith(TRAIN_PREFIX) and isinstance(v, (int, float, np.floating, np.integer))}
+        rollout = self._rollout_stats()
+        if logging:
+            self.monitor.log_rewards(step, reward_terms)
+            self.monitor.log_time(step, collection_s=collection_s, update_s=update_s)
+            self.bar.log_iteration(k, step, fps, rollout, self.last_train, collection_s, update_s, reward_terms)
+        if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
+            self.last_eval = run_evaluation(self.evaluate, self.policy)
+            self.stop_requested = bool(self.last_eval.stop)
+            self.monitor.log_eval(step, self.last_eval)
+            self.bar.write(f"eval iter {k} steps {step}: "
+                           + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
+        if cfg.checkpoint_every and k % cfg.checkpoint_every == 0 and not (last or self.stop_requested):
+            self.save(ckpt.iteration_path(self.run_dir, k))
+            ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints, suffixes=(SB3_ZIP_SUFFIX,))
+        self.monitor.flush()
+        self.bar.update(step, fps, rollout)
+
+
+def _clear(logger: Logger) -> None:
+    """Drop what SB3 recorded since the last dump (an iteration that is not logged)."""
+    logger.name_to_value.clear()
+    logger.name_to_count.clear()
+    logger.name_to_excluded.clear()

@@ -1,0 +1,37 @@
+import pytest
+import torch
+
+from latentrl.ppo import PolicyConfig, PPOConfig
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """Tiny networks on a shared 2-core machine: one intra-op thread avoids OpenMP stalls (100x slower with 2)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def tiny_ppo(**overrides) -> PPOConfig:
+    """8 envs x 8 steps = 64 transitions per iteration, 2 minibatches, 2 epochs, 2 iterations."""
+    values = dict(total_steps=128, num_steps=8, num_minibatches=2, update_epochs=2, learning_rate=1e-3,
+                  checkpoint_every=1, keep_checkpoints=10, seed=3)
+    values.update(overrides)
+    return PPOConfig(**values)
+
+
+def tiny_policy(**overrides) -> PolicyConfig:
+    values = dict(latent_dim=32, n_blocks=1)
+    values.update(overrides)
+    return PolicyConfig(**values)
+
+
+@pytest.fixture
+def ppo_cfg() -> PPOConfig:
+    return tiny_ppo()
+
+
+@pytest.fixture
+def policy_cfg() -> PolicyConfig:
+    return tiny_policy()
