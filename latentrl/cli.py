@@ -51,6 +51,27 @@ def _motion_commands(sub) -> None:
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     train.set_defaults(func=lambda a: _call("latentrl.motion.trainer", "train_command", a))
 
+    bvh = msub.add_parser("export-bvh", help="write a motion .npz as BVH (SMPL-22 skeleton, Y-up, centimetres)")
+    bvh.add_argument("motion", metavar="MOTION.npz", help="motion file in the shared format (e.g. from eval or sample)")
+    bvh.add_argument("--out", metavar="FILE.bvh", help="output file (default: the motion file with .bvh)")
+    bvh.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "export_bvh", a))
+
+
+def _train_commands(sub) -> None:
+    train = sub.add_parser("train", help="train a controller with PPO from a YAML config")
+    train.add_argument("config", nargs="?", help="YAML config (e.g. configs/quick.yaml)")
+    train.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
+    train.add_argument("--trainer", default="native", choices=["native", "sb3"], help="PPO implementation")
+    train.add_argument("--device", help="torch device (sets ppo.device), e.g. cpu or cuda")
+    train.add_argument("--seed", type=int, help="random seed (sets ppo.seed)")
+    train.add_argument("--total-steps", type=int, help="env steps to train (sets ppo.total_steps)")
+    train.add_argument("--run-dir", help="run directory (default: runs/<config>-<time>)")
+    train.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its newest checkpoint")
+    train.add_argument("--allow-motion-mismatch", action="store_true",
+                       help="resume onto a different motion model than the run was trained on (experts)")
+    train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    train.set_defaults(func=lambda a: _call("latentrl.experiment", "train_command", a))
+
 
 def _bench_commands(sub) -> None:
     bench = sub.add_parser("bench", help="measure speed and quality; figures go to --json")
@@ -93,6 +114,36 @@ def _bench_commands(sub) -> None:
     motion.set_defaults(func=lambda a: _call("latentrl.bench", "bench_motion", a))
 
 
+def _eval_commands(sub) -> None:
+    ev = sub.add_parser("eval", help="evaluate a policy over waypoint paths (DART's protocol); report, plots, motions")
+    ev.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) written by latentrl train")
+    ev.add_argument("--paths", nargs="+", metavar="FILE",
+                    help="DART-format path files or suite names in tasks/paths (default: dart_walk_long "
+                         "dart_run_long dart_hop_long)")
+    ev.add_argument("--episodes", type=int, default=32, help="episodes per path, run as one batch (DART: 32)")
+    ev.add_argument("--max-steps", type=int, default=256,
+                    help="step budget per episode, in primitives of 8 frames (DART: 256 = 68.3 s); "
+                         "episodes that do not finish count as failures")
+    ev.add_argument("--deterministic", action="store_true", help="take the policy's mean action (default: sample)")
+    ev.add_argument("--motion", default="default",
+                    help="the motion model the policy was trained on: 'default', a model file or a DART checkpoint")
+    ev.add_argument("--allow-motion-mismatch", action="store_true",
+                    help="evaluate on a motion model other than the policy's (experts)")
+    ev.add_argument("--device", help="torch device (default: cuda when available, else cpu)")
+    ev.add_argument("--seed", type=int, default=0, help="base random seed (seed histories and action noise)")
+    ev.add_argument("--out", help="output folder (default: eval-<policy name> beside the policy)")
+    ev.add_argument("--render", type=int, default=1, metavar="N",
+                    help="render the first N episodes of every path as GIF and BVH (default 1)")
+    ev.add_argument("--no-render", dest="render", action="store_const", const=0, help="render nothing")
+    ev.add_argument("--no-motions", dest="motions", action="store_false", help="skip the per-episode .npz files")
+    ev.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "evaluate", a))
+
+    cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")
+    cmp.add_argument("reports", nargs="+", metavar="REPORT", help="report.json files or eval output folders")
+    cmp.add_argument("--out", metavar="FILE.md", help="also write the table to this file")
+    cmp.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "compare", a))
+
+
 def build_parser() -> argparse.ArgumentParser:
     from latentrl import __version__
 
@@ -102,6 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     _motion_commands(sub)
+    _train_commands(sub)
+    _eval_commands(sub)
     _bench_commands(sub)
     return parser
 

@@ -116,8 +116,17 @@ class ReachLocationEnv(LatentMotionVectorEnv):
         return self._goal_features(history_world, self._goal)
 
     def _advance_task(self, reached: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Reached goals are replaced (text kept, DART's ``reset_text=False``); never terminates."""
+        """Reached goals are replaced (text kept, DART's ``reset_text=False``); never terminates.
+
+        ``is_success`` is the episode's outcome so far: at least one goal reached (so the value at
+        an episode's last step, which SB3-style success rates read, is the episode's success).
+        The per-step event is ``infos["goal_reached"]``.
+        """
         if bool(reached.any()):
             idx = reached.nonzero()[:, 0]
             self._goal[idx] = self._sample_goals(idx)
-        return torch.zeros_like(reached), reached
+        return torch.zeros_like(reached), self._ep_goals > 0
+
+    def _task_infos(self, infos: dict, reached: torch.Tensor) -> None:
+        infos["goal_reached"] = reached
+        infos["_goal_reached"] = self._all
