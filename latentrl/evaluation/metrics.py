@@ -136,3 +136,61 @@ def mean_ci95(values) -> dict[str, float]:
     if v.size == 0:
         return {"mean": float("nan"), "ci95": float("nan")}
     return {"mean": float(v.mean()), "ci95": float(1.96 * v.std() / math.sqrt(v.size))}
+
+
+# --------------------------------------------------------------------------- evaluation protocol
+EPISODE_METRICS: dict[str, str] = {
+    "skate_cm_s": "cm/s",
+    "floor_cm": "cm",
+    "jerk": "m/s^3",
+    "penetration_mm": "mm",
+    "floating_mm": "mm",
+    "skating_mm": "mm",
+}
+"""Motion-quality metrics of one episode (name -> unit), as :func:`episode_metrics` returns them."""
+
+
+def episode_metrics(joints, fps: float = 30.0, floor: float = 0.0) -> dict[str, float]:
+    """Every motion-quality metric of one whole episode (T, 22, 3) world joints, seed frames included.
+
+    DART computes its metrics on the saved sequence, which starts with the 2 seed frames; so do we.
+    Returns the :data:`EPISODE_METRICS` names as floats.
+    """
+    j = _t(joints)
+    return {
+        "skate_cm_s": float(foot_skate_cm_s(j, fps, floor)),
+        "floor_cm": float(foot_floor_distance_cm(j, floor)),
+        "jerk": float(jerk(j, fps)),
+        "penetration_mm": float(closd_penetration_mm(j, floor)),
+        "floating_mm": float(closd_floating_mm(j, floor)),
+        "skating_mm": float(closd_skating_mm(j, floor)),
+    }
+
+
+def final_goal_distance_m(joints, goal, last: int = 8) -> torch.Tensor:
+    """DART's ``dist``: min over the last ``last`` frames of the pelvis xy distance to ``goal``, metres.
+
+    Args:
+        joints: (..., T, 22, 3) world joints, metres.
+        goal: (..., 3) or (..., 2) final goal, world metres (only xy is used).
+        last: frames at the end that count (DART: the 8 frames of the last primitive).
+
+    Returns:
+        (...) metres; DART's success is this < 0.3.
+    """
+    pelvis = _t(joints)[..., -last:, PELVIS, :2]
+    g = _t(goal)[..., None, :2]
+    return (pelvis - g).norm(dim=-1).amin(dim=-1)
+
+
+def dart_mean_ci95(values) -> dict[str, float]:
+    """DART's aggregation: average each episode (env) index over the paths, then :func:`mean_ci95`.
+
+    ``values`` (P paths, E episodes): DART's ``goal_reach.py`` averages env index e over the 5 paths
+    of a suite and reports the 95% CI over the 32 resulting means, so paths are not independent
+    samples. A path with fewer episodes than the others is an error (the rows must align).
+    """
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim != 2:
+        raise ValueError(f"values must be (paths, episodes), got shape {v.shape}")
+    return mean_ci95(v.mean(axis=0))

@@ -1,0 +1,160 @@
+"""Bodies of ``latentrl eval``, ``latentrl compare`` and ``latentrl motion export-bvh`` (arguments in cli.py).
+
+``latentrl eval POLICY`` writes into ``--out``::
+
+    report.json     machine-readable results (schema in docs/evaluation.md)
+    report.md       the tables a person reads
+    paths.png       top-down pelvis tracks, one panel per path
+    motions/<suite>_path<i>_ep<e>.npz    every episode in the shared motion format
+    renders/<suite>_path<i>_ep<e>.gif    skeleton animations of the first --render episodes of each path
+    renders/<suite>_path<i>_ep<e>.bvh    the same motions as BVH (SMPL-22, Y-up, centimetres)
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from latentrl.errors import ConfigError, DataError
+from latentrl.evaluation.runner import EpisodeResult, EvalSettings, PathResult
+
+DEFAULT_SUITES = ("dart_walk_long", "dart_run_long", "dart_hop_long")
+"""What ``latentrl eval`` runs without ``--paths``: DART's Table 4 suites."""
+GIF_STRIDE = 3
+"""Rendered GIFs keep every 3rd frame (10 fps): a 60 s episode is 600 frames, about a minute to draw on CPU."""
+
+
+def resolve_path_files(specs: list[str] | None) -> list[Path]:
+    """Path files from ``--paths``: existing files, or suite names in ``tasks/paths`` (``sharp_turns``)."""
+    from latentrl.evaluation.suites import default_folder
+
+    folder, files = default_folder(), []
+    for spec in specs or DEFAULT_SUITES:
+        path = Path(spec)
+        if not path.is_file():
+            named = folder / f"{spec.removesuffix('.json')}.json"
+            if not named.is_file():
+                known = sorted(p.stem for p in folder.glob("*.json")) if folder.is_dir() else []
+                raise DataError(f"path file not found: {spec} (give a file, or one of the suites {known})")
+            path = named
+        files.append(path)
+    stems = [p.stem for p in files]
+    dupes = sorted({s for s in stems if stems.count(s) > 1})
+    if dupes:
+        raise ConfigError(f"--paths: file names must differ (reports are keyed by them), repeated: {dupes}")
+    return files
+
+
+def _settings(args: argparse.Namespace) -> EvalSettings:
+    import torch
+
+    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    settings = EvalSettings(episodes=args.episodes, max_steps=args.max_steps, deterministic=args.deterministic,
+                            seed=args.seed, device=device)
+    try:
+        settings.validate()
+    except ConfigError as exc:  # name the flag: "max_steps: ..." -> "--max-steps: ..."
+        field, _, message = str(exc).partition(": ")
+        raise ConfigError(f"--{field.replace('_', '-')}: {message}") from None
+    if args.render < 0:
+        raise ConfigError(f"--render must be >= 0, got {args.render}")
+    return settings
+
+
+def _load(args: argparse.Namespace, settings: EvalSettings) -> tuple[Any, Any, dict, dict]:
+    """Motion model, loaded policy and their identities (refuses a policy trained on another model)."""
+    from latentrl.motion.checkpoint import file_sha256, load_motion_model
+    from latentrl.ppo import load_policy
+
+    model = load_motion_model(args.motion, device=settings.device)
+    motion = {"source": model.info.get("source"), "sha256": model.info.get("sha256")}
+    loaded = load_policy(args.policy, settings.device, motion={"path": motion["source"], "sha256": motion["sha256"]},
+                         allow_motion_mismatch=args.allow_motion_mismatch)
+    meta = loaded.checkpoint
+    policy = {"path": str(args.policy), "sha256": file_sha256(args.policy), "iteration": meta.get("iteration"),
+              "env_steps": meta.get("env_steps"), "trainer": meta.get("trainer"), "version": meta.get("version"),
+              "config_hash": meta.get("config_hash"), "trained_on": meta.get("motion")}
+    return model, loaded.policy, motion, policy
+
+
+def _sink(out_dir: Path, render: int, write_motions: bool):
+    """Per-episode writer: the motion ``.npz`` and, for the first ``render`` episodes of a path, GIF + BVH."""
+    from latentrl.render import render_gif, save_bvh, save_motion_npz
+
+    def sink(ep: EpisodeResult, motion: dict) -> str | None:
+        name = f"{ep.suite}_path{ep.path_index}_ep{ep.episode:03d}"
+        written = None
+        if write_motions:
+            save_motion_npz(out_dir / "motions" / f"{name}.npz", **motion, suite=ep.suite, path_index=ep.path_index,
+                            episode=ep.episode, success=ep.success, end=ep.end, reach_time_s=ep.reach_time_s)
+            written = f"motions/{name}.npz"
+        if ep.episode < render:
+            title = f"{ep.suite} path {ep.path_index} ep {ep.episode} ({ep.end})"
+            render_gif(out_dir / "renders" / f"{name}.gif", motion["joints"], texts=motion["texts"], title=title,
+                       stride=GIF_STRIDE, goals=motion["waypoints"])
+            save_bvh(out_dir / "renders" / f"{name}.bvh", motion["joints"], float(motion["fps"]))
+        return written
+
+    return sink
+
+
+def _progress(result: PathResult) -> None:
+    wins = sum(ep.success for ep in result.episodes)
+    times = [ep.reach_time_s for ep in result.episodes if ep.success]
+    reach = f", reach time of successes {sum(times) / len(times):.1f} s" if times else ""
+    print(f"{result.suite} path {result.index}: {wins}/{len(result.episodes)} reached{reach} ({result.wall_s:.0f} s)",
+          flush=True)
+
+
+def evaluate(args: argparse.Namespace) -> int:
+    """``latentrl eval``: run the suites, measure speed, write the report, plot and motions."""
+    from latentrl.bench import hardware
+    from latentrl.envs import load_paths
+    from latentrl.evaluation import plots, report
+    from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
+
+    settings = _settings(args)
+    files = resolve_path_files(args.paths)
+    first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
+    model, policy, motion, policy_info = _load(args, settings)
+    observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings)
+    out_dir = Path(args.out) if args.out else Path(args.policy).resolve().parent / f"eval-{Path(args.policy).stem}"
+    act = policy_fn(policy, settings.deterministic)
+    suites = run_suites(act, model, files, settings, observe_next=observe_next,
+                        sink=_sink(out_dir, args.render, args.motions), progress=_progress)
+    speed = measure_speed(act, model, first_path, settings, [1, settings.episodes], observe_next)
+    png = plots.save_paths_png(out_dir / report.PATHS_PNG, suites)
+    outputs = {"paths_png": png.name, "motions": "motions/" if args.motions else None,
+               "renders": "renders/" if args.render else None}
+    data = report.build_report(suites, settings, policy=policy_info, motion=motion, speed=speed,
+                               hardware=hardware(), files=outputs)
+    js, md = report.write_report(out_dir, data)
+    print("\n".join(report.results_table(data)))
+    print(f"wrote {js}, {md}, {png}")
+    return 0
+
+
+def compare(args: argparse.Namespace) -> int:
+    """``latentrl compare``: print (and optionally write) several reports side by side."""
+    from latentrl.evaluation.report import compare_reports
+
+    table = compare_reports(args.reports)
+    print(table, end="")
+    if args.out:
+        from latentrl.safe_io import atomic_write_text
+
+        atomic_write_text(args.out, table)
+        print(f"wrote {args.out}")
+    return 0
+
+
+def export_bvh(args: argparse.Namespace) -> int:
+    """``latentrl motion export-bvh``: a motion ``.npz`` (shared format) as BVH (SMPL-22, Y-up, cm)."""
+    from latentrl.render import load_motion_npz, save_bvh
+
+    motion = load_motion_npz(args.motion)
+    out = Path(args.out) if args.out else Path(args.motion).with_suffix(".bvh")
+    save_bvh(out, motion["joints"], float(motion["fps"]))
+    print(f"wrote {out} ({len(motion['joints'])} frames at {float(motion['fps']):g} fps)")
+    return 0

@@ -1,0 +1,378 @@
+"""Evaluation reports: aggregation, ``report.json`` (for machines), ``report.md`` (for people), ``compare``.
+
+Aggregation (``reference/dart.md`` section 5):
+
+- per path: mean and 95% CI (``1.96 * std / sqrt(n)``, population std as DART) over its episodes;
+- per suite (path file) and ``overall``: DART's aggregation, i.e. each episode index is averaged
+  over the paths first (DART's env index 0-31 over the 5 paths), then mean and CI over the indices;
+- ``reach_time_success_s`` (successful episodes only) cannot be averaged per index (some are
+  missing), so it is pooled: mean and CI over every successful episode of the suite.
+
+``report.md`` is generated from the ``report.json`` dict alone, so it can be rebuilt from the JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from latentrl.errors import DataError
+from latentrl.evaluation import metrics as M
+from latentrl.evaluation.runner import EvalSettings, PathResult, SuiteResult
+from latentrl.motion.skeleton import FPS
+
+FORMAT = "latentrl.eval/1"
+REPORT_JSON, REPORT_MD, PATHS_PNG = "report.json", "report.md", "paths.png"
+
+METRICS: dict[str, tuple[str, str]] = {
+    "success_rate": ("success", ""),
+    "reach_time_s": ("reach time", "s"),
+    "reach_time_success_s": ("reach time, successes", "s"),
+    "skate_cm_s": ("skate", "cm/s"),
+    "floor_cm": ("floor", "cm"),
+    "jerk": ("jerk", "m/s³"),
+    "penetration_mm": ("penetration", "mm"),
+    "floating_mm": ("floating", "mm"),
+    "skating_mm": ("skating", "mm"),
+}
+"""Every aggregated metric: key -> (column title, unit). Each is stored as ``{"mean", "ci95"}``."""
+
+COMPARE_METRICS = ("success_rate", "reach_time_s", "reach_time_success_s", "skate_cm_s", "floor_cm", "jerk")
+
+DART_TABLE4: dict[str, dict[str, float]] = {
+    "dart_walk_long": {"success_rate": 1.0, "reach_time_success_s": 17.08, "skate_cm_s": 2.67, "floor_cm": 2.24},
+    "dart_run_long": {"success_rate": 1.0, "reach_time_success_s": 10.55, "skate_cm_s": 3.23, "floor_cm": 3.86},
+    "dart_hop_long": {"success_rate": 1.0, "reach_time_success_s": 20.50, "skate_cm_s": 2.22, "floor_cm": 4.11},
+}
+"""DART paper, Table 4 (released BABEL model). Its script saved finished runs only, so its time is a mean over
+successes (our ``reach_time_success_s``) and its success rate is 1.0 by construction (docs/evaluation.md)."""
+
+
+# --------------------------------------------------------------------------- aggregation
+def _values(path: PathResult) -> dict[str, list[float]]:
+    """Metric -> one value per episode (success as 0/1; reach time censored at the budget)."""
+    out: dict[str, list[float]] = {"success_rate": [], "reach_time_s": []}
+    for ep in path.episodes:
+        out["success_rate"].append(float(ep.success))
+        out["reach_time_s"].append(ep.reach_time_s)
+        for name, value in ep.metrics.items():
+            out.setdefault(name, []).append(value)
+    return out
+
+
+def _success_times(paths: Sequence[PathResult]) -> list[float]:
+    return [ep.reach_time_s for p in paths for ep in p.episodes if ep.success]
+
+
+def path_metrics(path: PathResult) -> dict[str, dict[str, float]]:
+    """Mean and CI over the path's episodes, for every :data:`METRICS` key."""
+    out = {name: M.mean_ci95(v) for name, v in _values(path).items()}
+    out["reach_time_success_s"] = M.mean_ci95(_success_times([path]))
+    return {k: out[k] for k in METRICS}
+
+
+def pooled_metrics(paths: Sequence[PathResult]) -> dict[str, dict[str, float]]:
+    """DART's aggregation over several paths (episode index averaged over paths first); see the module docstring."""
+    values = [_values(p) for p in paths]
+    out = {name: M.dart_mean_ci95([v[name] for v in values]) for name in values[0]}
+    out["reach_time_success_s"] = M.mean_ci95(_success_times(paths))
+    return {k: out[k] for k in METRICS}
+
+
+def waypoint_times(path: PathResult) -> list[dict[str, float]]:
+    """Per waypoint: mean/CI of the reach time over the episodes that reached it, and the share that did."""
+    out = []
+    for k in range(len(path.path.waypoints)):
+        times = [ep.waypoint_times_s[k] for ep in path.episodes if ep.waypoint_times_s[k] is not None]
+        out.append({**M.mean_ci95(times), "reached_rate": len(times) / len(path.episodes)})
+    return out
+
+
+# --------------------------------------------------------------------------- report.json
+def _path_length(path) -> float:
+    pts = [(0.0, 0.0)] + [w[:2] for w in path.waypoints]
+    return float(sum(math.dist(a, b) for a, b in zip(pts[:-1], pts[1:])))
+
+
+def _episode_entry(ep) -> dict[str, Any]:
+    return {
+        "episode": ep.episode,
+        "success": ep.success,
+        "end": ep.end,
+        "steps": ep.steps,
+        "reach_time_s": ep.reach_time_s,
+        "final_dist_m": ep.final_dist_m,
+        "waypoint_times_s": ep.waypoint_times_s,
+        **ep.metrics,
+        "motion": ep.motion_file,
+    }
+
+
+def _path_entry(p: PathResult) -> dict[str, Any]:
+    return {
+        "index": p.index,
+        "waypoints": [list(w) for w in p.path.waypoints],
+        "texts": list(p.path.texts),
+        "length_m": _path_length(p.path),
+        "wall_s": p.wall_s,
+        "metrics": path_metrics(p),
+        "waypoint_reach_time_s": waypoint_times(p),
+        "episodes": [_episode_entry(ep) for ep in p.episodes],
+    }
+
+
+def _sha256(file: str) -> str | None:
+    from latentrl.motion.checkpoint import file_sha256
+
+    return file_sha256(file) if Path(file).is_file() else None
+
+
+def build_report(
+    suites: Sequence[SuiteResult],
+    settings: EvalSettings,
+    *,
+    policy: dict[str, Any],
+    motion: dict[str, Any],
+    speed: dict[str, Any] | None = None,
+    hardware: dict[str, Any] | None = None,
+    files: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """The ``report.json`` dict (schema in docs/evaluation.md); NaN becomes ``null`` when written."""
+    from dataclasses import asdict
+
+    from latentrl import __version__
+
+    all_paths = [p for s in suites for p in s.paths]
+    return {
+        "format": FORMAT,
+        "latentrl_version": __version__,
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "policy": policy,
+        "motion": motion,
+        "settings": {**asdict(settings), "fps": FPS, "budget_s": settings.budget_s,
+                     "files": [s.file for s in suites]},
+        "hardware": hardware or {},
+        "speed": speed or {},
+        "suites": {
+            s.name: {"file": s.file, "sha256": _sha256(s.file), "metrics": pooled_metrics(s.paths),
+                     "paths": [_path_entry(p) for p in s.paths]}
+            for s in suites
+        },
+        "overall": {"metrics": pooled_metrics(all_paths), "paths": len(all_paths),
+                    "episodes": sum(len(p.episodes) for p in all_paths)},
+        "files": files or {},
+    }
+
+
+def _finite(obj: Any) -> Any:
+    """JSON has no NaN: replace non-finite floats by None, recursively."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return _finite(obj.item())
+    return obj
+
+
+def write_report(out_dir: str | Path, report: dict[str, Any]) -> tuple[Path, Path]:
+    """Write ``report.json`` and ``report.md`` into ``out_dir`` (atomically); returns both paths."""
+    from latentrl.safe_io import atomic_write_text
+
+    out_dir = Path(out_dir)
+    js = atomic_write_text(out_dir / REPORT_JSON, json.dumps(_finite(report), indent=1, allow_nan=False) + "\n")
+    md = atomic_write_text(out_dir / REPORT_MD, report_markdown(report))
+    return js, md
+
+
+def load_report(path: str | Path) -> dict[str, Any]:
+    """Read a ``report.json`` (or a folder holding one); errors name the file and what is wrong."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / REPORT_JSON
+    if not path.is_file():
+        raise DataError(f"report not found: {path} (give a report.json or the eval output folder)")
+    try:
+        report = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: not a JSON report ({str(exc)[:120]})") from None
+    if not isinstance(report, dict) or report.get("format") != FORMAT:
+        found = report.get("format") if isinstance(report, dict) else type(report).__name__
+        raise DataError(f"{path}: not a latentrl evaluation report (format {found!r}, expected {FORMAT!r})")
+    for key in ("suites", "overall", "settings"):
+        if key not in report:
+            raise DataError(f"{path}: report lacks field '{key}'")
+    return report
+
+
+# --------------------------------------------------------------------------- report.md
+def _fmt(m: dict[str, float] | None, digits: int = 2) -> str:
+    """``mean ± ci`` of a ``{"mean", "ci95"}`` (None/NaN as an en dash)."""
+    if not m or m.get("mean") is None or not math.isfinite(m["mean"]):
+        return "–"
+    ci = m.get("ci95")
+    ci_text = f" ± {ci:.{digits}f}" if ci is not None and math.isfinite(ci) else ""
+    return f"{m['mean']:.{digits}f}{ci_text}"
+
+
+def _header(keys: Sequence[str], lead: Sequence[str]) -> list[str]:
+    titles = [f"{METRICS[k][0]} ({METRICS[k][1]})" if METRICS[k][1] else METRICS[k][0] for k in keys]
+    cols = [*lead, *titles]
+    return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+
+
+def _row(lead: Sequence[str], metrics: dict, keys: Sequence[str]) -> str:
+    return "| " + " | ".join([*lead, *(_fmt(metrics.get(k)) for k in keys)]) + " |"
+
+
+def _dart_row(name: str, keys: Sequence[str]) -> str | None:
+    ref = DART_TABLE4.get(name)
+    if ref is None:
+        return None
+    cells = [f"{ref[k]:.2f}" if k in ref else "" for k in keys]
+    return "| " + " | ".join([f"DART paper, Table 4 ({name.split('_')[1]})", "", *cells]) + " |"
+
+
+def results_table(report: dict[str, Any]) -> list[str]:
+    """One row per path, one DART-aggregated row per suite (+ DART's published row), then ``overall``."""
+    keys = list(METRICS)
+    lines = _header(keys, ["suite", "path"])
+    for name, suite in report["suites"].items():
+        for p in suite["paths"]:
+            lines.append(_row([name, str(p["index"])], p["metrics"], keys))
+        lines.append(_row([f"**{name}**", "all"], suite["metrics"], keys))
+        dart = _dart_row(name, keys)
+        if dart:
+            lines.append(dart)
+    lines.append(_row(["**overall**", "all"], report["overall"]["metrics"], keys))
+    return lines
+
+
+def _waypoint_table(report: dict[str, Any]) -> list[str]:
+    width = max((len(p["waypoints"]) for s in report["suites"].values() for p in s["paths"]), default=0)
+    lines = ["| suite | path | " + " | ".join(f"wp {k}" for k in range(width)) + " |", "|" + "---|" * (width + 2)]
+    for name, suite in report["suites"].items():
+        for p in suite["paths"]:
+            cells = [f"{_fmt(w, 1)} ({w['reached_rate']:.0%})" for w in p["waypoint_reach_time_s"]]
+            cells += [""] * (width - len(cells))
+            lines.append(f"| {name} | {p['index']} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _speed_lines(report: dict[str, Any]) -> list[str]:
+    if not report.get("speed"):
+        return ["(not measured)"]
+    lines = ["| batch | frames/s | ms per primitive (8 frames) |", "|---|---|---|"]
+    for s in report["speed"].values():
+        lines.append(f"| {s['batch']} | {s['frames_per_s']:.0f} | {s['ms_per_step']:.1f} |")
+    hw = report.get("hardware") or {}
+    lines.append("")
+    lines.append(f"Hardware: {hw.get('gpu') or hw.get('cpu', '?')} ({hw.get('cpu_count', '?')} CPU cores, "
+                 f"{hw.get('torch_threads', '?')} torch threads, torch {hw.get('torch', '?')}).")
+    return lines
+
+
+DEFINITIONS = """\
+- **success**: the pelvis came within {thr} m (xy) of the final waypoint, after every earlier waypoint, within
+  the budget of {steps} primitives ({budget:.1f} s). Episodes that time out, diverge or wander off are
+  **failures** (DART's script counted only finished runs).
+- **reach time**: seconds to the final waypoint, `frames / 30` with the 2 seed frames counted (DART's
+  definition). A failed episode counts with the **budget time** ({budget:.1f} s): a censored value, so
+  failures raise it instead of vanishing. **reach time, successes** averages successful episodes only
+  (DART's number, comparable with its Table 4 when success is 1.0).
+- **skate**: DART's contact-weighted foot (joints 10, 11) speed, weight `2 - 2^clamp(h / 3 cm, 0, 1)`, cm/s.
+- **floor**: DART's mean over frames of `|min(z_left_foot, z_right_foot)|`, cm.
+- **jerk**: mean norm of the third finite difference of all 22 joints, m/s³.
+- **penetration / floating**: CLoSD's, the lowest joint's mean depth below / height above the floor beyond 5 mm, mm.
+- **skating**: CLoSD's, mean horizontal foot displacement between frames in contact (within 5 mm), mm.
+- All motion metrics are computed on each whole episode, seed frames included, then aggregated.
+- Per path: mean ± 95% CI (1.96 std / sqrt(n)) over episodes. Per suite and overall: DART's aggregation,
+  each episode index averaged over the paths first, then mean ± CI over the indices; *reach time,
+  successes* is pooled over all successful episodes instead.
+- The DART rows are the paper's numbers on its released BABEL model. Its script counted finished runs only,
+  so its time sits under *reach time, successes* and its success of 1.0 ignores timeouts. Ours run on the
+  motion model named above.
+"""
+
+
+def report_markdown(report: dict[str, Any]) -> str:
+    """The human-readable report, from the report dict alone."""
+    s, pol, mot = report["settings"], report.get("policy") or {}, report.get("motion") or {}
+    mode = "deterministic (mean) actions" if s.get("deterministic") else "sampled actions (as DART)"
+    lines = [
+        f"# Evaluation of `{Path(str(pol.get('path', 'policy'))).name}`",
+        "",
+        f"- policy: `{pol.get('path')}` (sha256 `{str(pol.get('sha256'))[:12]}`, iteration {pol.get('iteration')})",
+        f"- motion model: `{mot.get('source')}` (sha256 `{str(mot.get('sha256'))[:12]}`)",
+        f"- {s['episodes']} episodes per path, budget {s['max_steps']} primitives ({s['budget_s']:.1f} s), {mode}, "
+        f"seed {s['seed']}, device {s['device']}, latentrl {report.get('latentrl_version')}, {report.get('created')}",
+        "",
+        "## Results",
+        "",
+        *results_table(report),
+        "",
+        "## Per-waypoint reach times (s, successes at that waypoint; share of episodes that reached it)",
+        "",
+        *_waypoint_table(report),
+        "",
+        "## Generation speed (policy + motion model)",
+        "",
+        *_speed_lines(report),
+        "",
+        "## Definitions",
+        "",
+        DEFINITIONS.format(thr=s["success_threshold"], steps=s["max_steps"], budget=s["budget_s"]),
+    ]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- compare
+def _label(path: Path, report: dict[str, Any]) -> str:
+    folder = path.parent.name if path.name == REPORT_JSON else path.stem
+    return folder or Path(str((report.get("policy") or {}).get("path", "report"))).name
+
+
+def compare_markdown(reports: Sequence[tuple[str, dict[str, Any]]], keys: Sequence[str] = COMPARE_METRICS) -> str:
+    """Several reports side by side: for every suite (and ``overall``), one row per report."""
+    names = list(dict.fromkeys(n for _, r in reports for n in r["suites"])) + ["overall"]
+    lines = _header(list(keys), ["suite", "report"])
+    for name in names:
+        for label, report in reports:
+            block = report["overall"] if name == "overall" else report["suites"].get(name)
+            if block is not None:
+                lines.append(_row([name, label], block["metrics"], keys))
+    notes = _setting_notes(reports)
+    return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
+
+
+def _setting_notes(reports: Sequence[tuple[str, dict[str, Any]]]) -> list[str]:
+    """Warn where reports differ in what makes numbers comparable."""
+    notes = []
+    for key in ("episodes", "max_steps", "deterministic", "success_threshold"):
+        seen = {label: r["settings"].get(key) for label, r in reports}
+        if len(set(map(str, seen.values()))) > 1:
+            notes.append(f"Note: `{key}` differs: " + ", ".join(f"{k}={v}" for k, v in seen.items()))
+    motions = {label: str((r.get("motion") or {}).get("sha256"))[:12] for label, r in reports}
+    if len(set(motions.values())) > 1:
+        notes.append("Note: the motion models differ: " + ", ".join(f"{k}={v}" for k, v in motions.items()))
+    return notes
+
+
+def compare_reports(paths: Sequence[str | Path]) -> str:
+    """Load every report (files or eval folders) and return the side-by-side table."""
+    loaded = []
+    for p in paths:
+        p = Path(p)
+        report = load_report(p)
+        loaded.append((_label(p if p.is_file() else p / REPORT_JSON, report), report))
+    labels = [label for label, _ in loaded]
+    loaded = [(f"{label} ({i})" if labels.count(label) > 1 else label, r) for i, (label, r) in enumerate(loaded)]
+    return compare_markdown(loaded)

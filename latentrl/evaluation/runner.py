@@ -1,0 +1,413 @@
+"""Run a policy over waypoint path files: DART's evaluation protocol, without hiding failures.
+
+For each path of each file, ``episodes`` environments of :class:`~latentrl.envs.FollowPathEnv`
+run in parallel on that same path (batch = episodes, DART's 32), with actions sampled from the
+policy (DART samples; ``deterministic=True`` takes the mean). Each env stops counting at its final
+waypoint (the env terminates it with ``is_success``); the batch stops when every env is done or the
+step budget ``max_steps`` is spent. What we fix in DART's script (``reference/dart.md`` section 5):
+
+- an episode that runs out of budget is a **failure** (DART only saved finished runs, so its
+  success rate was 1.0 by construction); its reach time is the budget time (a censored value),
+  and the mean over successful episodes only is reported beside it;
+- divergence and losing the path (farther than ``terminate_distance``) are failures too.
+
+What we keep: success is the pelvis within 0.3 m (xy) of the final waypoint at one of the 8 frames
+of a step (DART's min over the last 8 frames of the saved sequence); reach time is
+``num_frames / 30`` including the 2 seed frames; metrics are computed on the whole episode's world
+joints, seed frames included.
+
+The runner needs from the env package: ``FollowPathEnv(paths=[p], path_assignment="by_env",
+autoreset_mode="Disabled", record_history=True, max_episode_steps=...)``, the infos
+``waypoint_reached``, ``waypoint_index``, ``is_success``, ``diverged``, and ``export_history``.
+From the policy it needs only a callable ``obs (N, D) -> actions (N, A)`` (:data:`PolicyFn`);
+:func:`policy_fn` makes one from a PPO :class:`~latentrl.ppo.ActorCritic`.
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from latentrl.config import require
+from latentrl.envs.path import FollowPathEnv, WaypointPath, load_paths
+from latentrl.errors import CheckpointError
+from latentrl.evaluation import metrics as M
+from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
+from latentrl.motion.skeleton import FPS
+
+PolicyFn = Callable[[torch.Tensor], torch.Tensor]
+"""The policy seam: observations (N, D) float32 on the env's device -> actions (N, A)."""
+
+EpisodeSink = Callable[["EpisodeResult", dict], "str | None"]
+"""Called once per finished episode with its result and its motion: the shared ``.npz`` fields (``joints``,
+``fps``, ``texts``, ``primitive``, ``actions``, ``goals``) cut at the episode's end, plus the path's
+``waypoints`` (W, 3). Returns the file it wrote (stored in ``EpisodeResult.motion_file``) or None."""
+
+
+@dataclass
+class EvalSettings:
+    """How an evaluation runs; stored in ``report.json`` under ``settings``."""
+
+    episodes: int = 32
+    """Episodes per path, run in parallel as one batch (DART: 32 envs)."""
+    max_steps: int = 256
+    """Step budget per episode in primitives of 8 frames (DART's ``num_steps`` 256 = 68.3 s, enough for
+    its longest walking path, 36 m, at half of DART's walking speed). Episodes still running are failures."""
+    deterministic: bool = False
+    """Use the policy's mean action instead of sampling (DART samples)."""
+    seed: int = 0
+    """Base seed; each path gets its own seed derived from it, the file stem and the path index."""
+    device: str = "cpu"
+    guidance_scale: float = 5.0
+    """Classifier-free guidance of the motion model (DART's ``guidance_param``)."""
+    success_threshold: float = 0.3
+    """Waypoint radius, metres (xy, pelvis); DART 0.3."""
+
+    def validate(self) -> None:
+        require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
+        require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
+        require(self.success_threshold > 0, "success_threshold", f"must be > 0, got {self.success_threshold}")
+
+    @property
+    def budget_s(self) -> float:
+        """The reach time a failed episode gets: the frames of a full budget (seed frames included) / 30."""
+        return frames_after(self.max_steps) / FPS
+
+
+def frames_after(steps: int) -> int:
+    """Frames of an episode after ``steps`` primitives: the 2 seed frames + 8 per primitive (DART counts both)."""
+    return HISTORY_LENGTH + FUTURE_LENGTH * int(steps)
+
+
+@dataclass
+class EpisodeResult:
+    """One episode of one path. Times in seconds (frames / 30, seed frames included)."""
+
+    suite: str
+    path_index: int
+    episode: int
+    success: bool
+    end: str
+    """'success', 'timeout' (budget spent), 'diverged' (motion blew up) or 'lost' (beyond terminate_distance)."""
+    steps: int
+    """Primitives until the episode ended (the budget for timeouts)."""
+    reach_time_s: float
+    """Time to the final waypoint; the budget time for failures (censored, so failures are not hidden)."""
+    waypoint_times_s: list[float | None]
+    """Time each waypoint was reached; None where it was not."""
+    final_dist_m: float
+    """DART's ``dist``: min over the last 8 frames of the pelvis xy distance to the final waypoint."""
+    metrics: dict[str, float]
+    """:func:`latentrl.evaluation.metrics.episode_metrics` of the whole episode."""
+    pelvis_xy: np.ndarray = field(repr=False)
+    """(T, 2) pelvis track, world metres (for plots; not written to JSON)."""
+    motion_file: str | None = None
+
+
+@dataclass
+class PathResult:
+    suite: str
+    index: int
+    path: WaypointPath
+    episodes: list[EpisodeResult]
+    wall_s: float
+
+
+@dataclass
+class SuiteResult:
+    name: str
+    """File stem, e.g. ``dart_walk_long``."""
+    file: str
+    paths: list[PathResult]
+
+
+# --------------------------------------------------------------------------- policy seam
+def policy_fn(policy: torch.nn.Module, deterministic: bool = False) -> PolicyFn:
+    """Wrap a PPO ``ActorCritic`` (anything with ``act(obs, deterministic) -> (action, ...)``) as a :data:`PolicyFn`.
+
+    Sampling draws from torch's global generator, which :func:`run_path` seeds per path.
+    """
+
+    def act(obs: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            return policy.act(obs, deterministic=deterministic).action
+
+    return act
+
+
+def check_policy_shapes(obs_dim: int, action_dim: int, env: FollowPathEnv) -> None:
+    """Refuse a policy whose observation or action size does not fit the eval env, naming the fix."""
+    env_obs, env_act = env.single_observation_space.shape[0], env.single_action_space.shape[0]
+    if action_dim != env_act:
+        raise CheckpointError(
+            f"the policy outputs {action_dim}-D actions but the motion model's latent has {env_act} values; "
+            "evaluate with the motion model the policy was trained on (--motion)"
+        )
+    if obs_dim != env_obs:
+        raise CheckpointError(
+            f"the policy expects {obs_dim}-D observations but FollowPath gives {env_obs} "
+            f"(goal {env.observation_layout['goal']}); was it trained on another task layout or text encoder?"
+        )
+
+
+def fit_policy(obs_dim: int, action_dim: int, motion, settings: EvalSettings) -> bool:
+    """Check that a policy fits the eval env and return whether the env must ``observe_next``.
+
+    A FollowPath policy trained with ``observe_next`` has a goal group of 8 values instead of 4
+    (ReachLocation and plain FollowPath policies have 4), which is how it is recognised.
+    """
+    probe = WaypointPath(((0.0, 1.0, 0.0),), ("walk",))
+    env = make_env(motion, [probe], 1, settings, observe_next=False)
+    observe_next = obs_dim == env.single_observation_space.shape[0] + 4
+    if observe_next:
+        env = make_env(motion, [probe], 1, settings, observe_next=True)
+    check_policy_shapes(obs_dim, action_dim, env)
+    return observe_next
+
+
+# --------------------------------------------------------------------------- running
+def make_env(
+    motion,
+    paths: Sequence[WaypointPath],
+    num_envs: int,
+    settings: EvalSettings,
+    observe_next: bool = False,
+    record_history: bool = False,
+    max_steps: int | None = None,
+) -> FollowPathEnv:
+    """The evaluation env: env i follows path ``i % len(paths)``, no autoreset, DART's clips and thresholds."""
+    return FollowPathEnv(
+        num_envs,
+        motion=motion,
+        paths=list(paths),
+        path_assignment="by_env",
+        observe_next=observe_next,
+        texts=(paths[0].texts[0],),
+        device=settings.device,
+        max_episode_steps=max_steps or settings.max_steps,
+        autoreset_mode="Disabled",
+        guidance_scale=settings.guidance_scale,
+        success_threshold=settings.success_threshold,
+        record_history=record_history,
+    )
+
+
+def path_seed(seed: int, suite: str, index: int) -> int:
+    """A per-path seed that does not depend on which other files or paths are evaluated."""
+    return (int(seed) * 1_000_003 + zlib.crc32(f"{suite}:{index}".encode())) % 2**31
+
+
+def _rollout(env: FollowPathEnv, act: PolicyFn, max_steps: int, seed: int) -> dict[str, torch.Tensor]:
+    """Step the batch until every env is done or the budget is spent; per-env (CPU) outcome tensors.
+
+    Returns ``steps`` (N,) primitives until done, ``success``/``diverged``/``lost`` (N,) bool and
+    ``wp_step`` (N, W) the step at which each waypoint was reached (0 = never).
+    """
+    torch.manual_seed(seed)
+    obs, _ = env.reset(seed=seed)
+    n, dev = env.num_envs, env.device
+    width = max(len(p.waypoints) for p in env.paths)
+    done = torch.zeros(n, dtype=torch.bool, device=dev)
+    out = {k: torch.zeros(n, dtype=torch.bool, device=dev) for k in ("success", "diverged", "lost")}
+    steps = torch.full((n,), max_steps, dtype=torch.long, device=dev)
+    wp_step = torch.zeros(n, width, dtype=torch.long, device=dev)
+    rows = torch.arange(n, device=dev)
+    for k in range(1, max_steps + 1):
+        obs, _, terminated, truncated, infos = env.step(act(obs))
+        live = ~done
+        reached = infos["waypoint_reached"] & live
+        wp = (infos["waypoint_index"] - 1).clamp(min=0)  # the index after advancing, minus the one reached
+        wp_step[rows[reached], wp[reached]] = k
+        out["success"] |= infos["is_success"] & live
+        out["diverged"] |= infos["diverged"] & live
+        ended = live & (terminated | truncated)
+        out["lost"] |= ended & terminated & ~infos["is_success"] & ~infos["diverged"]
+        steps = torch.where(ended, k, steps)
+        done |= ended
+        if bool(done.all()):
+            break
+    return {"steps": steps.cpu(), "wp_step": wp_step.cpu(), **{k: v.cpu() for k, v in out.items()}}
+
+
+def _episode_motion(env: FollowPathEnv, i: int, steps: int) -> dict[str, Any]:
+    """Env i's recorded episode cut at its end (steps continue for finished envs in a batch)."""
+    h = env.export_history(i, episode=0)
+    frames = frames_after(steps)
+    return {
+        "joints": h["joints"][:frames],
+        "fps": h["fps"],
+        "texts": list(h["texts"][:frames]),
+        "primitive": h["primitive"][:frames],
+        "actions": h["actions"][:steps],
+        "goals": h["goals"][:steps],
+    }
+
+
+def _end(outcome: dict[str, torch.Tensor], i: int) -> str:
+    for name in ("success", "diverged", "lost"):
+        if bool(outcome[name][i]):
+            return name
+    return "timeout"
+
+
+def run_path(
+    act: PolicyFn,
+    motion,
+    path: WaypointPath,
+    settings: EvalSettings,
+    *,
+    suite: str = "paths",
+    index: int = 0,
+    observe_next: bool = False,
+    sink: EpisodeSink | None = None,
+) -> PathResult:
+    """Evaluate ``settings.episodes`` episodes of one path in one batch; see the module docstring."""
+    t0 = time.perf_counter()
+    env = make_env(motion, [path], settings.episodes, settings, observe_next, record_history=True)
+    outcome = _rollout(env, act, settings.max_steps, path_seed(settings.seed, suite, index))
+    final_goal = torch.tensor(path.waypoints[-1])
+    episodes = []
+    for i in range(settings.episodes):
+        steps = int(outcome["steps"][i])
+        motion_i = _episode_motion(env, i, steps)
+        joints = torch.as_tensor(motion_i["joints"])
+        success = bool(outcome["success"][i])
+        wp_times = [frames_after(int(s)) / FPS if s > 0 else None for s in outcome["wp_step"][i, : len(path.waypoints)]]
+        result = EpisodeResult(
+            suite=suite,
+            path_index=index,
+            episode=i,
+            success=success,
+            end=_end(outcome, i),
+            steps=steps,
+            reach_time_s=frames_after(steps) / FPS if success else settings.budget_s,
+            waypoint_times_s=wp_times,
+            final_dist_m=float(M.final_goal_distance_m(joints, final_goal)),
+            metrics=M.episode_metrics(joints, FPS, env.floor_height),
+            pelvis_xy=joints[:, 0, :2].numpy().copy(),
+        )
+        if sink is not None:
+            result.motion_file = sink(result, {**motion_i, "waypoints": np.asarray(path.waypoints, np.float32)})
+        episodes.append(result)
+    env.close()
+    return PathResult(suite, index, path, episodes, time.perf_counter() - t0)
+
+
+def load_suites(files: Sequence[str | Path], text: str | None = None) -> list[tuple[Path, list[WaypointPath]]]:
+    """Parse and check every path file (DART's JSON, :func:`latentrl.envs.load_paths`) before anything runs.
+
+    ``text`` replaces every waypoint's text (e.g. evaluate a 'run' policy on DART's walk paths).
+    """
+    loaded = [(Path(f), load_paths(f)) for f in files]
+    if text is not None:
+        loaded = [(f, [WaypointPath(p.waypoints, (text,) * len(p.waypoints)) for p in paths]) for f, paths in loaded]
+    return loaded
+
+
+def run_suites(
+    act: PolicyFn,
+    motion,
+    files: Sequence[str | Path],
+    settings: EvalSettings,
+    *,
+    observe_next: bool = False,
+    text: str | None = None,
+    sink: EpisodeSink | None = None,
+    progress: Callable[[PathResult], None] | None = None,
+) -> list[SuiteResult]:
+    """Every path of every file, in order (all files are checked first, see :func:`load_suites`)."""
+    settings.validate()
+    results = []
+    for file, paths in load_suites(files, text):
+        suite = SuiteResult(file.stem, str(file), [])
+        for index, path in enumerate(paths):
+            result = run_path(act, motion, path, settings, suite=file.stem, index=index,
+                              observe_next=observe_next, sink=sink)
+            suite.paths.append(result)
+            if progress is not None:
+                progress(result)
+        results.append(suite)
+    return results
+
+
+def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_cfg: Any, device: str = "cpu"):
+    """The trainer's periodic evaluation (``ppo.eval_every``): ``policy -> EvalReport``.
+
+    Runs ``eval_cfg.paths``' suites (already resolved to ``files``) with ``eval_cfg.episodes``,
+    ``max_steps``, ``deterministic`` and ``text``, and returns the overall DART-aggregated means
+    (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ...; undefined ones left out),
+    the ``eval/trajectories`` figure, and ``stop`` once ``success_rate >= eval_cfg.success_target``.
+    ``env_cfg`` gives ``guidance_scale`` and, for path policies, ``observe_next``. Files and texts are
+    checked now, not at the first evaluation. The trainer restores its random streams afterwards.
+    """
+    settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
+                            deterministic=eval_cfg.deterministic, device=str(device),
+                            guidance_scale=getattr(env_cfg, "guidance_scale", 5.0))
+    settings.validate()
+    for _, paths in load_suites(files, eval_cfg.text):
+        make_env(motion, paths, 1, settings)  # unknown prompts fail here (TextError), before training starts
+    observe_next = getattr(env_cfg, "task", "reach") == "path" and bool(getattr(env_cfg, "observe_next", False))
+    target = getattr(eval_cfg, "success_target", None)
+
+    def evaluate(policy: torch.nn.Module):
+        from latentrl.evaluation.plots import paths_figure
+        from latentrl.evaluation.report import pooled_metrics
+        from latentrl.monitor import EVAL_TRAJECTORIES, EvalReport
+
+        suites = run_suites(policy_fn(policy, settings.deterministic), motion, files, settings,
+                            observe_next=observe_next, text=eval_cfg.text)
+        pooled = pooled_metrics([p for s in suites for p in s.paths])
+        metrics = {k: v["mean"] for k, v in pooled.items() if np.isfinite(v["mean"])}
+        stop = target is not None and metrics["success_rate"] >= target
+        return EvalReport(metrics, {EVAL_TRAJECTORIES: paths_figure(suites)}, stop)
+
+    return evaluate
+
+
+# --------------------------------------------------------------------------- speed
+def measure_speed(
+    act: PolicyFn,
+    motion,
+    path: WaypointPath,
+    settings: EvalSettings,
+    batches: Sequence[int],
+    observe_next: bool = False,
+    repeats: int = 5,
+) -> dict[str, dict[str, float]]:
+    """Frames/s of the whole controller (policy + motion model + env bookkeeping) per batch size.
+
+    Timed apart from the evaluation (which also records history and computes metrics) with
+    :func:`latentrl.bench.median_time`: one warm-up step, then the median of ``repeats`` steps.
+    Returns ``{str(batch): {"batch", "ms_per_step", "frames_per_s", "env_steps_per_s"}}``.
+    """
+    out = {}
+    for batch in dict.fromkeys(int(b) for b in batches):
+        env = make_env(motion, [path], batch, settings, observe_next, max_steps=10**9)
+        seconds = _seconds_per_step(act, env, settings, repeats)
+        out[str(batch)] = {
+            "batch": batch,
+            "ms_per_step": seconds * 1e3,
+            "frames_per_s": batch * FUTURE_LENGTH / seconds,
+            "env_steps_per_s": batch / seconds,
+        }
+        env.close()
+    return out
+
+
+def _seconds_per_step(act: PolicyFn, env: FollowPathEnv, settings: EvalSettings, repeats: int) -> float:
+    """Median seconds of one policy call + one env step (the env never ends: no autoreset, huge budget)."""
+    from latentrl.bench import median_time
+
+    state = {"obs": env.reset(seed=settings.seed)[0]}
+
+    def step() -> None:
+        state["obs"] = env.step(act(state["obs"]))[0]
+
+    return median_time(step, repeats=repeats, warmup=1, device=str(settings.device))

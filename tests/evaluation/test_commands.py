@@ -1,0 +1,94 @@
+"""``latentrl eval``, ``compare`` and ``motion export-bvh`` end to end on the tiny model and a fresh policy."""
+
+import json
+
+import numpy as np
+import pytest
+
+from latentrl.cli import main
+from latentrl.evaluation.commands import resolve_path_files
+from latentrl.render import load_bvh, load_motion_npz
+from tests.evaluation.conftest import FAR, NEAR, write_paths
+
+
+def run_eval(eval_files, paths, out, *extra) -> int:
+    return main(["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
+                 "--episodes", "2", "--max-steps", "3", "--device", "cpu", "--out", str(out), *extra])
+
+
+@pytest.fixture(scope="module")
+def evaluated(eval_files, tmp_path_factory):
+    root = tmp_path_factory.mktemp("eval_cli")
+    paths = write_paths(root, [NEAR, FAR], "mini.json")
+    assert run_eval(eval_files, paths, root / "out", "--render", "1") == 0
+    return root / "out"
+
+
+def test_eval_writes_report_plot_motions_and_renders(evaluated):
+    report = json.loads((evaluated / "report.json").read_text())
+    suite = report["suites"]["mini"]
+    assert [p["metrics"]["success_rate"]["mean"] for p in suite["paths"]] == [1.0, 0.0]
+    assert report["overall"]["metrics"]["reach_time_s"]["mean"] == pytest.approx((10 / 30 + 26 / 30) / 2)
+    assert report["policy"]["iteration"] == 0 and len(report["policy"]["sha256"]) == 64
+    assert len(report["motion"]["sha256"]) == 64 and set(report["speed"]) == {"1", "2"}
+    assert (evaluated / "paths.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    md = (evaluated / "report.md").read_text()
+    assert "| mini | 0 | 1.00 ± 0.00 |" in md and "| mini | 1 | 0.00 ± 0.00 |" in md
+    motions = sorted((evaluated / "motions").glob("*.npz"))
+    assert [m.name for m in motions] == [f"mini_path{p}_ep00{e}.npz" for p in (0, 1) for e in (0, 1)]
+    far = load_motion_npz(motions[2])
+    assert far["joints"].shape == (26, 22, 3) and far["actions"].shape[0] == 3 and not bool(far["success"])
+    assert suite["paths"][1]["episodes"][0]["motion"] == "motions/mini_path1_ep000.npz"
+    renders = sorted(p.name for p in (evaluated / "renders").iterdir())
+    assert renders == ["mini_path0_ep000.bvh", "mini_path0_ep000.gif", "mini_path1_ep000.bvh", "mini_path1_ep000.gif"]
+    bvh = load_bvh(evaluated / "renders" / "mini_path1_ep000.bvh")
+    assert np.abs(bvh["joints"] - far["joints"]).max() < 1e-3
+
+
+def test_compare_two_reports(evaluated, tmp_path, capsys):
+    out = tmp_path / "cmp.md"
+    assert main(["compare", str(evaluated), str(evaluated / "report.json"), "--out", str(out)]) == 0
+    table = out.read_text()
+    assert "| mini | out (0) |" in table and "| overall | out (1) |" in table
+    assert table in capsys.readouterr().out
+
+
+def test_malformed_path_file_names_path_and_field(eval_files, tmp_path, capsys):
+    bad = write_paths(tmp_path, [NEAR, {"goal_location": [[0, 1, 0]], "goal_text": [""]}])
+    assert run_eval(eval_files, bad, tmp_path / "out") == 2
+    assert "paths.json: path 1, waypoint 0: field 'goal_text'" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_bad_settings_name_the_flag(eval_files, tmp_path, capsys):
+    assert run_eval(eval_files, write_paths(tmp_path, [NEAR]), tmp_path / "o", "--max-steps", "0") == 2
+    assert "--max-steps: must be >= 1, got 0" in capsys.readouterr().err
+
+
+def test_policy_from_another_motion_model_is_refused(eval_files, tmp_path, capsys):
+    from latentrl.motion.checkpoint import save_motion_model
+    from tests.helpers import make_tiny_model
+
+    other = save_motion_model(make_tiny_model(seed=1), tmp_path / "other.pt")
+    paths = write_paths(tmp_path, [NEAR])
+    code = main(["eval", str(eval_files["policy"]), "--motion", str(other), "--paths", str(paths),
+                 "--out", str(tmp_path / "o"), "--device", "cpu"])
+    assert code == 2 and "trained on motion model" in capsys.readouterr().err
+
+
+def test_suite_names_resolve_to_shipped_files(tmp_path):
+    files = resolve_path_files(["sharp_turns", "dart_walk_long.json"])
+    assert [f.name for f in files] == ["sharp_turns.json", "dart_walk_long.json"]
+    assert [f.stem for f in resolve_path_files(None)] == ["dart_walk_long", "dart_run_long", "dart_hop_long"]
+    with pytest.raises(Exception, match="one of the suites"):
+        resolve_path_files(["no_such_suite"])
+    with pytest.raises(Exception, match="repeated"):
+        resolve_path_files(["sharp_turns", "sharp_turns"])
+
+
+def test_export_bvh_command(evaluated, tmp_path):
+    motion = evaluated / "motions" / "mini_path0_ep000.npz"
+    out = tmp_path / "walk.bvh"
+    assert main(["motion", "export-bvh", str(motion), "--out", str(out)]) == 0
+    back = load_bvh(out)
+    assert np.abs(back["joints"] - load_motion_npz(motion)["joints"]).max() < 1e-3 and back["fps"] == pytest.approx(30)

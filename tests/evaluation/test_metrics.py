@@ -1,0 +1,107 @@
+"""Known answers of the evaluation metrics on hand-made motions (metres, z up, 30 fps)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from latentrl.evaluation import metrics as M
+
+FPS = 30.0
+
+
+def body(frames: int = 31, foot_heights=(0.0, 0.0), height: float = 1.0) -> torch.Tensor:
+    """(T, 22, 3): every joint at ``height`` except the two foot joints (10, 11) at ``foot_heights``."""
+    j = torch.zeros(frames, 22, 3)
+    j[..., 2] = height
+    j[:, 10, 2], j[:, 11, 2] = foot_heights
+    j[:, 11, 0] = 0.2  # feet side by side
+    return j
+
+
+def slide(joints: torch.Tensor, speed_m_s: float, axis: int = 1) -> torch.Tensor:
+    """The whole body translated at ``speed_m_s`` along ``axis``."""
+    t = torch.arange(len(joints), dtype=joints.dtype) / FPS
+    out = joints.clone()
+    out[..., axis] += (speed_m_s * t)[:, None]
+    return out
+
+
+def test_foot_sliding_on_the_floor_skates_at_its_speed():
+    # Both feet in contact (weight 1) slide at 0.5 m/s: DART's skate is that speed, in cm/s.
+    assert float(M.foot_skate_cm_s(slide(body(), 0.5))) == pytest.approx(50.0, rel=1e-4)
+
+
+def test_skate_counts_only_feet_in_contact():
+    # One foot on the floor, one 10 cm up (weight 0): the mean over the two feet halves the speed.
+    assert float(M.foot_skate_cm_s(slide(body(foot_heights=(0.0, 0.10)), 0.5))) == pytest.approx(25.0, rel=1e-4)
+    assert float(M.foot_skate_cm_s(slide(body(foot_heights=(0.10, 0.10)), 0.5))) == 0.0
+
+
+def test_skate_weight_is_dart_exponential_ramp():
+    # At 1.5 cm (half the 3 cm threshold) the weight is 2 - 2^0.5.
+    w = M.foot_skate_weights(torch.full((2, 2), 0.015))
+    assert torch.allclose(w, torch.full((1, 2), 2.0 - math.sqrt(2.0)))
+
+
+def test_standing_still_does_not_skate():
+    assert float(M.foot_skate_cm_s(body())) == 0.0
+
+
+def test_floating_foot_gives_its_height():
+    # The lower foot is 5 cm up: DART's floor distance is 5 cm; CLoSD's floating 50 - 5 mm tolerance.
+    j = body(foot_heights=(0.05, 0.08))
+    assert float(M.foot_floor_distance_cm(j)) == pytest.approx(5.0, rel=1e-5)
+    assert float(M.closd_floating_mm(j)) == pytest.approx(45.0, rel=1e-4)
+    assert float(M.closd_penetration_mm(j)) == 0.0
+
+
+def test_penetrating_foot_gives_its_depth():
+    j = body(foot_heights=(-0.02, 0.0))
+    assert float(M.foot_floor_distance_cm(j)) == pytest.approx(2.0, rel=1e-5)  # |min height|
+    assert float(M.closd_penetration_mm(j)) == pytest.approx(15.0, rel=1e-4)
+    assert float(M.closd_floating_mm(j)) == 0.0
+
+
+def test_closd_skating_is_horizontal_displacement_in_contact():
+    # Both feet in contact, 0.3 m/s: 10 mm per frame for both feet.
+    assert float(M.closd_skating_mm(slide(body(), 0.3, axis=0))) == pytest.approx(10.0, rel=1e-4)
+    assert float(M.closd_skating_mm(slide(body(foot_heights=(0.01, 0.01)), 0.3))) == 0.0  # above 5 mm
+
+
+def test_jerk_of_a_cubic_is_six_times_its_coefficient():
+    t = torch.arange(20, dtype=torch.float64) / FPS
+    j = body(20).double()
+    j[..., 0] += (2.0 * t**3)[:, None]  # x = 2 t^3 -> third derivative 12 m/s^3 for every joint
+    assert float(M.jerk(j)) == pytest.approx(12.0, rel=1e-6)
+    assert float(M.jerk(slide(body().double(), 1.0))) == pytest.approx(0.0, abs=1e-6)  # constant velocity
+
+
+def test_episode_metrics_bundle():
+    out = M.episode_metrics(slide(body(), 0.5))
+    assert set(out) == set(M.EPISODE_METRICS)
+    assert out["skate_cm_s"] == pytest.approx(50.0, rel=1e-4) and out["floor_cm"] == 0.0
+
+
+def test_final_goal_distance_is_min_over_the_last_eight_frames():
+    j = slide(body(40), 3.0)  # pelvis y = 0.1 m per frame
+    goal = torch.tensor([0.0, 3.5, 0.0])  # frame 35; the last 8 frames are 32..39
+    assert float(M.final_goal_distance_m(j, goal)) == pytest.approx(0.0, abs=1e-5)
+    assert float(M.final_goal_distance_m(j[:30], goal)) == pytest.approx(0.6, abs=1e-5)
+
+
+def test_mean_ci95_known_values():
+    out = M.mean_ci95([1.0, 2.0, 3.0, 4.0])
+    assert out["mean"] == 2.5
+    assert out["ci95"] == pytest.approx(1.96 * math.sqrt(1.25) / 2.0)  # population std, as DART
+    assert M.mean_ci95([7.0]) == {"mean": 7.0, "ci95": 0.0}
+    assert math.isnan(M.mean_ci95([])["mean"])
+
+
+def test_dart_aggregation_averages_episode_index_over_paths_first():
+    values = np.array([[1.0, 3.0], [3.0, 5.0]])  # 2 paths x 2 episodes; index means 2 and 4
+    out = M.dart_mean_ci95(values)
+    assert out["mean"] == 3.0 and out["ci95"] == pytest.approx(1.96 * 1.0 / math.sqrt(2))
+    with pytest.raises(ValueError, match="paths, episodes"):
+        M.dart_mean_ci95([1.0, 2.0])
