@@ -372,3 +372,60 @@ def bench_motion(args: argparse.Namespace) -> int:
         print(f"[{'pass' if ok else 'FAIL'}] {name}")
     write_json(args.json, out)
     return 0
+
+
+# --------------------------------------------------------------------------- training
+def _iteration_summary(times) -> dict:
+    """Median per-iteration collection/update seconds, skipping the first (warm-up) iteration."""
+    rows = list(times)[1:] or list(times)
+    coll = statistics.median(t.collection_s for t in rows)
+    upd = statistics.median(t.update_s for t in rows)
+    return {"iterations_timed": len(rows), "collection_s": coll, "update_s": upd, "iteration_s": coll + upd,
+            "update_share": upd / (coll + upd)}
+
+
+def bench_train(args: argparse.Namespace) -> int:
+    """Time to eval success on the quick config, and native vs SB3 iteration time side by side."""
+    import tempfile
+
+    from latentrl.config import load_config
+    from latentrl.experiment import QUICK_CONFIG, TrainConfig, run_training
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    base = Path(args.config) if args.config else QUICK_CONFIG
+    out = {"benchmark": "train", "hardware": hardware(), "config": str(base)}
+    work = Path(args.run_dir) if args.run_dir else Path(tempfile.mkdtemp(prefix="latentrl-bench-train-"))
+    if not args.skip_success:
+        cfg = load_config(TrainConfig, base, list(args.set or []))
+        cfg.eval.success_target = args.target
+        cfg.ppo.eval_every = args.eval_every
+        if args.max_steps:
+            cfg.ppo.total_steps = args.max_steps
+        print(f"training {base.name} until eval success >= {args.target} (at most {cfg.ppo.total_steps} env steps)")
+        t0 = time.perf_counter()
+        res = run_training(cfg, work / "to_success", progress=not args.no_progress)
+        wall = time.perf_counter() - t0
+        metrics = res.eval.metrics if res.eval is not None else {}
+        out["to_success"] = {"target": args.target, "reached": bool(res.stopped_early), "wall_s": wall,
+                             "train_s": res.elapsed_s, "env_steps": res.env_steps, "iterations": res.iterations,
+                             "last_eval": metrics, **_iteration_summary(res.times)}
+        print(f"{'reached' if res.stopped_early else 'did NOT reach'} eval success {args.target} after "
+              f"{res.env_steps} env steps, {wall:.0f} s wall (last eval: {metrics})")
+    side = {}
+    for trainer in ("native", "sb3"):
+        cfg = load_config(TrainConfig, base, list(args.set or []))
+        cfg.ppo.eval_every = 0
+        cfg.ppo.checkpoint_every = 10**6
+        plan = cfg.ppo.plan(cfg.env.num_envs)
+        cfg.ppo.total_steps = plan.batch_size * args.iterations
+        res = run_training(cfg, work / f"side_by_side_{trainer}", trainer=trainer, progress=False)
+        side[trainer] = _iteration_summary(res.times)
+        s = side[trainer]
+        print(f"{trainer:>6}: {s['iteration_s']:.2f} s/iteration (collection {s['collection_s']:.2f} s, "
+              f"update {s['update_s']:.2f} s, update share {s['update_share']:.0%})")
+    side["native_over_sb3"] = side["native"]["iteration_s"] / side["sb3"]["iteration_s"]
+    out["native_vs_sb3"] = side
+    print(f"native / SB3 per-iteration time: {side['native_over_sb3']:.2f} (target <= 0.6)")
+    write_json(args.json, out)
+    return 0

@@ -2,7 +2,8 @@
 
 Each subcommand calls one function in the module that owns the job. Errors a user can cause
 (:class:`latentrl.errors.LatentRLError`, bad arguments) become one line on stderr and exit code 2;
-``--debug`` shows the traceback instead.
+non-finite training values exit 3 (:class:`~latentrl.errors.NonFiniteError`), I/O failures while
+a command runs (disk full) exit 1, Ctrl-C 130; ``--debug`` shows the traceback instead.
 """
 
 from __future__ import annotations
@@ -17,6 +18,45 @@ from latentrl.errors import LatentRLError
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # one line, exit 2 (argparse's own convention)
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _device(text: str) -> str:
+    """Argument type of ``--device``: a torch device this machine has (checked before any work starts)."""
+    from latentrl.preflight import check_device
+
+    try:
+        check_device(text, "--device")
+    except LatentRLError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--device: ")) from None
+    return text
+
+
+def _positive(kind: type):
+    """Argument type: an int or float > 0 (and finite)."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            expected = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {expected}, got '{text}'") from None
+        if not value > 0 or value == float("inf"):
+            raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__  # argparse names the type in "invalid <type> value" messages
+    return parse
+
+
+_pos_int, _pos_float = _positive(int), _positive(float)
+
+
+def _fraction(text: str) -> float:
+    """Argument type: a float in (0, 1]."""
+    value = _pos_float(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"must lie in (0, 1], got {text}")
+    return value
 
 
 def _motion_commands(sub) -> None:
@@ -37,7 +77,7 @@ def _motion_commands(sub) -> None:
     sample.add_argument("--seed", type=int, default=0, help="random seed (noise and seed-history choice)")
     sample.add_argument("--guidance", type=float, default=5.0, help="classifier-free guidance scale")
     sample.add_argument("--batch", type=int, default=1, help="number of motions (files get _<i> suffixes)")
-    sample.add_argument("--device", default="cpu")
+    sample.add_argument("--device", default="cpu", type=_device)
     sample.add_argument("--out", default="motion.npz", help="output .npz (shared motion format)")
     sample.add_argument("--render", help="also write a skeleton animation (.gif)")
     sample.set_defaults(func=lambda a: _call("latentrl.motion.commands", "sample", a))
@@ -58,11 +98,19 @@ def _motion_commands(sub) -> None:
 
 
 def _train_commands(sub) -> None:
+    quick = sub.add_parser("quickstart", help="train configs/quick.yaml on the default motion model, then evaluate it")
+    quick.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a field of configs/quick.yaml")
+    quick.add_argument("--run-dir", help="run directory (default: runs/quickstart-<time>)")
+    quick.add_argument("--episodes", type=int, default=8, help="evaluation episodes per path")
+    quick.add_argument("--max-steps", type=int, default=128, help="evaluation step budget per episode")
+    quick.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    quick.set_defaults(func=lambda a: _call("latentrl.experiment", "quickstart_command", a))
+
     train = sub.add_parser("train", help="train a controller with PPO from a YAML config")
     train.add_argument("config", nargs="?", help="YAML config (e.g. configs/quick.yaml)")
     train.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
     train.add_argument("--trainer", default="native", choices=["native", "sb3"], help="PPO implementation")
-    train.add_argument("--device", help="torch device (sets ppo.device), e.g. cpu or cuda")
+    train.add_argument("--device", type=_device, help="torch device (sets ppo.device), e.g. cpu or cuda")
     train.add_argument("--seed", type=int, help="random seed (sets ppo.seed)")
     train.add_argument("--total-steps", type=int, help="env steps to train (sets ppo.total_steps)")
     train.add_argument("--run-dir", help="run directory (default: runs/<config>-<time>)")
@@ -78,12 +126,13 @@ def _bench_commands(sub) -> None:
     bsub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK", parser_class=_Parser)
     bsub.required = True
     roll = bsub.add_parser("rollout", help="primitives/s of the motion model, side by side with DART's sampler")
-    roll.add_argument("--batches", type=int, nargs="+", default=[1, 16, 256], help="batch sizes")
+    roll.add_argument("--batches", type=_pos_int, nargs="+", default=[1, 16, 256], help="batch sizes")
     roll.add_argument("--models", nargs="+", default=["official", "default"],
                       help="'official' (DART size, random weights), 'default', or model paths")
-    roll.add_argument("--device", nargs="+", default=None, help="devices (default: cpu, plus cuda when present)")
-    roll.add_argument("--repeats", type=int, default=5, help="timed runs per figure (median reported)")
-    roll.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    roll.add_argument("--device", nargs="+", type=_device, default=None,
+                      help="devices (default: cpu, plus cuda when present)")
+    roll.add_argument("--repeats", type=_pos_int, default=5, help="timed runs per figure (median reported)")
+    roll.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads (default: torch's)")
     roll.add_argument("--compile", action="store_true", help="also time torch.compile'd denoiser")
     roll.add_argument("--dart-src", default=None,
                       help="extracted zkf1997/DART tree; runs ../shared/tools/dart_peer_bench.py side by side")
@@ -95,19 +144,34 @@ def _bench_commands(sub) -> None:
     env = bsub.add_parser("env", help="env steps/s of the batched env vs. a per-env SyncVectorEnv loop")
     env.add_argument("--models", nargs="+", default=["default", "official"],
                      help="'default', 'official' (DART size, random weights), 'tiny', or model paths")
-    env.add_argument("--num-envs", type=int, nargs="+", default=[1, 64, 256, 1024], help="env counts")
-    env.add_argument("--device", nargs="+", default=None, help="devices (default: cpu, plus cuda when present)")
-    env.add_argument("--steps", type=int, default=5, help="timed steps per figure")
-    env.add_argument("--max-seconds", type=float, default=120.0, help="skip combinations estimated to take longer")
+    env.add_argument("--num-envs", type=_pos_int, nargs="+", default=[1, 64, 256, 1024], help="env counts")
+    env.add_argument("--device", nargs="+", type=_device, default=None,
+                     help="devices (default: cpu, plus cuda when present)")
+    env.add_argument("--steps", type=_pos_int, default=5, help="timed steps per figure")
+    env.add_argument("--max-seconds", type=_pos_float, default=120.0, help="skip combinations estimated to take longer")
     env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
-    env.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
     env.add_argument("--json", help="write all figures to this JSON file")
     env.set_defaults(func=lambda a: _call("latentrl.envs.bench", "bench_env", a))
 
+    tr = bsub.add_parser("train", help="time to eval success on the quick config; native vs SB3 iteration time")
+    tr.add_argument("--config", help="training config (default: configs/quick.yaml)")
+    tr.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
+    tr.add_argument("--target", type=_fraction, default=0.9, help="eval success rate to reach")
+    tr.add_argument("--eval-every", type=_pos_int, default=10, help="iterations between evaluations")
+    tr.add_argument("--max-steps", type=_pos_int, default=None, help="env-step cap for the success run")
+    tr.add_argument("--iterations", type=_pos_int, default=5, help="iterations per trainer in the side-by-side run")
+    tr.add_argument("--skip-success", action="store_true", help="only the native vs SB3 comparison")
+    tr.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
+    tr.add_argument("--run-dir", help="where the benchmark's runs go (default: a temporary folder)")
+    tr.add_argument("--no-progress", action="store_true")
+    tr.add_argument("--json", help="write all figures to this JSON file")
+    tr.set_defaults(func=lambda a: _call("latentrl.bench", "bench_train", a))
+
     motion = bsub.add_parser("motion", help="stability and text control of a motion model vs. its training data")
     motion.add_argument("--motion", default="default", help="'default' or a model file")
-    motion.add_argument("--seconds", type=float, default=60.0, help="rollout length per prompt")
-    motion.add_argument("--batch", type=int, default=8, help="rollouts per prompt")
+    motion.add_argument("--seconds", type=_pos_float, default=60.0, help="rollout length per prompt")
+    motion.add_argument("--batch", type=_pos_int, default=8, help="rollouts per prompt")
     motion.add_argument("--guidance", type=float, default=5.0)
     motion.add_argument("--seed", type=int, default=0)
     motion.add_argument("--json", help="write all figures to this JSON file")
@@ -129,7 +193,7 @@ def _eval_commands(sub) -> None:
                     help="the motion model the policy was trained on: 'default', a model file or a DART checkpoint")
     ev.add_argument("--allow-motion-mismatch", action="store_true",
                     help="evaluate on a motion model other than the policy's (experts)")
-    ev.add_argument("--device", help="torch device (default: cuda when available, else cpu)")
+    ev.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
     ev.add_argument("--seed", type=int, default=0, help="base random seed (seed histories and action noise)")
     ev.add_argument("--out", help="output folder (default: eval-<policy name> beside the policy)")
     ev.add_argument("--render", type=int, default=1, metavar="N",
@@ -167,8 +231,12 @@ def _call(module: str, name: str, args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one command; returns its exit status (argparse's too: 0 after ``--help``, 2 for bad arguments)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
     try:
         return args.func(args)
     except LatentRLError as exc:
@@ -176,6 +244,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"latentrl: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:  # disk full, permission denied, ... while a command runs: not bad input, exit 1
+        if args.debug:
+            raise
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"latentrl: error: {exc.strerror or exc}{where} (--debug shows the traceback)", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("latentrl: interrupted", file=sys.stderr)
         return 130

@@ -22,8 +22,11 @@ from pathlib import Path
 import torch
 
 from latentrl.config import load_config, require
-from latentrl.errors import ConfigError
+from latentrl.errors import ConfigError, closest
+from latentrl.motion.text import prompt_problem
 from latentrl.ppo.config import PolicyConfig, PPOConfig
+from latentrl.preflight import check_device, check_writable
+from latentrl.rewards import TERM_NAMES
 
 TASKS = ("reach", "path")
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
@@ -72,11 +75,16 @@ class EnvConfig:
         require(self.task in TASKS, "task", f"expected one of {TASKS}, got '{self.task}'")
         require(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
         require(len(self.texts) >= 1, "texts", "give at least one prompt")
+        for text in self.texts:
+            require(prompt_problem(text) is None, "texts", str(prompt_problem(text)))
         require(self.text_weights is None or len(self.text_weights) == len(self.texts), "text_weights",
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
         require(len(self.goal_distance) == 2, "goal_distance", f"must be [min, max], got {self.goal_distance}")
+        for name in self.reward_weights:
+            require(name in TERM_NAMES, "reward_weights",
+                    f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")
 
 
 @dataclass
@@ -111,6 +119,13 @@ class TrainConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     threads: int = 2
     """torch CPU threads (0: torch's default)."""
+
+    def validate(self) -> None:
+        require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")
+        try:  # the batch must split into minibatches for this many envs
+            self.ppo.plan(self.env.num_envs)
+        except ConfigError as exc:
+            raise ConfigError(f"ppo.{exc}") from None
 
 
 def resolve_task_file(path: str) -> Path:
@@ -183,6 +198,7 @@ def train_command(args: argparse.Namespace) -> int:
         cfg = load_config(TrainConfig, args.config, overrides)
         name = Path(args.config).stem
         run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        check_new_run(run_dir)
     result = run_training(cfg, run_dir, trainer=args.trainer, resume=bool(args.resume),
                           allow_motion_mismatch=args.allow_motion_mismatch, progress=not args.no_progress)
     print(f"trained {result.iterations} iterations ({result.env_steps} env steps) in {result.elapsed_s:.0f} s; "
@@ -190,25 +206,32 @@ def train_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def check_device(device: str) -> None:
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        raise ConfigError(f"device '{device}' requested but CUDA is not available on this machine (use 'cpu')")
+def check_new_run(run_dir: Path) -> None:
+    """A fresh run must not start in a folder that holds another run (its checkpoints would mix with ours)."""
+    from latentrl.ppo.checkpoint import FINAL, iteration_checkpoints
+
+    if (run_dir / "config.yaml").is_file() or (run_dir / FINAL).is_file() or iteration_checkpoints(run_dir):
+        raise ConfigError(f"--run-dir {run_dir} already holds a training run; continue it with --resume {run_dir} "
+                          "or choose another --run-dir")
 
 
 def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resume: bool = False,
                  allow_motion_mismatch: bool = False, progress: bool = True):
-    """Build env + hooks from ``cfg`` and train in ``run_dir``."""
+    """Build env + hooks from ``cfg`` and train in ``run_dir``.
+
+    Every input is checked (device, batch sizes, run directory, motion model, path files) before
+    anything is written; :func:`latentrl.ppo.run.train` then checks the free disk space.
+    """
     from latentrl.ppo.run import train
 
     if trainer not in ("native", "sb3"):
         raise ConfigError(f"--trainer must be 'native' or 'sb3', got '{trainer}'")
-    device = cfg.ppo.device
-    check_device(device)
+    device = str(check_device(cfg.ppo.device, "ppo.device"))
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    check_writable(run_dir, "run directory")
     motion = load_motion(cfg.env, device)
     env = make_env(cfg.env, device, motion=motion)
     venv = env
@@ -220,3 +243,29 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     return train(venv, run_dir, cfg.ppo, cfg.policy, trainer=trainer, config=cfg, resume=resume,
                  motion=motion_info(motion), evaluate=hook, allow_motion_mismatch=allow_motion_mismatch,
                  progress=progress)
+
+
+QUICK_CONFIG = PACKAGE_ROOT / "configs" / "quick.yaml"
+QUICK_EVAL_PATHS = ("dart_demo_walk", "random_smooth")
+
+
+def quickstart_command(args: argparse.Namespace) -> int:
+    """Body of ``latentrl quickstart``: train ``configs/quick.yaml`` on the default model, then evaluate."""
+    from latentrl.cli import build_parser
+    from latentrl.evaluation.commands import check_eval_args, evaluate
+
+    cfg = load_config(TrainConfig, QUICK_CONFIG, list(args.set or []))
+    run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}"
+    check_new_run(run_dir)
+    check_eval_args(args.episodes, args.max_steps, QUICK_EVAL_PATHS)  # before training, not after
+    print(f"[quickstart] training configs/quick.yaml on the '{cfg.env.motion}' motion model in {run_dir}")
+    result = run_training(cfg, run_dir, progress=not args.no_progress)
+    print(f"[quickstart] trained {result.iterations} iterations ({result.env_steps} env steps) in "
+          f"{result.elapsed_s:.0f} s; TensorBoard: tensorboard --logdir {run_dir}")
+    eval_args = ["eval", str(result.final_checkpoint), "--paths", *QUICK_EVAL_PATHS, "--episodes",
+                 str(args.episodes), "--max-steps", str(args.max_steps), "--motion", cfg.env.motion,
+                 "--device", cfg.ppo.device, "--out", str(run_dir / "eval"), "--render", "1"]
+    print(f"[quickstart] evaluating on {', '.join(QUICK_EVAL_PATHS)}: latentrl {' '.join(eval_args)}")
+    code = evaluate(build_parser().parse_args(eval_args))
+    print(f"[quickstart] done: report {run_dir / 'eval' / 'report.md'}, plot {run_dir / 'eval' / 'paths.png'}")
+    return code

@@ -7,6 +7,8 @@ native and SB3 runs overlay. Tags use SB3's names where SB3 has one:
 ``rollout/ep_rew_mean``     mean return of the last ``stats_window`` finished episodes
 ``rollout/ep_len_mean``     mean length (env steps) of those episodes
 ``rollout/success_rate``    fraction of those episodes with ``is_success`` at their last step
+``rollout/diverged``        env steps of the last rollout whose motion diverged (non-finite or absurd
+                            joints; the env terminated and reset those envs), when the env reports it
 ``train/<stat>``            PPO update statistics: ``approx_kl``, ``clip_fraction``, ``entropy_loss``,
                             ``policy_gradient_loss``, ``value_loss``, ``loss``, ``explained_variance``,
                             ``std``, ``learning_rate``, ``clip_range`` (+ ``grad_norm``, ``epochs``
@@ -32,6 +34,7 @@ from typing import Any, NamedTuple
 EP_REW_MEAN = "rollout/ep_rew_mean"
 EP_LEN_MEAN = "rollout/ep_len_mean"
 SUCCESS_RATE = "rollout/success_rate"
+DIVERGED = "rollout/diverged"
 TRAIN_PREFIX = "train/"
 TRAIN_STATS = ("approx_kl", "clip_fraction", "entropy_loss", "policy_gradient_loss", "value_loss", "loss",
                "explained_variance", "std", "learning_rate", "clip_range")
@@ -97,11 +100,16 @@ class Monitor:
         if value is not None:
             self.writer.add_scalar(tag, float(value), int(step))
 
-    def log_rollout(self, step: int, stats: RolloutStats) -> None:
-        """``rollout/*`` means; a None (no finished episode yet) writes nothing, as in SB3."""
+    def log_rollout(self, step: int, stats: RolloutStats, diverged: int | None = None) -> None:
+        """``rollout/*`` means and the rollout's diverged count; a None writes nothing, as in SB3."""
         self._scalar(EP_REW_MEAN, stats.ep_rew_mean, step)
         self._scalar(EP_LEN_MEAN, stats.ep_len_mean, step)
         self._scalar(SUCCESS_RATE, stats.success_rate, step)
+        self.log_diverged(step, diverged)
+
+    def log_diverged(self, step: int, diverged: int | None) -> None:
+        """``rollout/diverged``: env steps of the last rollout whose motion diverged (None writes nothing)."""
+        self._scalar(DIVERGED, diverged, step)
 
     def log_train(self, step: int, stats: Mapping[str, float]) -> None:
         """Every update statistic as ``train/<name>``."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 import os
 import pickle
+import re
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -34,13 +35,19 @@ def load_torch(path: str | Path, map_location: str | torch.device = "cpu", what:
     try:
         return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        text = " ".join(str(exc).split())
+        found = re.search(r"GLOBAL ([\w.]+)", text)  # torch names the global it refused
+        if found is None:  # the weights-only unpickler met bytes that are no pickle at all
+            detail = re.search(r"WeightsUnpickler error: (.+?)(?: Check the documentation|$)", text)
+            reason = (detail.group(1) if detail else text)[:160]
+            raise CheckpointError(f"{path}: not a readable torch file (corrupt or truncated?): {reason}") from None
         raise CheckpointError(
             f"{path}: refused to load: the file holds Python objects other than tensors and plain "
-            f"containers (weights_only=True): {first[:200]}"
+            f"containers (it asks for {found.group(1)}; only weights_only=True files are read)"
         ) from None
     except (RuntimeError, EOFError, OSError, ValueError, KeyError, AttributeError) as exc:
-        raise CheckpointError(f"{path}: not a readable torch file (corrupt or truncated?): {str(exc)[:200]}") from None
+        reason = f"{type(exc).__name__}: {str(exc)[:160]}"
+        raise CheckpointError(f"{path}: not a readable torch file (corrupt or truncated?): {reason}") from None
 
 
 def save_torch_atomic(obj: Any, path: str | Path) -> Path:

@@ -35,6 +35,7 @@ from latentrl.motion.canonical import WorldTransform, features_to_world
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
 from latentrl.motion.rollout import MotionModel, RolloutState
 from latentrl.motion.skeleton import PELVIS
+from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import RewardComposer, RewardConfig, RewardInputs
 
 _AUTORESET_MODES = {AutoresetMode.SAME_STEP, AutoresetMode.DISABLED}
@@ -193,6 +194,8 @@ class LatentMotionVectorEnv(VectorEnv):
             texts = (texts,)
         self.texts: tuple[str, ...] = tuple(dict.fromkeys(self._all_texts(tuple(texts))))
         require(len(self.texts) > 0, "texts", "give at least one prompt")
+        for text in self.texts:
+            require(prompt_problem(text) is None, "texts", str(prompt_problem(text)))
         self._text_emb = self.motion.encode_text(list(self.texts)).to(self.device, torch.float32)
         self._floor_scale = self.rewards.floor_scales(self.texts).to(self.device)
         self._sample_texts_from = torch.tensor([self.texts.index(t) for t in texts], device=self.device)

@@ -20,8 +20,13 @@ from latentrl.config import require
 from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.goal import body_forward
 from latentrl.errors import DataError, closest
+from latentrl.motion.text import prompt_problem
 
 _PATH_FIELDS = ("goal_location", "goal_text")
+MAX_WAYPOINTS = 10_000
+"""Most waypoints per path (DART's suites have 2-20); every env keeps a padded (W, 3) copy of its path."""
+MAX_FILE_BYTES = 64 << 20
+"""Largest path file read (64 MiB, about a million waypoints of JSON)."""
 
 
 @dataclass(frozen=True)
@@ -37,6 +42,10 @@ def load_paths(file: str | Path) -> list[WaypointPath]:
     file = Path(file)
     if not file.is_file():
         raise DataError(f"path file not found: {file}")
+    size = file.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise DataError(f"{file}: {size / (1 << 20):.0f} MiB is larger than the {MAX_FILE_BYTES >> 20} MiB a path file "
+                        "may have; split it into several files")
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
@@ -76,6 +85,9 @@ def _parse_path(item: Any, where: str) -> WaypointPath:
         raise DataError(f"{where}: field 'goal_text' must be a list of strings, got {type(texts).__name__}")
     if len(texts) != len(points):
         raise DataError(f"{where}: field 'goal_text' has {len(texts)} entries for {len(points)} waypoints")
+    if len(points) > MAX_WAYPOINTS:
+        raise DataError(f"{where}: {len(points)} waypoints, more than the {MAX_WAYPOINTS} a path may have; "
+                        "split it into several paths")
     waypoints = []
     for j, (point, text) in enumerate(zip(points, texts)):
         ok = isinstance(point, list) and len(point) == 3
@@ -86,6 +98,8 @@ def _parse_path(item: Any, where: str) -> WaypointPath:
             )
         if not isinstance(text, str) or not text.strip():
             raise DataError(f"{where}, waypoint {j}: field 'goal_text' must be a non-empty string, got {text!r:.80}")
+        if prompt_problem(text) is not None:
+            raise DataError(f"{where}, waypoint {j}: field 'goal_text': {prompt_problem(text)}")
         waypoints.append(tuple(float(v) for v in point))
     return WaypointPath(tuple(waypoints), tuple(texts))
 

@@ -5,6 +5,7 @@ and the episode-end keys (``terminal_observation``, ``TimeLimit.truncated``, ``e
 ``is_success``) only in the info dicts of envs whose episode ended, which is all SB3 reads.
 Every info dict also carries the unweighted ``reward/<term>`` floats of its env (what
 :mod:`latentrl.ppo.sb3` logs); ``reward_terms=False`` drops them to save the per-env Python work.
+Envs whose motion diverged this step get ``diverged=True`` (counted as ``rollout/diverged``).
 The wrapped env must use SAME_STEP autoreset, SB3's own convention.
 """
 
@@ -41,6 +42,9 @@ class Sb3VecEnv(VecEnv):
         reward_terms: put each env's ``reward/<term>`` values in its info dict at every step.
     """
 
+    reports_diverged = True
+    """Info dicts carry ``diverged=True`` for envs whose motion diverged (absent otherwise)."""
+
     def __init__(self, env: LatentMotionVectorEnv, reward_terms: bool = True):
         if env.metadata.get("autoreset_mode") != AutoresetMode.SAME_STEP:
             raise ConfigError("Sb3VecEnv needs an env with autoreset_mode=SAME_STEP (SB3 resets in the same step)")
@@ -66,6 +70,8 @@ class Sb3VecEnv(VecEnv):
         terminated, truncated = _numpy(terminated), _numpy(truncated)
         dones = terminated | truncated
         out = self._reward_infos(infos) if self.reward_terms else [{} for _ in range(self.num_envs)]
+        for i in np.flatnonzero(_numpy(infos["diverged"])):
+            out[i]["diverged"] = True
         done_ids = np.flatnonzero(dones)
         if len(done_ids):
             final = _numpy(infos["final_obs"])

@@ -49,7 +49,10 @@ def resolve_path_files(specs: list[str] | None) -> list[Path]:
 def _settings(args: argparse.Namespace) -> EvalSettings:
     import torch
 
+    from latentrl.preflight import check_device
+
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    check_device(device, "--device")
     settings = EvalSettings(episodes=args.episodes, max_steps=args.max_steps, deterministic=args.deterministic,
                             seed=args.seed, device=device)
     try:
@@ -60,6 +63,16 @@ def _settings(args: argparse.Namespace) -> EvalSettings:
     if args.render < 0:
         raise ConfigError(f"--render must be >= 0, got {args.render}")
     return settings
+
+
+def check_eval_args(episodes: int, max_steps: int, paths: list[str] | tuple[str, ...] | None) -> None:
+    """What ``latentrl quickstart`` checks before it trains: the settings and path files of its evaluation."""
+    from latentrl.envs import load_paths
+
+    _settings(argparse.Namespace(episodes=episodes, max_steps=max_steps, deterministic=False, seed=0,
+                                 device="cpu", render=0))
+    for file in resolve_path_files(list(paths) if paths else None):
+        load_paths(file)
 
 
 def _load(args: argparse.Namespace, settings: EvalSettings) -> tuple[Any, Any, dict, dict]:
@@ -113,23 +126,26 @@ def evaluate(args: argparse.Namespace) -> int:
     from latentrl.envs import load_paths
     from latentrl.evaluation import plots, report
     from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
+    from latentrl.preflight import NewOutput, check_writable
 
     settings = _settings(args)
     files = resolve_path_files(args.paths)
     first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
+    out_dir = Path(args.out) if args.out else Path(args.policy).resolve().parent / f"eval-{Path(args.policy).stem}"
+    check_writable(out_dir, "--out")
     model, policy, motion, policy_info = _load(args, settings)
     observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings)
-    out_dir = Path(args.out) if args.out else Path(args.policy).resolve().parent / f"eval-{Path(args.policy).stem}"
     act = policy_fn(policy, settings.deterministic)
-    suites = run_suites(act, model, files, settings, observe_next=observe_next,
-                        sink=_sink(out_dir, args.render, args.motions), progress=_progress)
-    speed = measure_speed(act, model, first_path, settings, [1, settings.episodes], observe_next)
-    png = plots.save_paths_png(out_dir / report.PATHS_PNG, suites)
-    outputs = {"paths_png": png.name, "motions": "motions/" if args.motions else None,
-               "renders": "renders/" if args.render else None}
-    data = report.build_report(suites, settings, policy=policy_info, motion=motion, speed=speed,
-                               hardware=hardware(), files=outputs)
-    js, md = report.write_report(out_dir, data)
+    with NewOutput(out_dir):  # a failure from here on removes the output folder this command created
+        suites = run_suites(act, model, files, settings, observe_next=observe_next,
+                            sink=_sink(out_dir, args.render, args.motions), progress=_progress)
+        speed = measure_speed(act, model, first_path, settings, [1, settings.episodes], observe_next)
+        png = plots.save_paths_png(out_dir / report.PATHS_PNG, suites)
+        outputs = {"paths_png": png.name, "motions": "motions/" if args.motions else None,
+                   "renders": "renders/" if args.render else None}
+        data = report.build_report(suites, settings, policy=policy_info, motion=motion, speed=speed,
+                                   hardware=hardware(), files=outputs)
+        js, md = report.write_report(out_dir, data)
     print("\n".join(report.results_table(data)))
     print(f"wrote {js}, {md}, {png}")
     return 0
@@ -138,7 +154,10 @@ def evaluate(args: argparse.Namespace) -> int:
 def compare(args: argparse.Namespace) -> int:
     """``latentrl compare``: print (and optionally write) several reports side by side."""
     from latentrl.evaluation.report import compare_reports
+    from latentrl.preflight import check_output_file
 
+    if args.out:
+        check_output_file(args.out)
     table = compare_reports(args.reports)
     print(table, end="")
     if args.out:
@@ -151,10 +170,12 @@ def compare(args: argparse.Namespace) -> int:
 
 def export_bvh(args: argparse.Namespace) -> int:
     """``latentrl motion export-bvh``: a motion ``.npz`` (shared format) as BVH (SMPL-22, Y-up, cm)."""
+    from latentrl.preflight import check_output_file
     from latentrl.render import load_motion_npz, save_bvh
 
     motion = load_motion_npz(args.motion)
     out = Path(args.out) if args.out else Path(args.motion).with_suffix(".bvh")
+    check_output_file(out)
     save_bvh(out, motion["joints"], float(motion["fps"]))
     print(f"wrote {out} ({len(motion['joints'])} frames at {float(motion['fps']):g} fps)")
     return 0

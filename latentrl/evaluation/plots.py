@@ -14,6 +14,8 @@ from pathlib import Path
 from latentrl.evaluation.runner import PathResult, SuiteResult
 
 SUCCESS_COLOR, FAILURE_COLOR = "tab:green", "tab:red"
+MAX_LABELS = 60
+"""Paths with more distinct waypoints get numbers only at the first and last (10,000 labels take minutes)."""
 
 
 def _draw_path(ax, result: PathResult) -> None:
@@ -27,9 +29,11 @@ def _draw_path(ax, result: PathResult) -> None:
     labels: dict[tuple[float, float], list[str]] = {}  # waypoints visited twice share one label: "0,2,4"
     for k, (x, y, _) in enumerate(result.path.waypoints):
         labels.setdefault((round(x, 2), round(y, 2)), []).append(str(k))
-    for (x, y), ks in labels.items():
-        ax.plot(x, y, "o", ms=6, mfc="white", mec="black", zorder=3)
-        ax.annotate(",".join(ks), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7, zorder=4)
+    points = list(labels)
+    ax.plot([x for x, _ in points], [y for _, y in points], "o", ls="none", ms=6, mfc="white", mec="black", zorder=3)
+    shown = points if len(points) <= MAX_LABELS else [points[0], points[-1]]
+    for x, y in shown:
+        ax.annotate(",".join(labels[(x, y)]), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7, zorder=4)
     n = len(result.episodes)
     wins = sum(ep.success for ep in result.episodes)
     ax.set_title(f"{result.suite} / path {result.index}: {wins}/{n} reached", fontsize=8)

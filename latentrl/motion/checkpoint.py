@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import zipfile
 from dataclasses import asdict, fields
 from importlib import resources
 from pathlib import Path
@@ -168,10 +169,14 @@ def _load_seed(seed) -> torch.Tensor:
         if path.suffix == ".npz":
             if not path.is_file():
                 raise CheckpointError(f"seed history file not found: {path}")
-            with np.load(path, allow_pickle=False) as z:
-                if "seed_history" not in z:
-                    raise CheckpointError(f"{path}: no 'seed_history' array (expected (K, 2, 276))")
-                arr = torch.from_numpy(z["seed_history"]).float()
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    if "seed_history" not in z:
+                        raise CheckpointError(f"{path}: no 'seed_history' array (expected (K, 2, 276))")
+                    arr = torch.from_numpy(z["seed_history"]).float()
+            except (ValueError, OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile) as exc:  # pickles, junk
+                raise CheckpointError(f"{path}: not a readable seed-history .npz (numeric arrays only): "
+                                      f"{str(exc)[:160]}") from None
         else:
             obj = load_torch(path, what="seed history")
             arr = torch.as_tensor(obj["seed_history"] if isinstance(obj, dict) else obj, dtype=torch.float32)

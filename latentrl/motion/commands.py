@@ -6,6 +6,9 @@ import argparse
 
 from latentrl.motion.checkpoint import load_motion_model
 
+MAX_BATCH = 1024
+"""Most motions one ``latentrl motion sample`` call writes."""
+
 
 def info(args: argparse.Namespace) -> int:
     """Print what a motion model is: source, sizes, sampler, texts."""
@@ -35,14 +38,29 @@ def sample(args: argparse.Namespace) -> int:
     import torch
 
     from latentrl.errors import ConfigError
+    from latentrl.motion.text import prompt_problem
+    from latentrl.preflight import check_device, check_output_file
     from latentrl.render import render_gif, save_motion_npz
 
-    if args.seconds <= 0 or args.seconds > 3600:
+    if not 0 < args.seconds <= 3600:  # also refuses nan
         raise ConfigError(f"--seconds must be in (0, 3600], got {args.seconds}")
-    if args.batch < 1:
-        raise ConfigError(f"--batch must be >= 1, got {args.batch}")
-    model = load_motion_model(args.motion, seed_history=args.seed_history, device=args.device)
+    if not 1 <= args.batch <= MAX_BATCH:
+        raise ConfigError(f"--batch must be in [1, {MAX_BATCH}], got {args.batch}")
+    if not math.isfinite(args.guidance):
+        raise ConfigError(f"--guidance must be a finite number, got {args.guidance}")
     texts = args.text or ["walk"]
+    for text in texts:
+        if prompt_problem(text) is not None:
+            raise ConfigError(f"--text: {prompt_problem(text)}")
+    if not args.out.endswith(".npz"):
+        raise ConfigError(f"--out must name a .npz file, got '{args.out}'")
+    if args.render and not args.render.endswith(".gif"):
+        raise ConfigError(f"--render must name a .gif file, got '{args.render}'")
+    check_device(args.device, "--device")
+    for out_file in (args.out, args.render):
+        if out_file:
+            check_output_file(out_file, "--render" if out_file == args.render else "--out")
+    model = load_motion_model(args.motion, seed_history=args.seed_history, device=args.device)
     model.encode_text(texts)  # fail early on unknown prompts
     steps = max(1, math.ceil(args.seconds * 30 / 8))
     # each text gets an equal share of the steps, in the order given

@@ -36,6 +36,21 @@ class TextEncoder(Protocol):
         ...
 
 
+MAX_PROMPT_CHARS = 1000
+"""Longest prompt accepted from users (DART's prompts are a few words; CLIP reads 77 tokens)."""
+
+
+def prompt_problem(text: object) -> str | None:
+    """Why ``text`` cannot be a prompt (not a string, empty, longer than :data:`MAX_PROMPT_CHARS`), or None."""
+    if not isinstance(text, str):
+        return f"prompt {text!r:.60} is not a string"
+    if not text.strip():
+        return f"prompt {text!r} is empty; give a description such as 'walk'"
+    if len(text) > MAX_PROMPT_CHARS:
+        return f"prompt '{text[:40]}...' has {len(text)} characters, more than the {MAX_PROMPT_CHARS} allowed"
+    return None
+
+
 def normalize_prompt(text: str) -> str:
     """Lower-case, collapse whitespace, strip: the key every table lookup uses."""
     return " ".join(text.lower().split())
@@ -170,7 +185,7 @@ class TableTextEncoder:
                 known = ", ".join(repr(p) for p in self.prompts[:40])
                 more = "" if len(self.prompts) <= 40 else f" ... ({len(self.prompts)} in all)"
                 hint = f"; {self.fallback_hint}" if self.fallback_hint else ""
-                raise TextError(f"unknown prompt {bad!r}: this model's text table knows {known}{more}{hint}")
+                raise TextError(f"unknown prompt {bad!r:.80}: this model's text table knows {known}{more}{hint}")
             out[unknown] = self.fallback.encode([texts[i] for i in unknown])
         return out
 

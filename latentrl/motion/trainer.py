@@ -22,7 +22,7 @@ import torch
 
 from latentrl.config import load_config, require, to_dict, to_yaml
 from latentrl.datasets.locomotion import LocomotionConfig
-from latentrl.errors import CheckpointError, ConfigError
+from latentrl.errors import CheckpointError, ConfigError, NonFiniteError
 from latentrl.motion.training import (
     EMA,
     DenoiserTrainConfig,
@@ -71,13 +71,19 @@ class MotionTrainConfig:
     """Steps between trainer checkpoints (0 = only at stage ends)."""
 
     def validate(self) -> None:
+        require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")
         require(self.log_every > 0, "log_every", f"must be > 0, got {self.log_every}")
         require(self.checkpoint_every >= 0, "checkpoint_every", f"must be >= 0, got {self.checkpoint_every}")
+        hashed = self.text_encoder.removeprefix("hashed-bow-")
         require(
-            self.text_encoder.startswith("hashed-bow-") or self.text_encoder == "minilm-l6-v2",
+            (self.text_encoder.startswith("hashed-bow-") and hashed.isdigit() and int(hashed) > 0)
+            or self.text_encoder == "minilm-l6-v2",
             "text_encoder",
             f"expected 'hashed-bow-<dim>' or 'minilm-l6-v2', got '{self.text_encoder}'",
         )
+        dim = int(hashed) if hashed.isdigit() else 384
+        require(self.model.denoiser.clip_dim == dim, "model.denoiser.clip_dim",
+                f"is {self.model.denoiser.clip_dim} but text encoder '{self.text_encoder}' gives {dim} dims")
 
 
 class MotionTrainer:
@@ -147,6 +153,14 @@ class MotionTrainer:
         return motion, self.text_table[b.text_index.to(self.device)]
 
     # ------------------------------------------------------------------ checkpoints
+    def disk_estimate(self) -> int:
+        """Bytes still needed: ``state.pt`` twice (one write in flight), the exported model, 16 MiB of logs.
+
+        ``state.pt`` holds the weights, their EMA and Adam's two moments: 4 x the parameters.
+        """
+        weights = sum(p.numel() * p.element_size() for m in (self.vae, self.denoiser) for p in m.parameters())
+        return 2 * 4 * weights + weights + (16 << 20)
+
     def state_dict(self) -> dict:
         return {
             "stage": self.stage,
@@ -168,6 +182,10 @@ class MotionTrainer:
 
     def load_checkpoint(self, path: Path) -> None:
         state = load_torch(path, what="trainer checkpoint")
+        keys = ("stage", "step", "elapsed", "vae", "vae_ema", "vae_opt", "denoiser", "den_ema", "den_opt", "generator",
+                "torch_rng", "config")
+        if not isinstance(state, dict) or any(k not in state for k in keys):
+            raise CheckpointError(f"{path}: not a latentrl motion-trainer checkpoint (expected the keys {list(keys)})")
         if state.get("config") != to_dict(self.cfg):
             raise CheckpointError(
                 f"{path}: was written with a different config; resume with the run's "
@@ -196,10 +214,30 @@ class MotionTrainer:
         if bar is not None:
             bar.set_postfix(stage=prefix, loss=f"{float(terms['loss'].detach()):.4g}")
 
-    def _maybe_checkpoint(self, step: int, total: int) -> None:
-        every = self.cfg.checkpoint_every
-        if (every and (step + 1) % every == 0) or step + 1 == total:
+    def _maybe_checkpoint(self, total: int, loss: torch.Tensor) -> None:
+        """Checkpoint after ``self.step`` steps of a stage of ``total`` steps, if one is due.
+
+        Saves every ``checkpoint_every`` steps and at the stage's end; the last loss and the weights
+        are checked first (and at log steps), so a non-finite state is never saved.
+        """
+        every, done = self.cfg.checkpoint_every, self.step
+        save = bool(every and done % every == 0) or done == total
+        if save or (done - 1) % self.cfg.log_every == 0:
+            self._check_finite(done - 1, loss)  # host syncs only at log and checkpoint steps
+        if save:
             self.save_checkpoint()
+
+    def _check_finite(self, step: int, loss: torch.Tensor) -> None:
+        """Stop with :class:`NonFiniteError` on a NaN/inf loss or weight; the last ``state.pt`` stays as it was."""
+        module = self.vae if self.stage == "vae" else self.denoiser
+        problem = None if bool(torch.isfinite(loss)) else f"loss is {float(loss)}"
+        if problem is None and not all(bool(torch.isfinite(p).all()) for p in module.parameters()):
+            problem = "a weight became non-finite"
+        if problem is not None:
+            last = self.run_dir / "checkpoints" / "state.pt"
+            raise NonFiniteError(f"motion train: {self.stage} step {step}: {problem}; training stopped without saving "
+                                 f"(last good checkpoint: {last if last.is_file() else 'none yet'}); "
+                                 f"lower {self.stage}_train.learning_rate")
 
     def run(self) -> Path:
         """Train both stages (continuing from ``self.stage``/``self.step``) and save the model."""
@@ -259,9 +297,9 @@ class MotionTrainer:
                     )
                 if self.step % self.cfg.log_every == 0:
                     self._log("vae", self.step, {**terms, "rollout_p": p}, lr, bar)
-                self._maybe_checkpoint(self.step, cfg.steps)
-                self.step += 1
+                self.step += 1  # steps done: what a checkpoint records, so a resume does not repeat this one
                 bar.update(1)
+                self._maybe_checkpoint(cfg.steps, loss.detach())
             self.elapsed = time.perf_counter() - start
         with torch.no_grad():
             motion, _ = self._batch(1, 2048)
@@ -308,9 +346,9 @@ class MotionTrainer:
                     history = rollout_history(pred, self.normalizer, self.dataset.pelvis_delta.to(self.device), h)
                 if self.step % self.cfg.log_every == 0:
                     self._log("denoiser", self.step, {**terms, "rollout_p": p}, lr, bar)
-                self._maybe_checkpoint(self.step, cfg.steps)
-                self.step += 1
+                self.step += 1  # steps done: what a checkpoint records, so a resume does not repeat this one
                 bar.update(1)
+                self._maybe_checkpoint(cfg.steps, loss.detach())
             self.elapsed = time.perf_counter() - start
 
     def build_model(self):
@@ -344,22 +382,39 @@ def copy_module(module):
 
 
 def train_command(args: argparse.Namespace) -> int:
-    """Body of ``latentrl motion train``."""
+    """Body of ``latentrl motion train``: every input is checked before the run directory is created."""
+    from latentrl.preflight import NewOutput, check_device, check_free_space, check_output_file, check_writable
+
     if args.resume:
         run_dir = Path(args.resume)
         cfg_path = run_dir / "config.yaml"
         if not cfg_path.is_file():
             raise ConfigError(f"--resume {run_dir}: no config.yaml there; is it a motion training run directory?")
+        if args.set:
+            raise ConfigError(f"--set {args.set[0]}: a resumed run keeps its own config.yaml; start a new run instead")
         cfg = load_config(MotionTrainConfig, cfg_path)
     else:
         if not args.config:
             raise ConfigError("give a CONFIG file (e.g. configs/motion/default.yaml) or --resume RUN_DIR")
         cfg = load_config(MotionTrainConfig, args.config, args.set or [])
         run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"motion-{time.strftime('%Y%m%d-%H%M%S')}"
-    trainer = MotionTrainer(cfg, run_dir, out=args.out, progress=not args.no_progress)
-    ckpt = run_dir / "checkpoints" / "state.pt"
-    if args.resume and ckpt.is_file():
-        trainer.load_checkpoint(ckpt)
+        if (run_dir / "config.yaml").is_file() or (run_dir / "checkpoints" / "state.pt").is_file():
+            raise ConfigError(f"--run-dir {run_dir} already holds a motion training run; continue it with "
+                              f"--resume {run_dir} or choose another --run-dir")
+    check_device(cfg.device, "device")
+    if cfg.data.source != "locomotion" and not Path(cfg.data.source).is_dir():
+        raise ConfigError(f"data.source: folder not found: {cfg.data.source} (give 'locomotion' or a folder of "
+                          "motion-text .npz files)")
+    check_writable(run_dir, "run directory")
+    if args.out:
+        check_output_file(args.out)
+    with NewOutput(run_dir) as output:  # a failure before training starts removes the folder it created
+        trainer = MotionTrainer(cfg, run_dir, out=args.out, progress=not args.no_progress)
+        ckpt = run_dir / "checkpoints" / "state.pt"
+        if args.resume and ckpt.is_file():
+            trainer.load_checkpoint(ckpt)
+        check_free_space(run_dir, trainer.disk_estimate(), "run directory")
+        output.keep()
     out = trainer.run()
     print(f"motion model written to {out} ({trainer.elapsed:.0f} s of training)")
     return 0

@@ -15,8 +15,9 @@ A checkpoint is a dict of tensors and plain containers::
 
 Run layout: ``<run_dir>/checkpoints/iter_<N>.pt`` every ``checkpoint_every`` iterations (the newest
 ``keep_checkpoints`` kept) and ``<run_dir>/final.pt`` at the end. Every file is written to a
-temporary sibling and renamed, so a kill leaves the previous checkpoint intact; a truncated or
-corrupt newest file is skipped with a warning by :func:`load_latest`.
+temporary sibling and renamed, so a kill leaves the previous checkpoint intact (and at most a
+``.<name>.*.tmp`` file, which nothing reads and a resume deletes); a truncated or corrupt newest
+file is skipped with a warning by :func:`load_latest`.
 """
 
 from __future__ import annotations
@@ -177,6 +178,16 @@ def prune_checkpoints(run_dir: str | Path, keep: int, suffixes: tuple[str, ...] 
     for path in iteration_checkpoints(run_dir)[keep:]:
         for p in (path, *(path.with_suffix(s) for s in suffixes)):
             p.unlink(missing_ok=True)
+
+
+def remove_temporaries(run_dir: str | Path) -> list[Path]:
+    """Delete the ``.<name>.*.tmp`` files that writes killed mid-way left in a run (never read; safe on resume)."""
+    removed = []
+    for folder in (Path(run_dir), Path(run_dir) / CHECKPOINT_DIR):
+        for path in folder.glob(".*.tmp") if folder.is_dir() else ():
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
 
 
 # --------------------------------------------------------------------------- load

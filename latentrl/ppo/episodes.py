@@ -7,7 +7,8 @@ thing in native and SB3 runs.
 
 Env info keys read (Gymnasium vector conventions, SAME_STEP autoreset):
 ``episode = {"r": (N,), "l": (N,)}`` with mask ``_episode``; ``is_success`` (N,) bool, read at
-episode ends; every ``reward/<term>`` (N,) float.
+episode ends; every ``reward/<term>`` (N,) float; ``diverged`` (N,) bool, envs whose motion diverged
+this step (the env terminated and reset them), counted per rollout.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ class RolloutSummary(NamedTuple):
     """Term name (without ``reward/``) -> mean over the rollout's T * N steps."""
     episodes: int
     """Episodes that ended during this rollout."""
+    diverged: int | None = None
+    """Env steps of this rollout whose motion diverged (None: the env does not report ``diverged``)."""
 
 
 class EpisodeRecorder:
@@ -42,6 +45,7 @@ class EpisodeRecorder:
         self.success = torch.zeros(T, N, dtype=torch.bool, device=dev)
         self.has_success = False
         self.term_sums: dict[str, torch.Tensor] = {}
+        self.diverged: torch.Tensor | None = None
         self.window_returns: deque[float] = deque(maxlen=window)
         self.window_lengths: deque[float] = deque(maxlen=window)
         self.window_success: deque[float] = deque(maxlen=window)
@@ -60,6 +64,9 @@ class EpisodeRecorder:
         if "is_success" in infos:
             self._put(self.success[t], infos["is_success"])
             self.has_success = True
+        if "diverged" in infos:
+            count = torch.as_tensor(infos["diverged"], device=self.device).sum()
+            self.diverged = count if self.diverged is None else self.diverged + count
         for key, value in infos.items():
             if key.startswith(REWARD_PREFIX):
                 value = torch.as_tensor(value, device=self.device).float().sum()
@@ -76,7 +83,10 @@ class EpisodeRecorder:
         means = (torch.stack([self.term_sums[k] for k in names]) / ended.numel()).tolist() if names else []
         self.term_sums = {}
         episodes = int(ended.sum())
-        return RolloutSummary(self.stats(), {k.removeprefix(REWARD_PREFIX): v for k, v in zip(names, means)}, episodes)
+        diverged = None if self.diverged is None else int(self.diverged)
+        self.diverged = None
+        return RolloutSummary(self.stats(), {k.removeprefix(REWARD_PREFIX): v for k, v in zip(names, means)}, episodes,
+                              diverged)
 
     def stats(self) -> RolloutStats:
         def mean(values: deque[float]) -> float | None:

@@ -48,14 +48,16 @@ class RunProgress:
 
     def log_iteration(self, iteration: int, env_steps: int, fps: float, rollout: RolloutStats,
                       train: Mapping[str, float], collection_s: float, update_s: float,
-                      reward_terms: Mapping[str, float] | None = None) -> None:
-        """One ``train.log`` line: counters, throughput, episode stats, update stats, reward terms."""
+                      reward_terms: Mapping[str, float] | None = None, diverged: int | None = None) -> None:
+        """One ``train.log`` line: counters, throughput, episode stats, diverged steps, update stats, reward terms."""
         parts = [f"iter {iteration}", f"steps {env_steps}", f"fps {fps:.0f}",
                  f"collect_s {collection_s:.3f}", f"update_s {update_s:.3f}"]
         for name, value in (("ep_rew_mean", rollout.ep_rew_mean), ("ep_len_mean", rollout.ep_len_mean),
                             ("success_rate", rollout.success_rate)):
             if value is not None:
                 parts.append(f"{name} {value:.4g}")
+        if diverged is not None:
+            parts.append(f"diverged {diverged}")
         parts += [f"{k} {float(train[k]):.4g}" for k in LINE_STATS if k in train]
         parts += [f"reward/{k} {v:.4g}" for k, v in (reward_terms or {}).items()]
         self.write(" | ".join(parts))

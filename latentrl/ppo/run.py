@@ -18,9 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from latentrl.errors import ConfigError
+from latentrl.ppo import checkpoint as ckpt
 from latentrl.ppo.checkpoint import plain_config
 from latentrl.ppo.config import PolicyConfig, PPOConfig
 from latentrl.ppo.trainer import Evaluator, NativeTrainer, TrainResult
+from latentrl.preflight import MIB, NewOutput, check_free_space, check_writable
 from latentrl.safe_io import atomic_write_text
 
 TRAINERS = ("native", "sb3")
@@ -75,20 +77,47 @@ def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *
         trainer: 'native' or 'sb3'.
         config: the full resolved config (dataclass or dict) saved as ``config.yaml`` and in every
             checkpoint; resume refuses a checkpoint whose config differs (default: the two sections).
-        resume: continue the run in ``run_dir`` (a run killed before its first checkpoint restarts).
+        resume: continue the run in ``run_dir`` (a run killed before its first checkpoint restarts);
+            temporary files a killed write left behind are removed.
         motion: ``{"path": str, "sha256": str}`` of the env's motion model (stored, checked on resume).
         evaluate: evaluation hook ``policy -> EvalReport``, called every ``ppo.eval_every`` iterations.
         layout: observation layout when the env's ``metadata`` does not carry ``observation_layout``.
         allow_motion_mismatch: resume onto a different motion model (experts only).
         progress: show the progress bar.
+
+    Before anything is written, the run directory must be writable and its disk must hold
+    :func:`disk_estimate` bytes (``ConfigError`` otherwise); a run directory this call creates is
+    removed again if setting it up fails.
     """
     run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
     config = config if config is not None else {"ppo": ppo, "policy": policy}
+    check_writable(run_dir, "run directory")
     runner = make_trainer(env, run_dir, ppo, policy, trainer=trainer, config=config, motion=motion,
                           evaluate=evaluate, layout=layout, progress=progress)
     if resume:
         runner.resume(allow_motion_mismatch=allow_motion_mismatch)
-    if not resume or not (run_dir / CONFIG_FILE).is_file():
-        write_config(run_dir, config)
+    check_free_space(run_dir, disk_estimate(runner), "run directory")
+    with NewOutput(run_dir) as output:  # nothing is written before this point
+        run_dir.mkdir(parents=True, exist_ok=True)
+        if resume:
+            ckpt.remove_temporaries(run_dir)
+        if not resume or not (run_dir / CONFIG_FILE).is_file():
+            write_config(run_dir, config)
+        output.keep()
     return runner.train()
+
+
+def disk_estimate(runner: Any) -> int:
+    """Bytes a run may still need: every kept checkpoint, ``final.pt`` and one write in flight, plus logs.
+
+    A checkpoint holds the weights and Adam's two moments (3 x the parameters) plus about 1 MiB of
+    RNG states and config; the SB3 trainer writes its own zip of the same size beside each.
+    """
+    cfg, plan = runner.cfg, runner.plan
+    weights = sum(p.numel() * p.element_size() for p in runner.policy.parameters())
+    per_file = 3 * weights + MIB
+    if runner.name == "sb3":
+        per_file *= 2
+    saves = plan.num_iterations // cfg.checkpoint_every if cfg.checkpoint_every else 0
+    kept = min(saves, cfg.keep_checkpoints) if cfg.keep_checkpoints else saves
+    return (kept + 2) * per_file + 16 * MIB

@@ -15,8 +15,10 @@ action space before stepping; the value weight is mapped so both scale ``(V - R)
 
 The VecEnv must give per-env info dicts with ``episode`` and ``is_success`` at episode ends (SB3's
 convention), ``terminal_observation``/``TimeLimit.truncated`` (SB3's bootstrap), and every
-``reward/<term>`` at every step; its ``metadata["observation_layout"]`` (or the ``layout`` argument)
-gives the observation layout.
+``reward/<term>`` at every step (and ``diverged``, counted as ``rollout/diverged``, if the env reports
+it); its ``metadata["observation_layout"]`` (or the ``layout`` argument) gives the observation layout.
+Non-finite observations or rewards (checked at every step) and losses or weights (after every update)
+stop training with :class:`~latentrl.errors.NonFiniteError`, as in the native trainer.
 """
 
 from __future__ import annotations
@@ -39,13 +41,16 @@ from latentrl.ppo.config import BatchPlan, PolicyConfig, PPOConfig
 from latentrl.ppo.policy import ActorCritic, plain_layout
 from latentrl.ppo.progress import RunProgress
 from latentrl.ppo.trainer import (
+    ROLLOUT_HINT,
     Evaluator,
     IterationTime,
     TrainResult,
     adam_kwargs,
+    nonfinite_update,
     observation_layout,
     run_evaluation,
     seed_everything,
+    stop_if_nonfinite,
 )
 from latentrl.safe_io import atomic_write_bytes
 
@@ -172,6 +177,8 @@ class _TrainingHooks(BaseCallback):
         self.collection_s = 0.0
         self.term_sums: dict[str, float] = {}
         self.term_count = 0
+        self.diverged: int | None = 0 if getattr(trainer.venv, "reports_diverged", False) else None
+        """Env steps with ``diverged`` infos this rollout (None: the VecEnv does not report them)."""
         self.moments: tuple[torch.Tensor, torch.Tensor, int] | None = None
 
     def _on_training_start(self) -> None:
@@ -184,12 +191,29 @@ class _TrainingHooks(BaseCallback):
         self.rollout_start = time.perf_counter()
 
     def _on_step(self) -> bool:
+        self._check_finite()
         for info in self.locals["infos"]:
             for key, value in info.items():
                 if key.startswith(REWARD_PREFIX):
                     self.term_sums[key] = self.term_sums.get(key, 0.0) + float(value)
+            if self.diverged is not None and info.get("diverged"):
+                self.diverged += 1
         self.term_count += len(self.locals["infos"])
         return not self.trainer.stop_requested  # False aborts PPO.learn (an evaluation asked to stop)
+
+    def _check_finite(self) -> None:
+        """Stop on a NaN/inf observation or reward the env just returned, naming the env."""
+        for name, key in (("observation", "new_obs"), ("reward", "rewards")):
+            value = np.asarray(self.locals[key])
+            bad = ~np.isfinite(value.reshape(len(value), -1)).all(-1)
+            if bad.any():
+                n = int(np.flatnonzero(bad)[0])
+                row = value[n].reshape(-1)
+                step = self.model.rollout_buffer.pos  # the step being collected (stored after this callback)
+                when = "returned by" if name == "observation" else "at"
+                stop_if_nonfinite(self.trainer, self.trainer.bar,
+                                  f"{name} of env {n} {when} rollout step {step} is {row[~np.isfinite(row)][0]}",
+                                  ROLLOUT_HINT)
 
     def _on_rollout_end(self) -> None:
         self.rollout_end = time.perf_counter()
@@ -209,7 +233,8 @@ class _TrainingHooks(BaseCallback):
             self.moments = None
         terms = {k.removeprefix(REWARD_PREFIX): v / max(self.term_count, 1) for k, v in self.term_sums.items()}
         self.term_sums, self.term_count = {}, 0
-        self.trainer._after_iteration(terms, self.collection_s, update_s)
+        diverged, self.diverged = self.diverged, None if self.diverged is None else 0
+        self.trainer._after_iteration(terms, self.collection_s, update_s, diverged)
         self.rollout_end = None
 
 
@@ -244,6 +269,8 @@ class Sb3Trainer:
         self.last_eval: EvalReport | None = None
         self.times: list[IterationTime] = []
         self.stop_requested = False
+        self.last_checkpoint: Path | None = None
+        """The newest checkpoint this run wrote or resumed from (named by non-finite errors)."""
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict:
@@ -258,6 +285,7 @@ class Sb3Trainer:
         buf = io.BytesIO()
         self.model.save(buf)
         atomic_write_bytes(path.with_suffix(SB3_ZIP_SUFFIX), buf.getvalue())
+        self.last_checkpoint = path
         return path
 
     def resume(self, allow_motion_mismatch: bool = False) -> Path | None:
@@ -278,6 +306,7 @@ class Sb3Trainer:
         self.model.num_timesteps = state["extra"]["num_timesteps"]
         self.model._n_updates = state["extra"]["n_updates"]
         self._pending_rng = state["rng"]
+        self.last_checkpoint = path
         return path
 
     # ------------------------------------------------------------------ loop
@@ -321,9 +350,13 @@ class Sb3Trainer:
                             float(np.mean([e["l"] for e in eps])) if eps else None,
                             float(np.mean(succ)) if succ else None, len(eps))
 
-    def _after_iteration(self, reward_terms: dict[str, float], collection_s: float, update_s: float) -> None:
+    def _after_iteration(self, reward_terms: dict[str, float], collection_s: float, update_s: float,
+                         diverged: int | None = None) -> None:
         """Called after each PPO update: SB3's train/* dump, our extra tags, eval, checkpoint, progress."""
         cfg = self.cfg
+        recorded = {k[len(TRAIN_PREFIX):]: v for k, v in self.model.logger.name_to_value.items()
+                    if k.startswith(TRAIN_PREFIX) and isinstance(v, (int, float, np.floating, np.integer))}
+        stop_if_nonfinite(self, self.bar, nonfinite_update(recorded, self.policy))
         self.iteration, self.env_steps = self.iteration + 1, int(self.model.num_timesteps)
         self.times.append(IterationTime(collection_s, update_s))
         k, step, last = self.iteration, self.env_steps, self.iteration == self.plan.num_iterations
@@ -340,8 +373,10 @@ class Sb3Trainer:
         rollout = self._rollout_stats()
         if logging:
             self.monitor.log_rewards(step, reward_terms)
+            self.monitor.log_diverged(step, diverged)
             self.monitor.log_time(step, collection_s=collection_s, update_s=update_s)
-            self.bar.log_iteration(k, step, fps, rollout, self.last_train, collection_s, update_s, reward_terms)
+            self.bar.log_iteration(k, step, fps, rollout, self.last_train, collection_s, update_s, reward_terms,
+                                   diverged)
         if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
             self.last_eval = run_evaluation(self.evaluate, self.policy)
             self.stop_requested = bool(self.last_eval.stop)

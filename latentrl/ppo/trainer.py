@@ -8,6 +8,11 @@ imports ``latentrl.envs`` or ``latentrl.motion``; the caller passes the motion m
 
 Inside the collection loop nothing is moved to the host (no ``.item()``); statistics are summarized
 once per iteration.
+
+Non-finite values stop the run: after each collection the rollout (observations, rewards, values,
+advantages) and after each update the losses and weights are checked (one host sync each), and a
+:class:`~latentrl.errors.NonFiniteError` names the iteration, the quantity and the last good
+checkpoint, which is left as it was (nothing is saved after the bad iteration).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
+from latentrl.errors import NonFiniteError
 from latentrl.monitor import EvalReport, Monitor, RolloutStats
 from latentrl.ppo import checkpoint as ckpt
 from latentrl.ppo.config import PolicyConfig, PPOConfig
@@ -99,6 +105,54 @@ def observation_layout(env: Any, given: Mapping[str, Any] | None = None) -> Mapp
     return (getattr(env, "metadata", None) or {}).get("observation_layout")
 
 
+LOSS_NAMES = {"policy_gradient_loss": "policy loss", "value_loss": "value loss", "entropy_loss": "entropy loss",
+              "loss": "total loss", "approx_kl": "approx KL", "grad_norm": "gradient norm"}
+"""Update statistics that must be finite, and how errors name them."""
+
+
+def nonfinite_rollout(buffer: RolloutBuffer) -> str | None:
+    """The first non-finite quantity of a filled buffer, e.g. ``'reward of env 3 at rollout step 5 is nan'``.
+
+    The fast path sums each tensor (a sum is finite only if every element is) and syncs once; the
+    slow path, which finds the env and step, runs only when something is wrong. None if all is finite.
+    Final observations count only where an episode ended (the rows GAE reads).
+    """
+    checks = (("observation", buffer.obs), ("reward", buffer.rewards), ("value estimate", buffer.values),
+              ("advantage", buffer.advantages))
+    read_final = torch.where(buffer.dones[..., None], buffer.final_obs, 0.0)
+    if bool(torch.isfinite(torch.stack([x.sum() for _, x in checks] + [read_final.sum()])).all()):
+        return None
+    T, N = buffer.num_steps, buffer.num_envs
+    ended = buffer.dones.nonzero()  # (M, 2) [t, n] of the rows whose final observation is read
+    final = buffer.final_obs[buffer.dones]  # (M, D)
+    found = [(name, (~torch.isfinite(x.reshape(T, N, -1)).all(-1)).nonzero(), x) for name, x in checks]
+    found.append(("final observation", ended[(~torch.isfinite(final).all(-1)).nonzero()[:, 0]], buffer.final_obs))
+    for name, where, x in found:
+        if len(where):
+            t, n = (int(i) for i in where[0])
+            row = x[t, n].reshape(-1)
+            value = row[~torch.isfinite(row)][0].item()
+            if name == "observation":  # row t holds the observation step t - 1 returned (row 0: the rollout's start)
+                when = f"returned by rollout step {t - 1}" if t else "at the start of the rollout"
+                return f"observation of env {n} {when} is {value}"
+            return f"{name} of env {n} at rollout step {t} is {value}"
+    return None  # a sum overflowed, but every value is finite
+
+
+def nonfinite_update(stats: Mapping[str, float], policy: torch.nn.Module) -> str | None:
+    """The first non-finite update statistic or weight after a PPO update, or None."""
+    for key, name in LOSS_NAMES.items():
+        value = stats.get(key)
+        if value is not None and not np.isfinite(value):
+            others = ", ".join(f"{LOSS_NAMES[k]} {stats[k]:.4g}" for k in LOSS_NAMES if k in stats and k != key)
+            return f"{name} is {value} ({others})"
+    params = dict(policy.named_parameters())
+    if not bool(torch.stack([torch.isfinite(p).all() for p in params.values()]).all()):
+        bad = next(n for n, p in params.items() if not bool(torch.isfinite(p).all()))
+        return f"policy weight '{bad}' became non-finite"
+    return None
+
+
 def _now(device: torch.device) -> float:
     if device.type == "cuda":
         torch.cuda.synchronize(device)
@@ -148,6 +202,8 @@ class NativeTrainer:
         self.last_eval: EvalReport | None = None
         self.times: list[IterationTime] = []
         self.stop_requested = False
+        self.last_checkpoint: Path | None = None
+        """The newest checkpoint this run wrote or resumed from (named by non-finite errors)."""
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict:
@@ -156,7 +212,8 @@ class NativeTrainer:
                                     config=self.config, motion=self.motion, env=self.env)
 
     def save(self, path: str | Path) -> Path:
-        return ckpt.save_checkpoint(self.checkpoint(), path)
+        self.last_checkpoint = ckpt.save_checkpoint(self.checkpoint(), path)
+        return self.last_checkpoint
 
     def resume(self, allow_motion_mismatch: bool = False) -> Path | None:
         """Continue from the newest readable checkpoint in ``run_dir``; None (fresh start) if there is none."""
@@ -172,6 +229,7 @@ class NativeTrainer:
         self.optimizer.load_state_dict(state["optimizer"])
         self.iteration, self.env_steps, self.elapsed_s = state["iteration"], state["env_steps"], state["elapsed_s"]
         self._pending_rng = state["rng"]
+        self.last_checkpoint = path
         return path
 
     # ------------------------------------------------------------------ phases
@@ -237,9 +295,11 @@ class NativeTrainer:
                 lr = self._set_learning_rate()
                 t0 = _now(self.device)
                 obs = self.collect(obs)
+                stop_if_nonfinite(self, bar, nonfinite_rollout(self.buffer), ROLLOUT_HINT)
                 summary = self.episodes.summarize()
                 t1 = _now(self.device)
                 self.last_train = {**self.update(), "learning_rate": lr}
+                stop_if_nonfinite(self, bar, nonfinite_update(self.last_train, self.policy))
                 t2 = _now(self.device)
                 self.iteration, self.env_steps, ran = self.iteration + 1, self.env_steps + self.plan.batch_size, ran + 1
                 self.elapsed_s = elapsed_at_start + (t2 - start)
@@ -260,12 +320,12 @@ class NativeTrainer:
         cfg, k, step = self.cfg, self.iteration, self.env_steps
         last = k == self.plan.num_iterations
         if k % cfg.log_every == 0 or last:
-            monitor.log_rollout(step, summary.stats)
+            monitor.log_rollout(step, summary.stats, summary.diverged)
             monitor.log_train(step, self.last_train)
             monitor.log_rewards(step, summary.reward_terms)
             monitor.log_time(step, fps, collection_s, update_s)
             bar.log_iteration(k, step, fps, summary.stats, self.last_train, collection_s, update_s,
-                              summary.reward_terms)
+                              summary.reward_terms, summary.diverged)
         if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
             self.last_eval = run_evaluation(self.evaluate, self.policy)
             self.stop_requested = bool(self.last_eval.stop)
@@ -277,3 +337,18 @@ class NativeTrainer:
             ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints)
         monitor.flush()
         bar.update(step, fps, summary.stats)
+
+
+ROLLOUT_HINT = "the env must return finite observations and rewards"
+UPDATE_HINT = "a new run with a lower ppo.learning_rate or max_grad_norm may avoid it"
+
+
+def stop_if_nonfinite(trainer: Any, bar: RunProgress, problem: str | None, hint: str = UPDATE_HINT) -> None:
+    """Raise :class:`NonFiniteError` for ``problem`` in the trainer's current iteration (also logged to train.log)."""
+    if problem is None:
+        return
+    last = trainer.last_checkpoint or "none yet"
+    message = (f"iteration {trainer.iteration + 1}: {problem}; training stopped without saving this iteration "
+               f"(last good checkpoint: {last}); {hint}")
+    bar.write(f"stopped: {message}")
+    raise NonFiniteError(message)

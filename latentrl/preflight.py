@@ -1,0 +1,133 @@
+"""Checks every command runs before it writes anything, and cleanup of what a failed command created.
+
+A command validates its inputs (config, files, device, motion model) and its outputs (the folder is
+writable, the disk has room) *before* it creates a run or output directory; if it still fails
+afterwards, :class:`NewOutput` removes the directories this invocation created (never one that
+existed before). Every problem is one :class:`~latentrl.errors.ConfigError` line naming the value
+and the fix.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from types import TracebackType
+
+from latentrl.errors import ConfigError, LatentRLError, NonFiniteError
+
+MIB = 1 << 20
+
+
+# --------------------------------------------------------------------------- devices
+def check_device(device: str, what: str = "--device"):
+    """Parse ``device`` and make sure this machine has it; returns the ``torch.device``.
+
+    ``what`` names the flag or config key in the message (``--device``, ``ppo.device``).
+    """
+    import torch
+
+    try:
+        parsed = torch.device(device)
+    except (RuntimeError, TypeError, ValueError):
+        raise ConfigError(f"{what}: unknown device '{device}'; use 'cpu', 'cuda' or 'cuda:<index>'") from None
+    if parsed.type == "cpu":
+        return parsed
+    if parsed.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ConfigError(f"{what}: '{device}' requested but CUDA is not available on this machine (use 'cpu')")
+        count = torch.cuda.device_count()
+        if parsed.index is not None and parsed.index >= count:
+            raise ConfigError(f"{what}: '{device}' does not exist; this machine has {count} CUDA device(s) "
+                              f"(cuda:0 .. cuda:{count - 1})")
+        return parsed
+    if parsed.type == "mps":
+        if not torch.backends.mps.is_available():
+            raise ConfigError(f"{what}: '{device}' requested but MPS is not available on this machine (use 'cpu')")
+        return parsed
+    raise ConfigError(f"{what}: device type '{parsed.type}' is not supported; use 'cpu' or 'cuda[:<index>]'")
+
+
+# --------------------------------------------------------------------------- output folders
+def _nearest_existing(path: Path) -> Path:
+    """``path`` itself or its closest ancestor that exists."""
+    path = Path(os.path.abspath(path))
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def check_writable(folder: str | Path, what: str = "output folder") -> None:
+    """Make sure ``folder`` is (or can be created as) a writable directory, without creating it.
+
+    Writes and deletes a probe file in ``folder`` or, if it does not exist yet, in its nearest
+    existing ancestor (that is where it will be created). Permission bits alone are not trusted:
+    read-only mounts, full quotas and ACLs only show when a write is attempted.
+    """
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{what} {folder} exists and is not a directory; choose another path")
+    base = _nearest_existing(folder)
+    if not base.is_dir():
+        raise ConfigError(f"{what} {folder} cannot be created: {base} is a file, not a directory")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".latentrl-probe-", dir=base)
+        try:
+            os.write(fd, b"probe")
+        finally:
+            os.close(fd)
+            os.unlink(probe)
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise ConfigError(f"{what} {folder} is not writable ({reason} in {base}); choose another path or fix "
+                          "its permissions") from None
+
+
+def check_free_space(folder: str | Path, need_bytes: int, what: str = "output folder") -> None:
+    """Refuse to start when the disk holding ``folder`` has less than ``need_bytes`` free."""
+    base = _nearest_existing(Path(folder))
+    free = shutil.disk_usage(base).free
+    if free < need_bytes:
+        raise ConfigError(f"{what} {folder}: only {free / MIB:.0f} MiB free on its disk, this run needs about "
+                          f"{need_bytes / MIB:.0f} MiB (checkpoints and logs); free space or choose another path")
+
+
+def check_output_file(path: str | Path, what: str = "--out") -> None:
+    """An output file's folder must be writable and the path must not be a directory."""
+    path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{what} {path} is a directory; give a file name")
+    check_writable(path.parent if str(path.parent) else Path("."), f"{what} folder")
+
+
+class NewOutput:
+    """Context manager: if the block fails, remove the directories it created for ``folder``.
+
+    Records the top-most missing ancestor of ``folder`` on entry; on an error, that directory is
+    deleted with everything in it. A folder that existed before is never touched. Errors after
+    :meth:`keep` (the command has produced something worth keeping, e.g. training started) and
+    :class:`~latentrl.errors.NonFiniteError` (a training fault whose logs explain it) leave it in place.
+    """
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
+        self.created: Path | None = None
+        self.kept = False
+
+    def __enter__(self) -> NewOutput:
+        path = Path(os.path.abspath(self.folder))
+        top = None
+        while not path.exists() and path != path.parent:
+            top, path = path, path.parent
+        self.created = top
+        return self
+
+    def keep(self) -> None:
+        """From now on, leave the output in place even if the block fails."""
+        self.kept = True
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        bad_input = isinstance(exc, (LatentRLError, OSError)) and not isinstance(exc, NonFiniteError)
+        if exc is not None and bad_input and not self.kept and self.created is not None and self.created.exists():
+            shutil.rmtree(self.created, ignore_errors=True)

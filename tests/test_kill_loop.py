@@ -1,0 +1,184 @@
+"""SIGKILL a real ``latentrl train`` at random moments, checkpoint writes included, and resume it each time.
+
+After every kill: every checkpoint file on disk loads (a write is never visible half-done), and the next
+``--resume`` starts exactly at the newest of them, so env-step counters never go backwards; the run then
+finishes. CI runs ``KILLS_CI`` kills; ``LATENTRL_FULL_KILL_LOOP=1`` runs ``KILLS_FULL`` (docs/robustness.md).
+"""
+
+import json
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from latentrl.motion import save_motion_model
+from latentrl.ppo.checkpoint import FINAL, iteration_checkpoints, read_checkpoint
+from tests.helpers import make_tiny_model
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = ROOT / "configs" / "tiny.yaml"
+KILLS_CI, KILLS_FULL = 5, 50
+FULL = os.environ.get("LATENTRL_FULL_KILL_LOOP") == "1"
+START = re.compile(r"trainer: start at iteration (\d+), (\d+) env steps")
+MODES = ("write", "random", "launch")
+"""How a cycle picks its moment: at the next temporary checkpoint file seen after a random delay (inside
+``save_torch_atomic``), at a random delay after training started, or at a random delay after the launch."""
+
+
+def start_lines(run: Path) -> list[tuple[int, int]]:
+    log = run / "train.log"
+    return [tuple(map(int, m.groups())) for m in START.finditer(log.read_text())] if log.is_file() else []
+
+
+def temporaries(run: Path) -> list[Path]:
+    return [p for d in (run, run / "checkpoints") if d.is_dir() for p in d.glob(".*.tmp")]
+
+
+def newest_complete(run: Path) -> int:
+    """Env steps of the newest checkpoint on disk; every visible checkpoint must load (none is half-written)."""
+    files = [p for p in [run / FINAL] if p.is_file()] + iteration_checkpoints(run)
+    return max((read_checkpoint(p)["env_steps"] for p in files), default=0)
+
+
+def wait_for(condition, proc: subprocess.Popen, timeout: float = 120.0) -> bool:
+    """Poll ``condition`` every 0.5 ms until it holds (True) or the process exits (False)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        if proc.poll() is not None:
+            return False
+        time.sleep(0.0005)
+    raise AssertionError("the training process made no progress")
+
+
+@pytest.fixture(scope="module")
+def motion_file(tmp_path_factory):
+    return save_motion_model(make_tiny_model(), tmp_path_factory.mktemp("motion") / "tiny.pt")
+
+
+@pytest.mark.slow
+def test_sigkill_at_random_moments_always_resumes_from_the_newest_complete_checkpoint(motion_file, tmp_path):
+    kills = KILLS_FULL if FULL else KILLS_CI
+    rng = random.Random(7)
+    run, logs = tmp_path / "run", tmp_path / "logs"
+    logs.mkdir()
+    iterations = 8 * kills + 10  # more than the kills can finish: the last resume always has work left
+    fresh = [sys.executable, "-m", "latentrl.cli", "train", str(TINY), "--set", f"env.motion={motion_file}",
+             "--set", "policy.latent_dim=256", "--total-steps", str(64 * iterations), "--run-dir", str(run),
+             "--no-progress"]
+    resume = [sys.executable, "-m", "latentrl.cli", "train", "--resume", str(run), "--no-progress"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONWARNINGS": "always"}
+    expected, report = 0, {"kills": 0, "during_write": 0, "before_training": 0, "modes": {}}
+
+    def launch(i: int) -> subprocess.Popen:
+        argv = resume if (run / "config.yaml").is_file() else fresh
+        with open(logs / f"{i}.out", "w") as out, open(logs / f"{i}.err", "w") as err:
+            return subprocess.Popen(argv, stdout=out, stderr=err, env=env, cwd=tmp_path)
+
+    for i in range(kills):
+        mode = MODES[i % len(MODES)]
+        seen = len(start_lines(run))
+        proc = launch(i)
+        if mode == "launch":
+            time.sleep(rng.uniform(0.5, 4.0))
+        elif wait_for(lambda: len(start_lines(run)) > seen, proc):  # noqa: B023 - evaluated inside this iteration
+            time.sleep(rng.uniform(0.0, 0.8 if mode == "random" else 0.3))
+            if mode == "write":
+                wait_for(lambda: bool(temporaries(run)), proc)
+        assert proc.poll() is None, f"cycle {i}: the run ended before its kill: {(logs / f'{i}.err').read_text()}"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        report["kills"] += 1
+        report["modes"][mode] = report["modes"].get(mode, 0) + 1
+        report["during_write"] += bool(temporaries(run))
+        new = start_lines(run)[seen:]
+        report["before_training"] += not new
+        if new:  # this process resumed exactly where the previous kill left the newest complete checkpoint
+            assert new == [(expected // 64, expected)], f"cycle {i}: started at {new}, newest checkpoint {expected}"
+        newest = newest_complete(run)
+        assert newest >= expected, f"cycle {i}: env steps went back from {expected} to {newest}"
+        expected = newest
+
+    final = launch(kills)
+    assert final.wait(timeout=600) == 0, (logs / f"{kills}.err").read_text()
+    assert start_lines(run)[-1] == (expected // 64, expected), (start_lines(run), expected)
+    steps = [s for _, s in start_lines(run)]
+    assert steps == sorted(steps), f"a resume went backwards: {steps}"
+    assert read_checkpoint(run / FINAL)["env_steps"] == 64 * iterations
+    assert not temporaries(run), "the last resume left temporary files"
+    for i in range(kills + 1):
+        assert "skipping unusable checkpoint" not in (logs / f"{i}.err").read_text(), f"run {i} met a corrupt file"
+    print(json.dumps(report))
+    if kills >= 4:
+        assert report["during_write"] >= 1, f"no kill landed inside a checkpoint write: {report}"
+
+
+MOTION_KILLS_CI, MOTION_KILLS_FULL = 2, 10
+MTINY = ROOT / "configs" / "motion" / "tiny.yaml"
+MOTION_STEP = re.compile(r"^(vae|denoiser) step (\d+):", re.M)
+STAGES = ("vae", "denoiser")
+
+
+def motion_progress(run: Path) -> tuple[int, int]:
+    """(stage index, steps done) of the run's ``state.pt``; it must load whenever it exists."""
+    from latentrl.safe_io import load_torch
+
+    state_file = run / "checkpoints" / "state.pt"
+    if not state_file.is_file():
+        return (0, 0)
+    state = load_torch(state_file)
+    return (STAGES.index(state["stage"]), state["step"])
+
+
+@pytest.mark.slow
+def test_sigkill_motion_training_resumes_from_its_last_state(tmp_path):
+    kills = MOTION_KILLS_FULL if FULL else MOTION_KILLS_CI
+    steps = 4 * kills + 6  # per stage
+    rng = random.Random(11)
+    run, logs = tmp_path / "run", tmp_path / "logs"
+    logs.mkdir()
+    fresh = [sys.executable, "-m", "latentrl.cli", "motion", "train", str(MTINY), "--run-dir", str(run),
+             "--set", "data.locomotion.num_sequences=3", "--set", f"vae_train.steps={steps}",
+             "--set", f"denoiser_train.steps={steps}", "--set", "checkpoint_every=1", "--set", "log_every=1",
+             "--no-progress"]
+    resume = [sys.executable, "-m", "latentrl.cli", "motion", "train", "--resume", str(run), "--no-progress"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    progress, during_write = (0, 0), 0
+
+    def logged() -> list[tuple[int, int]]:
+        log = run / "train.log"
+        text = log.read_text() if log.is_file() else ""
+        return [(STAGES.index(s), int(n)) for s, n in MOTION_STEP.findall(text)]
+
+    for i in range(kills + 1):
+        seen = len(logged())
+        argv = resume if (run / "config.yaml").is_file() else fresh
+        with open(logs / f"{i}.err", "w") as err:
+            proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=err, env=env, cwd=tmp_path)
+        if i == kills:  # the last run finishes
+            assert proc.wait(timeout=600) == 0, (logs / f"{i}.err").read_text()
+        else:
+            assert wait_for(lambda: len(logged()) > seen, proc), (logs / f"{i}.err").read_text()  # noqa: B023
+            time.sleep(rng.uniform(0.0, 1.0))
+            if i % 2 == 0:
+                wait_for(lambda: bool(temporaries(run)), proc)
+            assert proc.poll() is None, f"cycle {i}: the run ended before its kill"
+            proc.send_signal(signal.SIGKILL)
+            proc.wait()
+            during_write += bool(temporaries(run))
+        first = logged()[seen:seen + 1]
+        if first:  # the first step this process logged is the first one its state.pt had not done
+            stage, done = progress
+            assert first[0] == ((stage, done) if done < steps or stage == 1 else (1, 0)), (i, first, progress)
+        now = motion_progress(run)
+        assert now >= progress, f"cycle {i}: state went back from {progress} to {now}"
+        progress = now
+    assert progress == (1, steps) and (run / "motion_model.pt").is_file()
+    print(json.dumps({"motion_kills": kills, "during_write": during_write}))
