@@ -196,7 +196,7 @@ def run_dart_peer(args: argparse.Namespace, batches: list[int]) -> dict | None:
 def _dart_ms(dart: dict, batch: int) -> float | None:
     for row in dart.get("results", dart.get("batches", [])):
         if int(row.get("batch", row.get("batch_size", -1))) == batch:
-            return float(row.get("ms_per_batch", row.get("ms_median", 0.0)))
+            return float(row.get("ms_per_batch_median", row.get("ms_per_batch", 0.0)))
     return None
 
 
@@ -233,8 +233,14 @@ def bench_rollout(args: argparse.Namespace) -> int:
                     f"{name:>10} {device:>5} batch {batch:>4}: {row['ms_per_primitive']:8.2f} ms/primitive "
                     f"{row['primitives_per_s']:8.1f} primitives/s {row['frames_per_s']:9.1f} frames/s"
                 )
-            if device == "cuda" and getattr(args, "compile", False):
-                pass
+            for amp in args.amp or []:
+                model.amp_dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}[amp]
+                for batch in args.batches:
+                    row = {"device": device, "amp": amp, **time_sampler(model, batch, device, args.repeats)}
+                    rows.append(row)
+                    print(f"{name:>10} {device:>5} {amp} batch {batch:>4}: {row['ms_per_primitive']:8.2f} "
+                          f"ms/primitive {row['primitives_per_s']:8.1f} primitives/s")
+                model.amp_dtype = None
         out["models"][name] = {
             "flops_per_primitive": flops,
             "latent_shape": list(model.latent_shape),
@@ -248,7 +254,7 @@ def bench_rollout(args: argparse.Namespace) -> int:
         ratios = {}
         for row in ours:
             ref = _dart_ms(dart, row["batch"])
-            if row["device"] == "cpu" and ref:
+            if row["device"] == "cpu" and "amp" not in row and ref:
                 ratios[str(row["batch"])] = ref / row["ms_per_batch"]
         out["speedup_vs_dart_official_cpu"] = ratios
         for b, r in ratios.items():
@@ -311,9 +317,7 @@ def bench_motion(args: argparse.Namespace) -> int:
     )
     for text, skill in MOTION_PROBES.items():
         g = torch.Generator().manual_seed(args.seed)
-        t0 = time.perf_counter()
         roll = model.rollout(text, steps, batch=args.batch, generator=g, guidance_scale=args.guidance)
-        elapsed = time.perf_counter() - t0
         j = roll.joints_world[:, 2:]  # generated frames only
         finite = bool(torch.isfinite(j).all())
         shares = M.foot_contact_shares(j)
@@ -328,7 +332,6 @@ def bench_motion(args: argparse.Namespace) -> int:
             "turn_deg_s": float(M.heading_change_rad(j).mean()) * 180 / 3.14159265 / (j.shape[1] / 30),
             "left_only": float(shares["left_only"].mean()),
             "right_only": float(shares["right_only"].mean()),
-            "frames_per_s": args.batch * steps * 8 / elapsed,
         }
         if ref and skill in ref["skills"]:
             row["data"] = ref["skills"][skill]

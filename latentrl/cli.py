@@ -133,7 +133,8 @@ def _bench_commands(sub) -> None:
                       help="devices (default: cpu, plus cuda when present)")
     roll.add_argument("--repeats", type=_pos_int, default=5, help="timed runs per figure (median reported)")
     roll.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads (default: torch's)")
-    roll.add_argument("--compile", action="store_true", help="also time torch.compile'd denoiser")
+    roll.add_argument("--amp", nargs="+", choices=["bf16", "fp16"],
+                      help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16)")
     roll.add_argument("--dart-src", default=None,
                       help="extracted zkf1997/DART tree; runs ../shared/tools/dart_peer_bench.py side by side")
     roll.add_argument("--dart-python", default=None, help="python of the environment able to import DART")

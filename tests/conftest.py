@@ -8,7 +8,6 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("LATENTRL_SHARED", ROOT.parent / "shared"))
 PARITY = SHARED / "reference" / "dart_parity_A"
 
-torch.set_num_threads(1)  # small tensors: one thread avoids OpenMP stalls on busy machines
 
 
 @pytest.fixture(scope="session")
@@ -24,3 +23,16 @@ def tiny_model():
     from tests.helpers import make_tiny_model
 
     return make_tiny_model()
+
+
+# Tiny networks: one intra-op thread avoids OpenMP stalls on a busy 2-core machine, and keeps results
+# identical between runs made inside module fixtures and inside tests.
+torch.set_num_threads(1)
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """Commands set torch's thread count from their configs; every test starts (and ends) at one."""
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(1)

@@ -32,13 +32,6 @@ class Evil:
 
 
 
-@pytest.fixture(autouse=True)
-def restore_threads():
-    """Commands set torch's thread count from their config; give the next test the count it had."""
-    threads = torch.get_num_threads()
-    yield
-    torch.set_num_threads(threads)
-
 @pytest.fixture(scope="module")
 def fx(tmp_path_factory) -> Path:
     """Every file the rows refer to, in one folder outside the working directory."""

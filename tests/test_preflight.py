@@ -20,13 +20,6 @@ IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 
 
 
-@pytest.fixture(autouse=True)
-def restore_threads():
-    """Commands set torch's thread count from their config; give the next test the count it had."""
-    threads = torch.get_num_threads()
-    yield
-    torch.set_num_threads(threads)
-
 @pytest.fixture(scope="module")
 def motion_file(tmp_path_factory):
     return save_motion_model(make_tiny_model(), tmp_path_factory.mktemp("motion") / "tiny.pt")

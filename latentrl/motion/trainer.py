@@ -284,11 +284,7 @@ class MotionTrainer:
                     history = motion[:, k, :h]
                 lr = set_lr(self.vae_opt, cfg, self.step)
                 loss, terms, pred = vae_step(self.vae, history, motion[:, k, h:], self.normalizer, cfg, self.generator)
-                self.vae_opt.zero_grad(set_to_none=True)
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(self.vae.parameters(), cfg.grad_clip)
-                self.vae_opt.step()
-                self.vae_ema.update(self.vae)
+                _optimizer_step(loss, self.vae, self.vae_opt, self.vae_ema, cfg.grad_clip)
                 p = cfg.rollout_probability(self.step)
                 use_rollout = bool(torch.rand((), generator=self.generator) < p)
                 if use_rollout:
@@ -334,11 +330,7 @@ class MotionTrainer:
                     cfg,
                     self.generator,
                 )
-                self.den_opt.zero_grad(set_to_none=True)
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(self.denoiser.parameters(), cfg.grad_clip)
-                self.den_opt.step()
-                self.den_ema.update(self.denoiser)
+                _optimizer_step(loss, self.denoiser, self.den_opt, self.den_ema, cfg.grad_clip)
                 p = cfg.rollout_probability(self.step)
                 use_rollout = k + 1 < cfg.num_primitives and bool(torch.rand((), generator=self.generator) < p)
                 if use_rollout:
@@ -373,6 +365,15 @@ class MotionTrainer:
             seed_history=seeds,
         )
         return model.cpu()
+
+
+def _optimizer_step(loss: torch.Tensor, module, optimizer, ema: EMA, grad_clip: float) -> None:
+    """Backward, clip, step, and update the EMA copy: one optimizer step of either stage."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(module.parameters(), grad_clip)
+    optimizer.step()
+    ema.update(module)
 
 
 def copy_module(module):

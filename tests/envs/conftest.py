@@ -4,16 +4,6 @@ import torch
 from latentrl.envs.reach import ReachLocationEnv
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny batches run fastest on one thread; two threads on the shared 2-core machine contend
-    badly (PPO's 2 iterations took 12 s instead of 0.2 s under load). Restored after each test."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 @pytest.fixture
 def make_reach(tiny_model):
     """Factory of small ReachLocation envs over the shared tiny model."""

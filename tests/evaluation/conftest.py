@@ -9,15 +9,6 @@ import pytest
 import torch
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Tiny batches run fastest on one thread on the shared 2-core machine (restored after each test)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def fresh_policy(model, observe_next: bool = False):
     """A freshly initialised DART-architecture policy (small) with the FollowPath observation layout."""
     from latentrl.envs.path import FollowPathEnv, WaypointPath

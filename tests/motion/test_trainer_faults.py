@@ -5,7 +5,6 @@ import math
 import re
 from pathlib import Path
 
-import pytest
 import torch
 
 from latentrl.cli import main
@@ -17,13 +16,6 @@ MTINY = str(ROOT / "configs" / "motion" / "tiny.yaml")
 SMALL = ["--set", "data.locomotion.num_sequences=3", "--set", "vae_train.steps=6", "--set", "denoiser_train.steps=2",
          "--set", "checkpoint_every=2", "--set", "log_every=1", "--no-progress"]
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def test_nan_loss_stops_motion_training_and_resume_continues_after_the_last_saved_step(tmp_path, monkeypatch, capsys):

@@ -1,16 +1,6 @@
 import pytest
-import torch
 
 from latentrl.ppo import PolicyConfig, PPOConfig
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    """Tiny networks on a shared 2-core machine: one intra-op thread avoids OpenMP stalls (100x slower with 2)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def tiny_ppo(**overrides) -> PPOConfig:
