@@ -97,6 +97,17 @@ def _motion_commands(sub) -> None:
     bvh.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "export_bvh", a))
 
 
+def _data_commands(sub) -> None:
+    data = sub.add_parser("data", help="motion-text datasets: convert AMASS-style sequences")
+    dsub = data.add_subparsers(dest="data_command", metavar="SUBCOMMAND", parser_class=_Parser)
+    dsub.required = True
+    conv = dsub.add_parser("convert-amass", add_help=False,
+                           help="AMASS SMPL(-X/-H) .npz + labels -> motion-text .npz files (see docs/datasets.md)")
+    conv.add_argument("args", nargs=argparse.REMAINDER,
+                      help="arguments of python -m latentrl.datasets.amass (run with --help for the list)")
+    conv.set_defaults(func=lambda a: _call("latentrl.datasets.amass", "main", a.args))
+
+
 def _train_commands(sub) -> None:
     quick = sub.add_parser("quickstart", help="train configs/quick.yaml on the default motion model, then evaluate it")
     quick.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a field of configs/quick.yaml")
@@ -218,6 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     _motion_commands(sub)
+    _data_commands(sub)
     _train_commands(sub)
     _eval_commands(sub)
     _bench_commands(sub)
@@ -233,6 +245,11 @@ def _call(module: str, name: str, args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status (argparse's too: 0 after ``--help``, 2 for bad arguments)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:2] == ["data", "convert-amass"]:  # its own parser (also python -m latentrl.datasets.amass)
+        from latentrl.datasets.amass import main as convert_amass_main
+
+        return convert_amass_main(argv[2:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

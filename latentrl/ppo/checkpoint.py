@@ -269,3 +269,15 @@ def load_policy(path: str | Path, device: str | torch.device = "cpu", motion: Ma
         raise CheckpointError(f"{path}: policy weights do not match its policy_spec: {str(exc)[:300]}") from None
     meta = {k: v for k, v in state.items() if k not in ("policy", "optimizer", "rng")}
     return LoadedPolicy(policy.eval(), meta)
+
+
+def export_policy(src: str | Path, dst: str | Path) -> Path:
+    """A release copy of a checkpoint, about a third of its size.
+
+    Keeps policy, spec, config, counters and motion-model hash; drops the optimizer and RNG states.
+    ``load_policy`` reads it; ``--resume`` cannot continue from it.
+    """
+    state = read_checkpoint(src)
+    slim = {k: v for k, v in state.items() if k not in ("optimizer", "rng")}
+    slim["extra"] = {**(state.get("extra") or {}), "exported_from": Path(src).name}
+    return save_torch_atomic(slim, dst)

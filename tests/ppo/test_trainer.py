@@ -130,3 +130,23 @@ def test_evaluation_can_stop_the_run_and_timings_are_reported(tmp_path):
     assert (result.iterations, result.env_steps, result.stopped_early) == (2, 128, True)
     assert read_checkpoint(result.final_checkpoint)["iteration"] == 2
     assert len(result.times) == 2 and all(t.collection_s > 0 and t.update_s > 0 for t in result.times)
+
+
+def test_exported_policy_loads_without_optimizer(tmp_path):
+    import torch
+
+    from latentrl.ppo.checkpoint import export_policy, load_policy
+    from latentrl.ppo.config import PolicyConfig, PPOConfig
+    from latentrl.ppo.run import train
+    from tests.ppo.envs import ReachVecEnv
+
+    env = ReachVecEnv(num_envs=4)
+    res = train(env, tmp_path / "run", PPOConfig(total_steps=64, num_steps=8, num_minibatches=2, update_epochs=1),
+                PolicyConfig(latent_dim=16), progress=False)
+    out = export_policy(res.final_checkpoint, tmp_path / "policy.pt")
+    assert out.stat().st_size < res.final_checkpoint.stat().st_size
+    loaded = load_policy(out)
+    obs = torch.zeros(2, loaded.policy.obs_dim)
+    action = loaded.policy.act(obs, deterministic=True).action
+    assert action.shape == (2, loaded.policy.action_dim) and torch.isfinite(action).all()
+    assert "optimizer" not in torch.load(out, weights_only=True)
