@@ -289,9 +289,21 @@ def _data_reference(model) -> dict | None:
     fields = {k: tuple(v) if isinstance(v, list) else v for k, v in loco.items()}
     seqs = generate_sequences(LocomotionConfig(**fields))
     pelvis_z = [float(s["joints"][:, 0, 2].min()) for s in seqs] + [float(s["joints"][:, 0, 2].max()) for s in seqs]
+    body = [_pelvis_over_feet(torch.as_tensor(s["joints"])) for s in seqs]
     stats = dataset_statistics(seqs)
     stats["pelvis_z_range"] = [min(pelvis_z), max(pelvis_z)]
+    stats["pelvis_over_feet_range"] = [float(min(b.min() for b in body)), float(max(b.max() for b in body))]
     return stats
+
+
+def _pelvis_over_feet(joints: torch.Tensor) -> torch.Tensor:
+    """(..., T, 22, 3) -> (..., T) pelvis height above the lower foot joint, metres.
+
+    The body's own height, independent of where the floor drifted to.
+    """
+    from latentrl.motion.skeleton import FOOT_JOINTS
+
+    return joints[..., 0, 2] - joints[..., list(FOOT_JOINTS), 2].amin(dim=-1)
 
 
 def bench_motion(args: argparse.Namespace) -> int:
@@ -329,6 +341,8 @@ def bench_motion(args: argparse.Namespace) -> int:
             "floor_cm": float(M.foot_floor_distance_cm(j).mean()),
             "pelvis_z_min": float(j[..., 0, 2].min()),
             "pelvis_z_max": float(j[..., 0, 2].max()),
+            "pelvis_over_feet_min": float(_pelvis_over_feet(j).min()),
+            "pelvis_over_feet_max": float(_pelvis_over_feet(j).max()),
             "turn_deg_s": float(M.heading_change_rad(j).mean()) * 180 / 3.14159265 / (j.shape[1] / 30),
             "left_only": float(shares["left_only"].mean()),
             "right_only": float(shares["right_only"].mean()),
@@ -343,15 +357,14 @@ def bench_motion(args: argparse.Namespace) -> int:
         )
     p = out["probes"]
     checks = {
-        "stable (finite, pelvis height in data range +-10 cm)": all(r["finite"] for r in p.values())
-        and (
-            ref is None
-            or all(
-                ref["pelvis_z_range"][0] - 0.1 <= r["pelvis_z_min"]
-                and r["pelvis_z_max"] <= ref["pelvis_z_range"][1] + 0.1
-                for r in p.values()
-            )
-        ),
+        "stable: finite, body height (pelvis over lower foot) in data range +-10 cm": all(
+            r["finite"] for r in p.values())
+        and (ref is None or all(ref["pelvis_over_feet_range"][0] - 0.1 <= r["pelvis_over_feet_min"]
+                                and r["pelvis_over_feet_max"] <= ref["pelvis_over_feet_range"][1] + 0.1
+                                for r in p.values())),
+        "no vertical drift: world pelvis height in data range +-10 cm": ref is None or all(
+            ref["pelvis_z_range"][0] - 0.1 <= r["pelvis_z_min"] and r["pelvis_z_max"] <= ref["pelvis_z_range"][1] + 0.1
+            for r in p.values()),
         "run faster than walk": p["run"]["speed_m_s"] > p["walk"]["speed_m_s"],
         "stand still < 0.1 m/s": p["stand still"]["speed_m_s"] < 0.1,
         "hop on left leg: left-foot-only contact dominates": p["hop on left leg"]["left_only"]
@@ -365,7 +378,8 @@ def bench_motion(args: argparse.Namespace) -> int:
         data_walk = ref["skills"]["walk"]
         checks["walk skate within 1.5x of data"] = p["walk"]["skate_cm_s"] <= 1.5 * max(data_walk["skate_cm_s"], 0.1)
         checks["walk floor within 1.5x of data"] = p["walk"]["floor_cm"] <= 1.5 * max(data_walk["floor_cm"], 0.1)
-        out["data_reference"] = {"pelvis_z_range": ref["pelvis_z_range"], "walk": data_walk}
+        out["data_reference"] = {"pelvis_z_range": ref["pelvis_z_range"],
+                                 "pelvis_over_feet_range": ref["pelvis_over_feet_range"], "walk": data_walk}
     train_s = model.info.get("train_seconds")
     if train_s is not None:
         out["train_seconds"] = train_s

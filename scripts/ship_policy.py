@@ -1,0 +1,70 @@
+"""Ship a trained policy: export it to policies/<name>.pt and write its card policies/<name>.md.
+
+    python scripts/ship_policy.py RUN_DIR EVAL_DIR NAME --config CONFIG
+
+RUN_DIR is a `latentrl train` run (its final.pt is exported without optimizer state); EVAL_DIR holds
+the `latentrl eval` report of that final.pt on the skill's suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import torch
+
+from latentrl.bench import hardware
+from latentrl.evaluation.report import results_table
+from latentrl.ppo.checkpoint import export_policy
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("run_dir")
+    ap.add_argument("eval_dir")
+    ap.add_argument("name")
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--text", required=True)
+    args = ap.parse_args()
+    run, ev = Path(args.run_dir), Path(args.eval_dir)
+    state = torch.load(run / "final.pt", weights_only=True)
+    out = export_policy(run / "final.pt", ROOT / "policies" / f"{args.name}.pt")
+    report = json.loads((ev / "report.json").read_text())
+    s = report["settings"]
+    hw = hardware()
+    card = [
+        f"# {args.name}",
+        "",
+        f"Reach goals with **\"{args.text}\"** on the embedded default motion model (`--motion default`, "
+        f"sha256 `{state['motion']['sha256'][:16]}`).",
+        "",
+        "| | |",
+        "|---|---|",
+        f"| file | `policies/{out.name}` ({out.stat().st_size / 1e6:.1f} MB, optimizer state stripped) |",
+        f"| config | [`{args.config}`](../{args.config}) |",
+        f"| reproduce | `latentrl train {args.config}` |",
+        f"| trainer | {state['trainer']} PPO |",
+        f"| iterations / env steps | {state['iteration']} / {state['env_steps']:,} primitives |",
+        f"| wall time | {state['elapsed_s'] / 60:.0f} min on {hw['cpu']} ({hw['cpu_count']} cores, CPU only, shared) |",
+        f"| evaluation | `latentrl eval policies/{out.name} --paths {' '.join(report['suites'])} "
+        f"--episodes {s['episodes']} --max-steps {s['max_steps']}` (stochastic actions, like DART) |",
+        "",
+        "## Evaluation",
+        "",
+        *results_table(report),
+        "",
+        "Reach time counts failed (timed-out) episodes at the budget time "
+        f"({s['budget_s']:.1f} s); 'reach time, successes' averages successful episodes only, which is what "
+        "DART's script reports. DART's row is its paper's Table 4, on its released BABEL model; ours runs "
+        "on the default model trained on synthetic locomotion.",
+        "",
+    ]
+    (ROOT / "policies" / f"{args.name}.md").write_text("\n".join(card))
+    print(f"wrote {out} and policies/{args.name}.md")
+
+
+if __name__ == "__main__":
+    main()
