@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import statistics
@@ -306,6 +307,29 @@ def _pelvis_over_feet(joints: torch.Tensor) -> torch.Tensor:
     return joints[..., 0, 2] - joints[..., list(FOOT_JOINTS), 2].amin(dim=-1)
 
 
+def steering_spread_deg(model, text: str, batch: int = 64, steps: int = 4, seed: int = 0,
+                        guidance: float = 5.0) -> float:
+    """How much the action (initial noise) can steer ``text``: 5-95 % spread of the yaw change, degrees.
+
+    Every sequence starts from the same state (seed history 0 and two primitives with shared
+    noise, so the gait is under way), then takes ``steps`` primitives with independent N(0, I)
+    noise. A controller can only turn as far as the noise moves the heading, so a narrow spread
+    means a policy cannot steer this prompt toward a goal, whatever the reward.
+    """
+    from latentrl.evaluation import metrics as M
+
+    g = torch.Generator().manual_seed(seed)
+    state = model.initial_state(batch, g, seed_index=torch.zeros(batch, dtype=torch.long))
+    emb = model.encode_text([text] * batch)
+    for _ in range(2):
+        shared = torch.randn(1, *model.latent_shape, generator=g).expand(batch, *model.latent_shape)
+        state = model.rollout_step(state, emb, shared.contiguous().to(model.device), guidance).state
+    roll = model.rollout(text, steps, batch=batch, generator=g, guidance_scale=guidance, state=state)
+    yaw = M.heading_change_rad(roll.joints_world[:, 1:]) * 180 / math.pi
+    lo, hi = torch.quantile(yaw.float().cpu(), torch.tensor([0.05, 0.95])).tolist()
+    return hi - lo
+
+
 def bench_motion(args: argparse.Namespace) -> int:
     """Rollout stability and text control of a motion model, against its training data."""
     from latentrl.evaluation import metrics as M
@@ -325,7 +349,7 @@ def bench_motion(args: argparse.Namespace) -> int:
     }
     print(
         f"{'prompt':>18} {'speed m/s':>9} {'skate cm/s':>10} {'floor cm':>8} {'pelvis z':>13} "
-        f"{'turn deg/s':>10} {'L-only':>6} {'R-only':>6}"
+        f"{'turn deg/s':>10} {'L-only':>6} {'R-only':>6} {'steer deg':>9}"
     )
     for text, skill in MOTION_PROBES.items():
         g = torch.Generator().manual_seed(args.seed)
@@ -346,6 +370,7 @@ def bench_motion(args: argparse.Namespace) -> int:
             "turn_deg_s": float(M.heading_change_rad(j).mean()) * 180 / 3.14159265 / (j.shape[1] / 30),
             "left_only": float(shares["left_only"].mean()),
             "right_only": float(shares["right_only"].mean()),
+            "steer_spread_deg": steering_spread_deg(model, text, seed=args.seed, guidance=args.guidance),
         }
         if ref and skill in ref["skills"]:
             row["data"] = ref["skills"][skill]
@@ -353,7 +378,7 @@ def bench_motion(args: argparse.Namespace) -> int:
         print(
             f"{text:>18} {row['speed_m_s']:9.2f} {row['skate_cm_s']:10.2f} {row['floor_cm']:8.2f} "
             f"{row['pelvis_z_min']:6.2f}-{row['pelvis_z_max']:<6.2f} {row['turn_deg_s']:10.1f} "
-            f"{row['left_only']:6.2f} {row['right_only']:6.2f}"
+            f"{row['left_only']:6.2f} {row['right_only']:6.2f} {row['steer_spread_deg']:9.1f}"
         )
     p = out["probes"]
     checks = {
