@@ -1,0 +1,247 @@
+"""Footprints, swing arcs, held feet, pelvis drop for reach, and the pose from IK."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from latentrl.datasets.body import (
+    TOE_HEIGHT_M,
+    Body,
+    leg_rotations,
+    rot_x,
+    rot_y,
+    rot_z,
+    two_bone_ik,
+    yaw_roll_pitch,
+)
+from latentrl.datasets.locomotion.config import _HELD_AFTER_S, _HELD_MIN_HEIGHT, _REACH, _SWING_TO_HELD_S
+from latentrl.datasets.locomotion.skills import _runs, _smootherstep, _smoothstep
+from latentrl.motion.skeleton import FPS
+
+# --- feet -------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Feet:
+    """Foot targets for both legs (index 0 left, 1 right) on the padded timeline."""
+
+    toe: np.ndarray  # (T, 2, 3) toe-base joint targets, world, metres
+    yaw: np.ndarray  # (T, 2) foot heading, rad, counter-clockwise from the rest facing (+y)
+    pitch: np.ndarray  # (T, 2) foot pitch about its lateral axis, rad, + lifts the toes
+    grounded: np.ndarray  # (T, 2) bool: toe locked on its footprint or heel pivoting on the floor
+
+
+def _rot2(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def _footprints(contact: np.ndarray, root_xy: np.ndarray, heading: np.ndarray, ch: dict, body: Body, side: float):
+    """(start, end, toe_xy, yaw) per stance: the nominal foot spot under the root at mid-stance.
+
+    Long stances (a stop, standing) use the root 0.3 s after touch-down, about where a normal stance has its
+    middle, so the last step of a stop is an ordinary step and the closing step lands beside it.
+    """
+    prints = []
+    frames = np.arange(len(contact))
+    for a, b in _runs(contact):
+        ref = min((a + b - 1) / 2, a + 0.3 * FPS)  # fractional: at 4 m/s half a frame is 7 cm
+        at = round(ref)
+        xy = np.array([np.interp(ref, frames, root_xy[:, 0]), np.interp(ref, frames, root_xy[:, 1])])
+        yaw = float(np.interp(ref, frames, heading))
+        offset = np.array([side * ch["stance_width"][at], body.ankle_to_toe[1] + ch["foot_shift"][at]])
+        prints.append((a, b, xy + _rot2(yaw) @ offset, yaw - side * ch["toe_out"][at]))
+    return prints
+
+
+def _stance_pitch(n: int, toe_land: float, heel_rise: float, lands: bool, lifts: bool) -> np.ndarray:
+    """(n,) foot pitch (rad) over a stance of ``n`` frames, pivoting about the locked toe joint.
+
+    A toe-first landing starts heel-up by ``toe_land`` and lowers the heel over at most 0.15 s; the heel
+    rises to ``heel_rise`` over the last 0.3 s (at most 40% of the stance) before lift-off.
+    """
+    i = np.arange(n)
+    pitch = np.zeros(n)
+    land = min(round(0.15 * FPS), int(0.3 * n)) if lands else 0
+    if land:
+        pitch[:land] -= toe_land * (1.0 - _smoothstep(i[:land] / land))
+    rise = min(round(0.3 * FPS), int(0.4 * n)) if lifts else 0
+    if rise:
+        pitch[n - rise:] -= heel_rise * _smoothstep((i[n - rise:] - (n - rise) + 1) / rise)
+    return pitch
+
+
+def _heel_roll(feet: _Feet, leg: int, a: int, frames: int, toe_xy: np.ndarray, yaw: float, strike: float,
+               body: Body) -> None:
+    """Fill the ``frames`` before touch-down ``a``: a heel-first landing rolling about the heel to flat."""
+    heel = np.append(toe_xy - _rot2(yaw) @ body.heel_to_toe[:2], 0.0)
+    pitch = strike * (1.0 - _smoothstep(np.arange(frames) / frames))
+    feet.toe[a - frames:a, leg] = heel + rot_z(np.full(frames, yaw)) @ rot_x(pitch) @ body.heel_to_toe
+    feet.yaw[a - frames:a, leg], feet.pitch[a - frames:a, leg] = yaw, pitch
+    feet.grounded[a - frames:a, leg] = True
+
+
+def _plant_feet(contact: np.ndarray, root_xy: np.ndarray, heading: np.ndarray, ch: dict, body: Body) -> _Feet:
+    """Grounded foot targets: toes locked on their footprints, and heel-first landings rolling onto them."""
+    total = len(contact)
+    feet = _Feet(np.zeros((total, 2, 3)), np.zeros((total, 2)), np.zeros((total, 2)), np.zeros((total, 2), bool))
+    for leg, side in ((0, -1.0), (1, 1.0)):
+        prev_end = 0
+        for a, b, xy, yaw in _footprints(contact[:, leg], root_xy, heading, ch, body, side):
+            feet.toe[a:b, leg] = (xy[0], xy[1], TOE_HEIGHT_M)
+            feet.yaw[a:b, leg], feet.grounded[a:b, leg] = yaw, True
+            feet.pitch[a:b, leg] = _stance_pitch(b - a, ch["toe_land"][a], ch["heel_rise"][b - 1], a > 0, b < total)
+            strike = ch["heel_strike"][a]
+            roll = min(round(ch["rocker_s"][a] * FPS), int(0.3 * (a - prev_end))) if a > 0 and strike > 0.01 else 0
+            if roll:
+                _heel_roll(feet, leg, a, roll, xy, yaw, strike, body)
+            prev_end = b
+    return feet
+
+
+def _hip(pelvis: np.ndarray, pelvis_rot: np.ndarray, body: Body, leg: int) -> np.ndarray:
+    """(T, 3) world position of hip joint ``leg`` (0 left, 1 right) for a (T, 3) pelvis with (T, 3, 3) rotation."""
+    return pelvis + pelvis_rot @ body.hip_offsets[leg]
+
+
+def _held_feet(pelvis: np.ndarray, pelvis_rot: np.ndarray, heading: np.ndarray, ch: dict, body: Body):
+    """(T, 2, 3) toe targets and (T,) pitch of a leg held off the floor (hip and knee flexed, toes down)."""
+    alpha, kappa = ch["tuck_hip"], ch["tuck_knee"]
+    ankle_fwd = body.thigh * np.sin(alpha) + body.shank * np.sin(alpha - kappa)
+    ankle_down = body.thigh * np.cos(alpha) + body.shank * np.cos(alpha - kappa)
+    pitch = np.full(len(heading), -0.3)
+    foot = (rot_x(pitch) @ body.ankle_to_toe)  # (T, 3) in the heading frame
+    toes = np.zeros((len(heading), 2, 3))
+    for leg in range(2):
+        hip = _hip(pelvis, pelvis_rot, body, leg)
+        local = np.stack((np.zeros_like(alpha), ankle_fwd, -ankle_down), axis=-1) + foot
+        toes[:, leg] = hip + (rot_z(heading) @ local[..., None])[..., 0]
+    toes[..., 2] = np.maximum(toes[..., 2], _HELD_MIN_HEIGHT)  # guard for deep crouches
+    return toes, pitch
+
+
+def _swing_arc(tau: np.ndarray, peak: float) -> np.ndarray:
+    """Unit-height lift over a swing, zero at both ends, peaking at ``tau = peak``: tau (1 - tau)^((1-p)/p)."""
+    power = (1.0 - peak) / peak
+    return tau * (1.0 - tau) ** power / (peak * (1.0 - peak) ** power)
+
+
+def _air_spells(grounded: np.ndarray) -> list[tuple[int, int, bool, bool]]:
+    """(start, end, from_floor, to_floor) per air spell of one foot.
+
+    A spell longer than ``_HELD_AFTER_S`` is a leg held up (the free leg of a hop); it is split into a rise
+    to the held pose and a descent from it, with the held pose in between.
+    """
+    total = len(grounded)
+    spells = []
+    for a, b in _runs(~grounded):
+        if b - a > _HELD_AFTER_S * FPS:
+            spells += [(a, (a + b) // 2, a > 0, False), ((a + b) // 2, b, False, b < total)]
+        else:
+            spells.append((a, b, a > 0, b < total))
+    return spells
+
+
+def _swing_feet(feet: _Feet, held: np.ndarray, held_pitch: np.ndarray, heading: np.ndarray,
+                pelvis_z: np.ndarray, ch: dict) -> None:
+    """Fill the air frames of ``feet``: arcs from lift-off to the next landing pose, or to / from a held pose.
+
+    Horizontally the toe eases from footprint to footprint (zero speed at both ends, travel done before the
+    final descent). Vertically it adds an early-peaking clearance arc (the heel kicks up) and the pelvis'
+    excursion from its straight line over the spell, so feet rise and fall with the body in flight.
+    """
+    span = round(_SWING_TO_HELD_S * FPS)
+    for leg in range(2):
+        for a, b, prev, nxt in _air_spells(feet.grounded[:, leg]):
+            frames = np.arange(a, b)
+            if prev and nxt:
+                tau = (frames - a + 1) / (b - a + 1)
+            elif prev or nxt:  # to or from the held pose, which is then reached or left in ``span`` frames
+                tau = np.minimum((frames - a + 1) / (span + 1), 1.0) if prev else np.maximum(
+                    1.0 - (b - frames) / (span + 1), 0.0)
+            else:
+                tau = np.zeros(len(frames))
+            start = feet.toe[a - 1, leg] if prev else held[frames, leg]
+            end = feet.toe[b, leg] if nxt else held[frames, leg]
+            along = _smootherstep(tau / 0.88)[:, None]
+            toe = start + (end - start) * along
+            mid = (a + b) // 2
+            lift = ch["clearance"][mid] * _swing_arc(tau, ch["swing_peak"][mid])
+            if prev and nxt:
+                lift += pelvis_z[frames] - (pelvis_z[a - 1] * (1 - tau) + pelvis_z[b] * tau)
+            rise = _smoothstep((tau - 0.3) / 0.7)  # towards the landing pose late in the swing
+            toe[:, 2] = start[..., 2] + (end[..., 2] - start[..., 2]) * rise + lift
+            feet.toe[a:b, leg] = toe
+            p0 = feet.pitch[a - 1, leg] if prev else held_pitch[frames]
+            p1 = feet.pitch[b, leg] if nxt else held_pitch[frames]
+            feet.pitch[a:b, leg] = np.where(tau < 0.5, p0 * (1 - _smoothstep(2 * tau)), p1 * _smoothstep(2 * tau - 1))
+            y0 = feet.yaw[a - 1, leg] if prev else heading[frames]
+            y1 = feet.yaw[b, leg] if nxt else heading[frames]
+            feet.yaw[a:b, leg] = y0 + np.angle(np.exp(1j * (y1 - y0))) * along[:, 0]
+
+
+def _ankle_targets(feet: _Feet, leg: int, body: Body) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 3) ankle targets and (T, 3, 3) foot rotations that put the toe joint on its target."""
+    foot_rot = rot_z(feet.yaw[:, leg]) @ rot_x(feet.pitch[:, leg])
+    return feet.toe[:, leg] - foot_rot @ body.ankle_to_toe, foot_rot
+
+
+def _smooth_cover(need: np.ndarray, radius: int = 3, sigma: float = 1.5) -> np.ndarray:
+    """A smooth curve >= ``need``: dilate by ``radius`` frames, Gaussian-smooth, then clip from below."""
+    padded = np.pad(need, radius, mode="edge")
+    dilated = np.lib.stride_tricks.sliding_window_view(padded, 2 * radius + 1).max(axis=-1)
+    x = np.arange(-3 * round(sigma), 3 * round(sigma) + 1)
+    kernel = np.exp(-0.5 * (x / sigma) ** 2)
+    smooth = np.convolve(np.pad(dilated, len(x) // 2, mode="edge"), kernel / kernel.sum(), mode="valid")
+    return np.maximum(smooth, need)
+
+
+def _reach_drop(pelvis: np.ndarray, pelvis_rot: np.ndarray, feet: _Feet, body: Body) -> np.ndarray:
+    """(T,) metres to lower the pelvis so every grounded foot is within ``_REACH`` of its leg length."""
+    reach = _REACH * (body.thigh + body.shank)
+    need = np.zeros(len(pelvis))
+    for leg in range(2):
+        hip = _hip(pelvis, pelvis_rot, body, leg)
+        ankle, _ = _ankle_targets(feet, leg, body)
+        horizontal = np.linalg.norm((hip - ankle)[:, :2], axis=-1)
+        allowed = np.sqrt(np.maximum(reach**2 - horizontal**2, 0.0))
+        drop = np.where(feet.grounded[:, leg], hip[:, 2] - ankle[:, 2] - allowed, 0.0)
+        need = np.maximum(need, drop)
+    return _smooth_cover(np.clip(need, 0.0, 0.3))
+
+
+# --- pose -------------------------------------------------------------------------------------------------
+
+
+def _local_rotations(
+    body: Body, pelvis: np.ndarray, pelvis_rot: np.ndarray, ch: dict, feet: _Feet
+) -> np.ndarray:
+    """(T, 22, 3, 3) local joint rotations: upper body from the channels, legs by IK to the foot targets."""
+    total = len(pelvis)
+    local = np.tile(np.eye(3), (total, 22, 1, 1))
+    local[:, 0] = pelvis_rot
+    for joint, share in ((3, 0.3), (6, 0.35), (9, 0.35)):
+        local[:, joint] = yaw_roll_pitch(share * ch["trunk_yaw"], share * ch["trunk_roll"], share * ch["trunk_pitch"])
+    thorax_yaw = ch["pelvis_yaw"] + ch["trunk_yaw"]
+    thorax_roll = ch["pelvis_roll"] + ch["trunk_roll"]
+    thorax_pitch = ch["pelvis_pitch"] + ch["trunk_pitch"]
+    for joint in (12, 15):  # neck and head share the work of keeping the gaze level and ahead
+        local[:, joint] = yaw_roll_pitch(-0.5 * thorax_yaw, -0.5 * thorax_roll, -0.4 * thorax_pitch)
+    local[:, 16] = rot_y(ch["arm_abd"]) @ rot_x(ch["shoulder_l"])
+    local[:, 17] = rot_y(-ch["arm_abd"]) @ rot_x(ch["shoulder_r"])
+    local[:, 18] = rot_x(ch["elbow_l"])
+    local[:, 19] = rot_x(ch["elbow_r"])
+    pelvis_fwd = pelvis_rot[:, :, 1] * np.array([1.0, 1.0, 0.0])
+    for leg, (hip_j, knee_j, ankle_j, toe_j) in enumerate(((1, 4, 7, 10), (2, 5, 8, 11))):
+        ankle, foot_rot = _ankle_targets(feet, leg, body)
+        hip = _hip(pelvis, pelvis_rot, body, leg)
+        pole = rot_z(feet.yaw[:, leg])[:, :, 1] + pelvis_fwd  # knee over the toes
+        thigh, shank, hinge = two_bone_ik(hip, ankle, pole, body.thigh, body.shank)
+        local[:, hip_j], local[:, knee_j], local[:, ankle_j] = leg_rotations(pelvis_rot, thigh, shank, hinge, foot_rot)
+        local[:, toe_j] = rot_x(0.8 * np.clip(-feet.pitch[:, leg], 0.0, 0.6))  # toes stay flat as the heel rises
+    return local
+
+

@@ -1,0 +1,224 @@
+"""One sequence from its plan, the public generator API and dataset statistics."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from latentrl.datasets.body import (
+    Body,
+    axis_angle_to_matrix_np,
+    forward_kinematics_np,
+    make_body,
+    matrix_to_axis_angle_np,
+    yaw_roll_pitch,
+)
+from latentrl.datasets.locomotion.config import _PAD_S, SKILLS, TEXT_TO_SKILL, G, LocomotionConfig
+from latentrl.datasets.locomotion.feet import _Feet, _held_feet, _local_rotations, _plant_feet, _reach_drop, _swing_feet
+from latentrl.datasets.locomotion.plan import (
+    _blend_channels,
+    _Block,
+    _compose_contacts,
+    _cycle_rate,
+    _evaluate_blocks,
+    _motion_ramps,
+    _plan_blocks,
+    _weights,
+)
+from latentrl.datasets.motion_text import write_meta, write_sequence
+from latentrl.motion.skeleton import FOOT_JOINTS, FPS
+
+# --- one sequence -----------------------------------------------------------------------------------------
+
+
+def _schedule(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, counts: dict[str, float],
+              total: int, pad: int) -> tuple[list[_Block], dict[str, np.ndarray], np.ndarray]:
+    """Steps 1-2: skill blocks, blended (T,) channels and (T, 2) foot contacts on the padded timeline."""
+    t = np.arange(total) / FPS
+    blocks = _plan_blocks(cfg, rng, body, counts, total)
+    weights = _weights([(b.start, a.end) for a, b in zip(blocks[:-1], blocks[1:])], total)
+    phase = rng.uniform() + np.cumsum(_cycle_rate(blocks, weights)) / FPS
+    for b in blocks:
+        if b.skill == "jump_forward":  # jump phase 0 (start of the standing lead-in) at the blend centre
+            b.phase_offset = -phase[b.start + b.blend_in // 2] if b.blend_in else 0.9 - phase[pad]
+    evaluated = _evaluate_blocks(blocks, phase, t, body)
+    contact, switches = _compose_contacts(blocks, [c for _, c in evaluated])
+    motion_ramps = _motion_ramps(blocks, switches, total)
+    for a, b, (start, end) in zip(blocks[:-1], blocks[1:], motion_ramps):  # label the whole speed change
+        a.end, b.start = max(a.end, end), min(b.start, start)
+    ch = _blend_channels(evaluated, weights, _weights(motion_ramps, total))
+    lean = -0.6 * np.arctan(ch["v_fwd"] * ch["yaw_rate"] / G)  # lean into turns
+    ch["pelvis_roll"] += 0.5 * lean
+    ch["trunk_roll"] += 0.5 * lean
+    return blocks, ch, contact
+
+
+def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, ch: dict,
+                  contact: np.ndarray) -> tuple[np.ndarray, np.ndarray, _Feet]:
+    """Steps 3-4: (T, 3) pelvis position and (T, 3, 3) orientation, world, and the foot targets."""
+    heading = rng.uniform(0, 2 * math.pi) + np.cumsum(ch["yaw_rate"]) / FPS
+    c, s = np.cos(heading), np.sin(heading)
+    vel = np.stack((c * ch["v_side"] - s * ch["v_fwd"], s * ch["v_side"] + c * ch["v_fwd"]), axis=-1)
+    root_xy = rng.uniform(-cfg.start_half_size, cfg.start_half_size, 2) + np.cumsum(vel, axis=0) / FPS
+    offset = np.stack((c * ch["sway"] - s * ch["surge"], s * ch["sway"] + c * ch["surge"]), axis=-1)
+    pelvis = np.concatenate((root_xy + offset, (body.pelvis_height + ch["dz"])[:, None]), axis=-1)
+    pelvis_rot = yaw_roll_pitch(heading + ch["pelvis_yaw"], ch["pelvis_roll"], ch["pelvis_pitch"])
+    feet = _plant_feet(contact, root_xy, heading, ch, body)
+    pelvis[:, 2] -= _reach_drop(pelvis, pelvis_rot, feet, body)
+    held, held_pitch = _held_feet(pelvis, pelvis_rot, heading, ch, body)
+    _swing_feet(feet, held, held_pitch, heading, pelvis[:, 2], ch)
+    return pelvis, pelvis_rot, feet
+
+
+def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> dict[str, np.ndarray]:
+    """One sequence in the motion-text format (fields of ``motion_text.FIELDS``)."""
+    rng = np.random.default_rng([cfg.seed, index])
+    body = make_body(rng.uniform(*cfg.height_range))
+    pad, frames = round(_PAD_S * FPS), round(cfg.seconds_per_sequence * FPS)
+    blocks, ch, contact = _schedule(cfg, rng, body, counts, frames + 2 * pad, pad)
+    pelvis, pelvis_rot, feet = _trajectories(cfg, rng, body, ch, contact)
+    keep = slice(pad, pad + frames)  # step 5 on the visible frames only
+    local = _local_rotations(body, pelvis[keep], pelvis_rot[keep], {k: v[keep] for k, v in ch.items()},
+                             _Feet(feet.toe[keep], feet.yaw[keep], feet.pitch[keep], feet.grounded[keep]))
+    poses = matrix_to_axis_angle_np(local).astype(np.float32)
+    rest = body.rest_joints.astype(np.float32)
+    transl = (pelvis[keep] - body.rest_joints[0]).astype(np.float32)
+    # joints from the stored (float32) values, so they match a reader's forward kinematics exactly
+    joints = forward_kinematics_np(rest.astype(np.float64), axis_angle_to_matrix_np(poses.astype(np.float64)),
+                                   transl.astype(np.float64))
+    segments = [(max(b.start, pad) - pad, min(b.end, pad + frames) - pad, b.text) for b in blocks
+                if min(b.end, pad + frames) > max(b.start, pad)]
+    return {
+        "fps": np.array(FPS, dtype=np.float32),
+        "transl": transl,
+        "pelvis_delta": rest[0].copy(),
+        "rest_joints": rest,
+        "poses": poses,
+        "joints": joints.astype(np.float32),
+        "seg_start": np.array([s[0] for s in segments], dtype=np.int32),
+        "seg_end": np.array([s[1] for s in segments], dtype=np.int32),
+        "seg_text": np.array([s[2] for s in segments], dtype=str),
+    }
+
+
+# --- public API -------------------------------------------------------------------------------------------
+
+
+def generate_sequences(cfg: LocomotionConfig) -> list[dict[str, np.ndarray]]:
+    """Generate every sequence in memory: a list of dicts with the motion-text fields (float32/int32/str)."""
+    cfg.validate()
+    counts = {s: 0.0 for s in cfg.skills}
+    return [_simulate(cfg, i, counts) for i in range(cfg.num_sequences)]
+
+
+def generate_dataset(cfg: LocomotionConfig, out_dir: str | Path, overwrite: bool = False) -> list[Path]:
+    """Write ``seq_00000.npz``... and ``meta.json`` into ``out_dir``; returns the sequence paths.
+
+    Refuses a folder that already holds ``.npz`` files unless ``overwrite`` (which first deletes them and
+    ``meta.json``), so stale sequences of an earlier, larger run never mix into the dataset.
+    """
+    from latentrl.errors import DataError
+
+    out_dir = Path(out_dir)
+    old = sorted(out_dir.glob("*.npz")) if out_dir.is_dir() else []
+    if old and not overwrite:
+        raise DataError(f"{out_dir}: already holds {len(old)} .npz files, expected an empty folder "
+                        "(or pass overwrite=True)")
+    for path in old + [out_dir / "meta.json"]:
+        path.unlink(missing_ok=True)
+    started = time.perf_counter()
+    seqs = generate_sequences(cfg)
+    seconds = time.perf_counter() - started
+    paths = [write_sequence(out_dir / f"seq_{i:05d}.npz", seq, check_fk=False) for i, seq in enumerate(seqs)]
+    stats = dataset_statistics(seqs)
+    write_meta(out_dir, {
+        "name": cfg.name,
+        "generator": "latentrl.datasets.locomotion",
+        "licence": "MIT (procedurally generated by latentrl; contains no recorded motion)",
+        "seed": cfg.seed,
+        "fps": FPS,
+        "config": asdict(cfg),
+        "num_sequences": len(paths),
+        "frames": stats["frames"],
+        "transition_frames": stats["transition_frames"],
+        "frames_per_skill": {k: v["frames"] for k, v in stats["skills"].items()},
+        "frames_per_text": stats["texts"],
+        "generation_seconds": round(seconds, 2),
+    })
+    return paths
+
+
+def foot_skate(joints: np.ndarray, horizontal: bool = False) -> np.ndarray:
+    """(T-1,) contact-weighted foot displacement per frame pair (m), DART's ``calc_skate`` before averaging.
+
+    ``joints`` (T, 22, 3) world, z up. Each foot joint (10, 11) moves ``|d|`` between frames and is weighted by
+    ``2 - 2**clamp(max(h_t, h_t-1) / 0.03, 0, 1)`` (h = its height above the floor); the two feet are averaged.
+    ``horizontal`` measures only the xy displacement (sliding), leaving out lift-off and touch-down.
+    """
+    feet = joints[:, list(FOOT_JOINTS)]
+    delta = np.diff(feet[..., :2] if horizontal else feet, axis=0)
+    height = np.maximum(feet[1:, :, 2], feet[:-1, :, 2])
+    weight = 2.0 - 2.0 ** np.clip(height / 0.03, 0.0, 1.0)
+    return (np.linalg.norm(delta, axis=-1) * weight).mean(axis=-1)
+
+
+_STAT_KEYS = ("frames", "pure", "pairs", "speed", "skate", "skate_xy", "floor")
+
+
+def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
+    """Frames per skill and text, the transition share, and per-skill speed, skate and floor metrics.
+
+    Speeds and metrics use frames labelled with a single skill (not transitions): ``speed_m_s`` is the mean
+    horizontal pelvis speed, ``skate_cm_s`` DART's contact-weighted skate (x fps, in cm/s), ``skate_xy_cm_s``
+    the same on horizontal displacement only, and ``floor_cm`` the mean |lowest foot joint height| (DART's
+    floor distance, in cm).
+    """
+    acc: dict[str, dict[str, float]] = {}
+    texts: dict[str, int] = {}
+    total = transitions = 0
+    for seq in seqs:
+        num = len(seq["transl"])
+        labels = np.zeros(num, dtype=int)
+        owner = np.full(num, "", dtype=object)
+        for a, b, text in zip(seq["seg_start"], seq["seg_end"], seq["seg_text"]):
+            skill = TEXT_TO_SKILL.get(str(text), str(text))
+            labels[a:b] += 1
+            owner[a:b] = skill
+            texts[str(text)] = texts.get(str(text), 0) + int(b - a)
+            acc.setdefault(skill, dict.fromkeys(_STAT_KEYS, 0.0))
+            acc[skill]["frames"] += int(b - a)
+        total += num
+        transitions += int(np.sum(labels > 1))
+        joints = seq["joints"].astype(np.float64)
+        pure = labels == 1
+        pair = pure[1:] & pure[:-1] & (owner[1:] == owner[:-1])
+        speed = np.linalg.norm(np.diff(joints[:, 0, :2], axis=0), axis=-1) * FPS
+        skate, skate_xy = foot_skate(joints), foot_skate(joints, horizontal=True)
+        floor = np.abs(joints[:, list(FOOT_JOINTS), 2].min(axis=-1))
+        for skill in set(owner[pure]):
+            m, mp = pure & (owner == skill), pair & (owner[1:] == skill)
+            a = acc[skill]
+            a["pure"] += int(m.sum())
+            a["floor"] += float(floor[m].sum())
+            a["pairs"] += int(mp.sum())
+            a["speed"] += float(speed[mp].sum())
+            a["skate"] += float(skate[mp].sum())
+            a["skate_xy"] += float(skate_xy[mp].sum())
+    skills = {}
+    for skill, a in sorted(acc.items(), key=lambda kv: SKILLS.index(kv[0]) if kv[0] in SKILLS else 99):
+        pairs, pure = max(a["pairs"], 1), max(a["pure"], 1)
+        skills[skill] = {
+            "frames": int(a["frames"]),
+            "single_label_frames": int(a["pure"]),
+            "speed_m_s": round(a["speed"] / pairs, 3),
+            "skate_cm_s": round(100 * FPS * a["skate"] / pairs, 3),
+            "skate_xy_cm_s": round(100 * FPS * a["skate_xy"] / pairs, 3),
+            "floor_cm": round(100 * a["floor"] / pure, 3),
+        }
+    return {"frames": total, "transition_frames": transitions,
+            "transition_fraction": round(transitions / max(total, 1), 3), "skills": skills, "texts": texts}
