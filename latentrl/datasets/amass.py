@@ -41,7 +41,7 @@ from latentrl.datasets.body import (
     forward_kinematics_np,
     matrix_to_axis_angle_np,
 )
-from latentrl.datasets.motion_text import write_meta, write_sequence
+from latentrl.datasets.motion_text import make_sequence, write_meta, write_sequence
 from latentrl.errors import DataError, closest
 from latentrl.motion.skeleton import ANKLE_JOINTS, FOOT_JOINTS, FPS, NUM_JOINTS
 
@@ -607,10 +607,6 @@ def amass_to_sequences(path: str | os.PathLike, labels: Any, body_model: Any, fl
     if floor == "feet":
         fk = forward_kinematics_np(rest, axis_angle_to_matrix_np(poses.astype(np.float64)), transl)
         transl[:, 2] -= floor_height(fk, rest)
-    transl = transl.astype(np.float32)
-    rest32 = rest.astype(np.float32)
-    joints = forward_kinematics_np(rest32.astype(np.float64), axis_angle_to_matrix_np(poses.astype(np.float64)),
-                                   transl.astype(np.float64)).astype(np.float32)
     segments = segments_to_frames(parse_labels(labels, f"{name} labels"), len(times),
                                   len(data["poses"]) / data["fps"], f"{name} labels")
     runs = _covered_runs(segments, len(times))
@@ -622,17 +618,7 @@ def amass_to_sequences(path: str | os.PathLike, labels: Any, body_model: Any, fl
     out = []
     for a, b in runs:
         segs = [(max(s, a) - a, min(e, b) - a, t) for s, e, t in segments if min(e, b) > max(s, a)]
-        out.append({
-            "fps": np.array(FPS, dtype=np.float32),
-            "transl": transl[a:b],
-            "pelvis_delta": rest32[0].copy(),
-            "rest_joints": rest32,
-            "poses": poses[a:b],
-            "joints": joints[a:b],
-            "seg_start": np.array([s[0] for s in segs], dtype=np.int32),
-            "seg_end": np.array([s[1] for s in segs], dtype=np.int32),
-            "seg_text": np.array([s[2] for s in segs], dtype=str),
-        })
+        out.append(make_sequence(rest, poses[a:b], transl[a:b], segs))
     return out
 
 

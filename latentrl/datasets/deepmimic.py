@@ -51,6 +51,7 @@ from latentrl.datasets.body import (
     rest_joints,
     rot_z,
 )
+from latentrl.datasets.motion_text import make_sequence
 from latentrl.errors import DataError, closest
 from latentrl.motion.skeleton import FPS, NUM_JOINTS, PARENTS
 
@@ -371,22 +372,7 @@ def _retarget(name: str, seconds: float | None, cycles: int | None, height: floa
     transl = observed[:, 0] - rest[0]
     transl[:, 2] -= floor_height(forward_kinematics_np(rest, axis_angle_to_matrix_np(poses.astype(np.float64)),
                                                        transl), rest)
-    transl = transl.astype(np.float32)
-    rest32 = rest.astype(np.float32)
-    joints = forward_kinematics_np(rest32.astype(np.float64), axis_angle_to_matrix_np(poses.astype(np.float64)),
-                                   transl.astype(np.float64))
-    num = len(poses)
-    return {
-        "fps": np.array(FPS, dtype=np.float32),
-        "transl": transl,
-        "pelvis_delta": rest32[0].copy(),
-        "rest_joints": rest32,
-        "poses": poses,
-        "joints": joints.astype(np.float32),
-        "seg_start": np.array([0], dtype=np.int32),
-        "seg_end": np.array([num], dtype=np.int32),
-        "seg_text": np.array([CLIPS[name][0]]),
-    }
+    return make_sequence(rest, poses, transl, [(0, len(poses), CLIPS[name][0])])
 
 
 def load_deepmimic_clips(names: Sequence[str] | None = None, seconds: float | None = None,

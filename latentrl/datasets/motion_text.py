@@ -133,6 +133,33 @@ def _check_kinematics(name: str, seq: Mapping) -> None:
         )
 
 
+def make_sequence(rest_joints: np.ndarray, poses: np.ndarray, transl: np.ndarray,
+                  segments: list[tuple[int, int, str]]) -> dict[str, np.ndarray]:
+    """A sequence in this format from a pose: rest joints (22, 3), axis-angle poses (T, 22, 3), transl (T, 3).
+
+    ``joints`` is the forward kinematics of the values *as stored* (float32), so a reader's check
+    (``validate_sequence``) reproduces them exactly. ``segments`` are ``(start, end, text)`` frames.
+    """
+    from latentrl.datasets.body import axis_angle_to_matrix_np, forward_kinematics_np
+
+    rest = np.asarray(rest_joints).astype(np.float32)
+    poses = np.asarray(poses).astype(np.float32)
+    transl = np.asarray(transl).astype(np.float32)
+    joints = forward_kinematics_np(rest.astype(np.float64), axis_angle_to_matrix_np(poses.astype(np.float64)),
+                                   transl.astype(np.float64))
+    return {
+        "fps": np.array(FPS, dtype=np.float32),
+        "transl": transl,
+        "pelvis_delta": rest[0].copy(),
+        "rest_joints": rest,
+        "poses": poses,
+        "joints": joints.astype(np.float32),
+        "seg_start": np.array([s[0] for s in segments], dtype=np.int32),
+        "seg_end": np.array([s[1] for s in segments], dtype=np.int32),
+        "seg_text": np.array([s[2] for s in segments], dtype=str),
+    }
+
+
 def validate_sequence(seq: Mapping, name: str, check_fk: bool = True) -> None:
     """Raise ``DataError`` unless ``seq`` holds every field with the exact dtype and shape of the format.
 

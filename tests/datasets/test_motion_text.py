@@ -14,6 +14,9 @@ from latentrl.datasets.motion_text import (
     write_meta,
     write_sequence,
 )
+from latentrl.datasets.motion_text import (
+    make_sequence as build_sequence,
+)
 from latentrl.errors import DataError
 from latentrl.motion.rotations import axis_angle_to_matrix
 from latentrl.motion.skeleton import forward_kinematics
@@ -39,6 +42,22 @@ def make_sequence(frames=12, seed=0):
         "seg_end": np.array([frames // 2 + 2, frames], dtype=np.int32),
         "seg_text": np.array(["walk", "stand still"]),
     }
+
+
+def test_make_sequence_stores_float32_and_fk_of_the_stored_values(tmp_path):
+    ref = make_sequence()
+    # float64 inputs, as the generators have them: everything is stored float32, joints from those values
+    seq = build_sequence(ref["rest_joints"].astype(np.float64), ref["poses"].astype(np.float64),
+                         ref["transl"].astype(np.float64), [(0, 4, "walk"), (4, 12, "stand still")])
+    assert set(seq) == set(FIELDS)
+    for field in ("transl", "pelvis_delta", "rest_joints", "poses", "joints"):
+        assert seq[field].dtype == np.float32, field
+    np.testing.assert_allclose(seq["joints"], ref["joints"], atol=1e-6)
+    assert seq["seg_start"].tolist() == [0, 4] and seq["seg_end"].tolist() == [4, 12]
+    assert seq["seg_text"].tolist() == ["walk", "stand still"]
+    validate_sequence(seq, "built.npz")
+    back = read_sequence(write_sequence(tmp_path / "built.npz", seq))
+    np.testing.assert_array_equal(back["joints"], seq["joints"])
 
 
 def error_of(seq, name="walk_0003.npz"):

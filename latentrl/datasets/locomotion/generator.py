@@ -12,8 +12,6 @@ import numpy as np
 
 from latentrl.datasets.body import (
     Body,
-    axis_angle_to_matrix_np,
-    forward_kinematics_np,
     make_body,
     matrix_to_axis_angle_np,
     yaw_roll_pitch,
@@ -30,7 +28,7 @@ from latentrl.datasets.locomotion.plan import (
     _plan_blocks,
     _weights,
 )
-from latentrl.datasets.motion_text import write_meta, write_sequence
+from latentrl.datasets.motion_text import make_sequence, write_meta, write_sequence
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS
 
 # --- one sequence -----------------------------------------------------------------------------------------
@@ -85,25 +83,10 @@ def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> di
     keep = slice(pad, pad + frames)  # step 5 on the visible frames only
     local = _local_rotations(body, pelvis[keep], pelvis_rot[keep], {k: v[keep] for k, v in ch.items()},
                              _Feet(feet.toe[keep], feet.yaw[keep], feet.pitch[keep], feet.grounded[keep]))
-    poses = matrix_to_axis_angle_np(local).astype(np.float32)
-    rest = body.rest_joints.astype(np.float32)
-    transl = (pelvis[keep] - body.rest_joints[0]).astype(np.float32)
-    # joints from the stored (float32) values, so they match a reader's forward kinematics exactly
-    joints = forward_kinematics_np(rest.astype(np.float64), axis_angle_to_matrix_np(poses.astype(np.float64)),
-                                   transl.astype(np.float64))
     segments = [(max(b.start, pad) - pad, min(b.end, pad + frames) - pad, b.text) for b in blocks
                 if min(b.end, pad + frames) > max(b.start, pad)]
-    return {
-        "fps": np.array(FPS, dtype=np.float32),
-        "transl": transl,
-        "pelvis_delta": rest[0].copy(),
-        "rest_joints": rest,
-        "poses": poses,
-        "joints": joints.astype(np.float32),
-        "seg_start": np.array([s[0] for s in segments], dtype=np.int32),
-        "seg_end": np.array([s[1] for s in segments], dtype=np.int32),
-        "seg_text": np.array([s[2] for s in segments], dtype=str),
-    }
+    return make_sequence(body.rest_joints, matrix_to_axis_angle_np(local), pelvis[keep] - body.rest_joints[0],
+                         segments)
 
 
 # --- public API -------------------------------------------------------------------------------------------

@@ -67,10 +67,14 @@ def _spring_mass_dz(step: np.ndarray, duty: float, period: float, base: float) -
     return np.where(in_stance, stance, flight)
 
 
-def _drift_params(rng: np.random.Generator, amplitude: float) -> tuple[float, ...]:
-    """Two slow random sinusoids (amplitude rad/s) that make straight skills wander in heading."""
-    a = amplitude * rng.uniform(0.3, 1.0, 2)
-    f = rng.uniform(0.08, 0.3, 2)
+def _drift_params(rng: np.random.Generator, amplitude: float, strength: tuple[float, float] = (0.3, 1.0),
+                  hz: tuple[float, float] = (0.08, 0.3)) -> tuple[float, ...]:
+    """Two random sinusoids for the yaw rate: each ``amplitude * U(strength)`` rad/s at ``U(hz)`` Hz.
+
+    The defaults are a slow drift that makes straight skills wander in heading.
+    """
+    a = amplitude * rng.uniform(*strength, 2)
+    f = rng.uniform(*hz, 2)
     p = rng.uniform(0.0, 2 * math.pi, 2)
     return (a[0], f[0], p[0], a[1], f[1], p[1])
 
@@ -85,10 +89,7 @@ def _wander_params(rng: np.random.Generator, amplitude: float) -> tuple[float, .
     learn. Yaw rates that change within a primitive make the turn the noise's to choose. Each
     block draws its own strength from 0 (straight) to ``amplitude`` (a weaving path).
     """
-    a = amplitude * rng.uniform(0.0, 1.0, 2)
-    f = rng.uniform(0.25, 0.8, 2)
-    p = rng.uniform(0.0, 2 * math.pi, 2)
-    return (a[0], f[0], p[0], a[1], f[1], p[1])
+    return _drift_params(rng, amplitude, strength=(0.0, 1.0), hz=(0.25, 0.8))
 
 
 def _drift(t: np.ndarray, d: tuple[float, ...]) -> np.ndarray:
