@@ -75,8 +75,8 @@ class EnvConfig:
         require(self.task in TASKS, "task", f"expected one of {TASKS}, got '{self.task}'")
         require(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
         require(len(self.texts) >= 1, "texts", "give at least one prompt")
-        for text in self.texts:
-            require(prompt_problem(text) is None, "texts", str(prompt_problem(text)))
+        for problem in map(prompt_problem, self.texts):
+            require(problem is None, "texts", str(problem))
         require(self.text_weights is None or len(self.text_weights) == len(self.texts), "text_weights",
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
