@@ -14,7 +14,7 @@ from pathlib import Path
 
 import torch
 
-from latentrl.bench import hardware
+from latentrl.timing import hardware
 from latentrl.evaluation.report import results_table
 from latentrl.ppo.checkpoint import export_policy
 

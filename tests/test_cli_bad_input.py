@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from latentrl.cli import main
+from latentrl.app.cli import main
 from latentrl.motion import save_motion_model
 from latentrl.motion.text import TableTextEncoder
 from tests.helpers import make_tiny_model

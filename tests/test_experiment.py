@@ -5,10 +5,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from latentrl.cli import main
+from latentrl.app.cli import main
+from latentrl.app.train import TrainConfig
 from latentrl.config import load_config
 from latentrl.errors import ConfigError
-from latentrl.experiment import TrainConfig
 from latentrl.motion import save_motion_model
 from tests.helpers import make_tiny_model
 

@@ -70,10 +70,10 @@ def test_sigkill_at_random_moments_always_resumes_from_the_newest_complete_check
     run, logs = tmp_path / "run", tmp_path / "logs"
     logs.mkdir()
     iterations = 8 * kills + 10  # more than the kills can finish: the last resume always has work left
-    fresh = [sys.executable, "-m", "latentrl.cli", "train", str(TINY), "--set", f"env.motion={motion_file}",
+    fresh = [sys.executable, "-m", "latentrl.app.cli", "train", str(TINY), "--set", f"env.motion={motion_file}",
              "--set", "policy.latent_dim=256", "--total-steps", str(64 * iterations), "--run-dir", str(run),
              "--no-progress"]
-    resume = [sys.executable, "-m", "latentrl.cli", "train", "--resume", str(run), "--no-progress"]
+    resume = [sys.executable, "-m", "latentrl.app.cli", "train", "--resume", str(run), "--no-progress"]
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONWARNINGS": "always"}
     expected, report = 0, {"kills": 0, "during_write": 0, "before_training": 0, "modes": {}}
 
@@ -144,11 +144,11 @@ def test_sigkill_motion_training_resumes_from_its_last_state(tmp_path):
     rng = random.Random(11)
     run, logs = tmp_path / "run", tmp_path / "logs"
     logs.mkdir()
-    fresh = [sys.executable, "-m", "latentrl.cli", "motion", "train", str(MTINY), "--run-dir", str(run),
+    fresh = [sys.executable, "-m", "latentrl.app.cli", "motion", "train", str(MTINY), "--run-dir", str(run),
              "--set", "data.locomotion.num_sequences=3", "--set", f"vae_train.steps={steps}",
              "--set", f"denoiser_train.steps={steps}", "--set", "checkpoint_every=1", "--set", "log_every=1",
              "--no-progress"]
-    resume = [sys.executable, "-m", "latentrl.cli", "motion", "train", "--resume", str(run), "--no-progress"]
+    resume = [sys.executable, "-m", "latentrl.app.cli", "motion", "train", "--resume", str(run), "--no-progress"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     progress, during_write = (0, 0), 0
 

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from latentrl import preflight
-from latentrl.cli import main
+from latentrl.app.cli import main
 from latentrl.errors import ConfigError, DataError, NonFiniteError
 from latentrl.motion import save_motion_model
 from latentrl.preflight import NewOutput, check_device, check_free_space, check_writable

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from latentrl.cli import main
+from latentrl.app.cli import main
 from latentrl.errors import CheckpointError, DataError
 from latentrl.motion import save_motion_model
 from latentrl.motion.checkpoint import load_motion_model

@@ -11,7 +11,7 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-from latentrl.evaluation.runner import PathResult, SuiteResult
+from latentrl.evaluation.results import PathResult, SuiteResult
 
 SUCCESS_COLOR, FAILURE_COLOR = "tab:green", "tab:red"
 MAX_LABELS = 60

@@ -119,8 +119,10 @@ def _num(v: float) -> str:
 
 
 def default_folder() -> Path:
-    """``tasks/paths`` of the source checkout (the suites are not package data)."""
-    return Path(__file__).resolve().parents[2] / "tasks" / "paths"
+    """``latentrl/tasks/paths``, the shipped suites (package data)."""
+    from latentrl.resources import suites_folder
+
+    return suites_folder()
 
 
 def write_suites(folder: str | Path | None = None) -> list[Path]:

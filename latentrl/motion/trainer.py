@@ -12,7 +12,6 @@ Run directory::
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from dataclasses import dataclass, field
@@ -20,7 +19,7 @@ from pathlib import Path
 
 import torch
 
-from latentrl.config import load_config, require, to_dict, to_yaml
+from latentrl.config import require, to_dict, to_yaml
 from latentrl.datasets.locomotion import LocomotionConfig
 from latentrl.errors import CheckpointError, ConfigError, NonFiniteError
 from latentrl.motion.training import (
@@ -380,42 +379,3 @@ def copy_module(module):
     import copy
 
     return copy.deepcopy(module).cpu()
-
-
-def train_command(args: argparse.Namespace) -> int:
-    """Body of ``latentrl motion train``: every input is checked before the run directory is created."""
-    from latentrl.preflight import NewOutput, check_device, check_free_space, check_output_file, check_writable
-
-    if args.resume:
-        run_dir = Path(args.resume)
-        cfg_path = run_dir / "config.yaml"
-        if not cfg_path.is_file():
-            raise ConfigError(f"--resume {run_dir}: no config.yaml there; is it a motion training run directory?")
-        if args.set:
-            raise ConfigError(f"--set {args.set[0]}: a resumed run keeps its own config.yaml; start a new run instead")
-        cfg = load_config(MotionTrainConfig, cfg_path)
-    else:
-        if not args.config:
-            raise ConfigError("give a CONFIG file (e.g. configs/motion/default.yaml) or --resume RUN_DIR")
-        cfg = load_config(MotionTrainConfig, args.config, args.set or [])
-        run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"motion-{time.strftime('%Y%m%d-%H%M%S')}"
-        if (run_dir / "config.yaml").is_file() or (run_dir / "checkpoints" / "state.pt").is_file():
-            raise ConfigError(f"--run-dir {run_dir} already holds a motion training run; continue it with "
-                              f"--resume {run_dir} or choose another --run-dir")
-    check_device(cfg.device, "device")
-    if cfg.data.source != "locomotion" and not Path(cfg.data.source).is_dir():
-        raise ConfigError(f"data.source: folder not found: {cfg.data.source} (give 'locomotion' or a folder of "
-                          "motion-text .npz files)")
-    check_writable(run_dir, "run directory")
-    if args.out:
-        check_output_file(args.out)
-    with NewOutput(run_dir) as output:  # a failure before training starts removes the folder it created
-        trainer = MotionTrainer(cfg, run_dir, out=args.out, progress=not args.no_progress)
-        ckpt = run_dir / "checkpoints" / "state.pt"
-        if args.resume and ckpt.is_file():
-            trainer.load_checkpoint(ckpt)
-        check_free_space(run_dir, trainer.disk_estimate(), "run directory")
-        output.keep()
-    out = trainer.run()
-    print(f"motion model written to {out} ({trainer.elapsed:.0f} s of training)")
-    return 0

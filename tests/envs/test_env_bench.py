@@ -5,7 +5,7 @@ import json
 
 import torch
 
-from latentrl.envs.bench import bench_env, bench_model, standing_seed
+from latentrl.app.bench.env import bench_env, bench_model, standing_seed
 
 
 def bench_args(tmp_path, **kwargs) -> argparse.Namespace:

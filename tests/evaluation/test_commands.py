@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from latentrl.cli import main
-from latentrl.evaluation.commands import resolve_path_files
+from latentrl.app.cli import main
+from latentrl.app.evaluate import resolve_path_files
 from latentrl.render import load_bvh, load_motion_npz
 from tests.evaluation.conftest import FAR, NEAR, write_paths
 

@@ -3,7 +3,7 @@
 import json
 import time
 
-from latentrl.cli import main
+from latentrl.app.cli import main
 from latentrl.envs.path import MAX_WAYPOINTS
 from tests.evaluation.conftest import write_paths
 

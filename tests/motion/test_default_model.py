@@ -44,7 +44,7 @@ def test_text_controls_speed_and_standing(model):
 def test_the_noise_steers_walking_and_running(model):
     # What a reach policy works with: with only the noise differing, headings must spread.
     # The first release measured 11 (walk) and 5 (run) degrees; the shipped model 13.6 and 10.8.
-    from latentrl.bench import steering_spread_deg
+    from latentrl.app.bench.motion import steering_spread_deg
 
     assert steering_spread_deg(model, "walk", batch=64) > 10.0
     assert steering_spread_deg(model, "run", batch=64) > 8.0

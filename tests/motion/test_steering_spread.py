@@ -4,7 +4,7 @@ import math
 
 import torch
 
-from latentrl.bench import steering_spread_deg
+from latentrl.app.bench.motion import steering_spread_deg
 from latentrl.motion.rollout import MotionModel
 
 

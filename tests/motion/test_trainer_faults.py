@@ -7,7 +7,7 @@ from pathlib import Path
 
 import torch
 
-from latentrl.cli import main
+from latentrl.app.cli import main
 from latentrl.motion import trainer as trainer_module
 from latentrl.safe_io import load_torch
 

@@ -34,7 +34,7 @@ def test_tags_and_steps(tmp_path):
 def test_ppo_imports_only_downward():
     """House rule 2: ppo/ and monitor.py never import envs/, motion/, evaluation/ or the entry points."""
     banned = ("latentrl.envs", "latentrl.motion", "latentrl.evaluation", "latentrl.cli", "latentrl.bench",
-              "latentrl.rewards", "latentrl.datasets", "latentrl.render")
+              "latentrl.app", "latentrl.rewards", "latentrl.datasets", "latentrl.render")
     for path in [*sorted((ROOT / "ppo").glob("*.py")), ROOT / "monitor.py"]:
         for node in ast.walk(ast.parse(path.read_text())):
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else (

@@ -1,17 +1,21 @@
 """``latentrl`` command line: the argument definitions of every subcommand, nothing else.
 
-Each subcommand calls one function in the module that owns the job. Errors a user can cause
-(:class:`latentrl.errors.LatentRLError`, bad arguments) become one line on stderr and exit code 2;
-non-finite training values exit 3 (:class:`~latentrl.errors.NonFiniteError`), I/O failures while
-a command runs (disk full) exit 1, Ctrl-C 130; ``--debug`` shows the traceback instead.
+Each subcommand turns its arguments into the request dataclass of its command
+(:mod:`latentrl.app.train`, :mod:`~latentrl.app.evaluate`, :mod:`~latentrl.app.motion`,
+:mod:`~latentrl.app.bench`) and calls it; the command's module loads only then (keeps ``--help`` fast).
+Errors a user can cause (:class:`latentrl.errors.LatentRLError`, bad arguments) become one line on
+stderr and exit code 2; non-finite training values exit 3 (:class:`~latentrl.errors.NonFiniteError`),
+I/O failures while a command runs (disk full) exit 1, Ctrl-C 130; ``--debug`` shows the traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections.abc import Sequence
 
+from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
 
 
@@ -67,7 +71,7 @@ def _motion_commands(sub) -> None:
     info = msub.add_parser("info", help="describe a motion model (architecture, latent size, texts)")
     info.add_argument("--motion", default="default", help="'default', a latentrl model file, or a DART checkpoint")
     info.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
-    info.set_defaults(func=lambda a: _call("latentrl.motion.commands", "info", a))
+    info.set_defaults(func=_motion_info)
 
     sample = msub.add_parser("sample", help="roll a motion model out over a text timeline; write .npz (and .gif)")
     sample.add_argument("--motion", default="default", help="'default', a latentrl model file, or a DART checkpoint")
@@ -75,12 +79,12 @@ def _motion_commands(sub) -> None:
     sample.add_argument("--text", action="append", help="prompt; repeat to chain prompts, each gets an equal share")
     sample.add_argument("--seconds", type=float, default=10.0, help="length of the motion")
     sample.add_argument("--seed", type=int, default=0, help="random seed (noise and seed-history choice)")
-    sample.add_argument("--guidance", type=float, default=5.0, help="classifier-free guidance scale")
+    sample.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
     sample.add_argument("--batch", type=int, default=1, help="number of motions (files get _<i> suffixes)")
     sample.add_argument("--device", default="cpu", type=_device)
     sample.add_argument("--out", default="motion.npz", help="output .npz (shared motion format)")
     sample.add_argument("--render", help="also write a skeleton animation (.gif)")
-    sample.set_defaults(func=lambda a: _call("latentrl.motion.commands", "sample", a))
+    sample.set_defaults(func=_motion_sample)
 
     train = msub.add_parser("train", help="train a motion model (VAE, then denoiser) from a YAML config")
     train.add_argument("config", nargs="?", help="YAML config (e.g. configs/motion/default.yaml)")
@@ -89,12 +93,12 @@ def _motion_commands(sub) -> None:
     train.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its last checkpoint")
     train.add_argument("--out", help="where to write the model (default: <run_dir>/motion_model.pt)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    train.set_defaults(func=lambda a: _call("latentrl.motion.trainer", "train_command", a))
+    train.set_defaults(func=_motion_train)
 
     bvh = msub.add_parser("export-bvh", help="write a motion .npz as BVH (SMPL-22 skeleton, Y-up, centimetres)")
     bvh.add_argument("motion", metavar="MOTION.npz", help="motion file in the shared format (e.g. from eval or sample)")
     bvh.add_argument("--out", metavar="FILE.bvh", help="output file (default: the motion file with .bvh)")
-    bvh.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "export_bvh", a))
+    bvh.set_defaults(func=_motion_export_bvh)
 
 
 def _data_commands(sub) -> None:
@@ -105,7 +109,7 @@ def _data_commands(sub) -> None:
                            help="AMASS SMPL(-X/-H) .npz + labels -> motion-text .npz files (see docs/datasets.md)")
     conv.add_argument("args", nargs=argparse.REMAINDER,
                       help="arguments of python -m latentrl.datasets.amass (run with --help for the list)")
-    conv.set_defaults(func=lambda a: _call("latentrl.datasets.amass", "main", a.args))
+    conv.set_defaults(func=lambda a: _convert_amass(a.args))
 
 
 def _train_commands(sub) -> None:
@@ -115,7 +119,7 @@ def _train_commands(sub) -> None:
     quick.add_argument("--episodes", type=int, default=8, help="evaluation episodes per path")
     quick.add_argument("--max-steps", type=int, default=128, help="evaluation step budget per episode")
     quick.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    quick.set_defaults(func=lambda a: _call("latentrl.experiment", "quickstart_command", a))
+    quick.set_defaults(func=_quickstart)
 
     train = sub.add_parser("train", help="train a controller with PPO from a YAML config")
     train.add_argument("config", nargs="?", help="YAML config (e.g. configs/quick.yaml)")
@@ -129,7 +133,7 @@ def _train_commands(sub) -> None:
     train.add_argument("--allow-motion-mismatch", action="store_true",
                        help="resume onto a different motion model than the run was trained on (experts)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    train.set_defaults(func=lambda a: _call("latentrl.experiment", "train_command", a))
+    train.set_defaults(func=_train)
 
 
 def _bench_commands(sub) -> None:
@@ -151,7 +155,7 @@ def _bench_commands(sub) -> None:
     roll.add_argument("--dart-python", default=None, help="python of the environment able to import DART")
     roll.add_argument("--dart-bench", default=None, help="path to dart_peer_bench.py (default: ../shared/tools)")
     roll.add_argument("--json", help="write all figures to this JSON file")
-    roll.set_defaults(func=lambda a: _call("latentrl.bench", "bench_rollout", a))
+    roll.set_defaults(func=_bench_rollout)
 
     env = bsub.add_parser("env", help="env steps/s of the batched env vs. a per-env SyncVectorEnv loop")
     env.add_argument("--models", nargs="+", default=["default", "official"],
@@ -164,7 +168,7 @@ def _bench_commands(sub) -> None:
     env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
     env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
     env.add_argument("--json", help="write all figures to this JSON file")
-    env.set_defaults(func=lambda a: _call("latentrl.envs.bench", "bench_env", a))
+    env.set_defaults(func=_bench_env)
 
     tr = bsub.add_parser("train", help="time to eval success on the quick config; native vs SB3 iteration time")
     tr.add_argument("--config", help="training config (default: configs/quick.yaml)")
@@ -178,16 +182,16 @@ def _bench_commands(sub) -> None:
     tr.add_argument("--run-dir", help="where the benchmark's runs go (default: a temporary folder)")
     tr.add_argument("--no-progress", action="store_true")
     tr.add_argument("--json", help="write all figures to this JSON file")
-    tr.set_defaults(func=lambda a: _call("latentrl.bench", "bench_train", a))
+    tr.set_defaults(func=_bench_train)
 
     motion = bsub.add_parser("motion", help="stability and text control of a motion model vs. its training data")
     motion.add_argument("--motion", default="default", help="'default' or a model file")
     motion.add_argument("--seconds", type=_pos_float, default=60.0, help="rollout length per prompt")
     motion.add_argument("--batch", type=_pos_int, default=8, help="rollouts per prompt")
-    motion.add_argument("--guidance", type=float, default=5.0)
+    motion.add_argument("--guidance", type=float, default=GUIDANCE_SCALE)
     motion.add_argument("--seed", type=int, default=0)
     motion.add_argument("--json", help="write all figures to this JSON file")
-    motion.set_defaults(func=lambda a: _call("latentrl.bench", "bench_motion", a))
+    motion.set_defaults(func=_bench_motion)
 
 
 def _eval_commands(sub) -> None:
@@ -212,12 +216,12 @@ def _eval_commands(sub) -> None:
                     help="render the first N episodes of every path as GIF and BVH (default 1)")
     ev.add_argument("--no-render", dest="render", action="store_const", const=0, help="render nothing")
     ev.add_argument("--no-motions", dest="motions", action="store_false", help="skip the per-episode .npz files")
-    ev.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "evaluate", a))
+    ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")
     cmp.add_argument("reports", nargs="+", metavar="REPORT", help="report.json files or eval output folders")
     cmp.add_argument("--out", metavar="FILE.md", help="also write the table to this file")
-    cmp.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "compare", a))
+    cmp.set_defaults(func=_compare)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -236,20 +240,104 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _call(module: str, name: str, args: argparse.Namespace) -> int:
-    """Import the owning module only when its command runs (keeps ``--help`` fast)."""
-    import importlib
+def request(cls: type, args: argparse.Namespace):
+    """The request dataclass ``cls`` filled from parsed arguments of the same names.
 
-    return int(getattr(importlib.import_module(module), name)(args) or 0)
+    ``--set`` fills ``overrides`` and ``--no-progress`` clears ``progress``; arguments left at None
+    keep the request's default.
+    """
+    given = dict(vars(args))
+    if "set" in given:
+        given["overrides"] = list(given.pop("set") or [])
+    if "no_progress" in given:
+        given["progress"] = not given.pop("no_progress")
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in given.items() if k in names and v is not None})
+
+
+def _motion_info(args: argparse.Namespace) -> int:
+    from latentrl.app.motion import InfoRequest, info
+
+    return info(request(InfoRequest, args))
+
+
+def _motion_sample(args: argparse.Namespace) -> int:
+    from latentrl.app.motion import SampleRequest, sample
+
+    return sample(request(SampleRequest, args))
+
+
+def _motion_train(args: argparse.Namespace) -> int:
+    from latentrl.app.motion import MotionTrainRequest, train
+
+    return train(request(MotionTrainRequest, args))
+
+
+def _motion_export_bvh(args: argparse.Namespace) -> int:
+    from latentrl.app.motion import ExportBvhRequest, export_bvh
+
+    return export_bvh(request(ExportBvhRequest, args))
+
+
+def _quickstart(args: argparse.Namespace) -> int:
+    from latentrl.app.train import QuickstartRequest, quickstart
+
+    return quickstart(request(QuickstartRequest, args))
+
+
+def _train(args: argparse.Namespace) -> int:
+    from latentrl.app.train import TrainRequest, train
+
+    return train(request(TrainRequest, args))
+
+
+def _bench_rollout(args: argparse.Namespace) -> int:
+    from latentrl.app.bench.rollout import RolloutBenchRequest, bench_rollout
+
+    return bench_rollout(request(RolloutBenchRequest, args))
+
+
+def _bench_env(args: argparse.Namespace) -> int:
+    from latentrl.app.bench.env import EnvBenchRequest, bench_env
+
+    return bench_env(request(EnvBenchRequest, args))
+
+
+def _bench_train(args: argparse.Namespace) -> int:
+    from latentrl.app.bench.train import TrainBenchRequest, bench_train
+
+    return bench_train(request(TrainBenchRequest, args))
+
+
+def _bench_motion(args: argparse.Namespace) -> int:
+    from latentrl.app.bench.motion import MotionBenchRequest, bench_motion
+
+    return bench_motion(request(MotionBenchRequest, args))
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from latentrl.app.evaluate import EvalRequest, evaluate
+
+    return evaluate(request(EvalRequest, args))
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from latentrl.app.evaluate import CompareRequest, compare
+
+    return compare(request(CompareRequest, args))
+
+
+def _convert_amass(argv: list[str]) -> int:
+    from latentrl.datasets.amass import main as convert_amass_main
+
+    return convert_amass_main(argv)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status (argparse's too: 0 after ``--help``, 2 for bad arguments)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:2] == ["data", "convert-amass"]:  # its own parser (also python -m latentrl.datasets.amass)
-        from latentrl.datasets.amass import main as convert_amass_main
-
-        return convert_amass_main(argv[2:])
+        return _convert_amass(argv[2:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

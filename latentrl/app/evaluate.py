@@ -1,4 +1,4 @@
-"""Bodies of ``latentrl eval``, ``latentrl compare`` and ``latentrl motion export-bvh`` (arguments in cli.py).
+"""Bodies of ``latentrl eval`` and ``latentrl compare`` (arguments in :mod:`latentrl.app.cli`).
 
 ``latentrl eval POLICY`` writes into ``--out``::
 
@@ -12,7 +12,7 @@
 
 from __future__ import annotations
 
-import argparse
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -25,11 +25,48 @@ GIF_STRIDE = 3
 """Rendered GIFs keep every 3rd frame (10 fps): a 60 s episode is 600 frames, about a minute to draw on CPU."""
 
 
+@dataclass
+class EvalRequest:
+    """``latentrl eval``: a policy checkpoint, the suites to run it on and what to write."""
+
+    policy: str
+    paths: list[str] | None = None
+    episodes: int = 32
+    max_steps: int = 256
+    deterministic: bool = False
+    motion: str = "default"
+    allow_motion_mismatch: bool = False
+    device: str | None = None
+    seed: int = 0
+    out: str | None = None
+    render: int = 1
+    motions: bool = True
+
+    def argv(self) -> list[str]:
+        """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
+        args = ["eval", self.policy]
+        options = (("--paths", self.paths), ("--episodes", self.episodes), ("--max-steps", self.max_steps),
+                   ("--motion", self.motion), ("--device", self.device), ("--out", self.out),
+                   ("--render", self.render))
+        for flag, value in options:
+            if value is not None:
+                args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
+        return args
+
+
+@dataclass
+class CompareRequest:
+    """``latentrl compare``: report files (or eval folders), and an optional markdown file to write."""
+
+    reports: list[str] = field(default_factory=list)
+    out: str | None = None
+
+
 def resolve_path_files(specs: list[str] | None) -> list[Path]:
     """Path files from ``--paths``: existing files, or suite names in ``tasks/paths`` (``sharp_turns``)."""
-    from latentrl.evaluation.suites import default_folder
+    from latentrl.resources import suites_folder
 
-    folder, files = default_folder(), []
+    folder, files = suites_folder(), []
     for spec in specs or DEFAULT_SUITES:
         path = Path(spec)
         if not path.is_file():
@@ -46,46 +83,45 @@ def resolve_path_files(specs: list[str] | None) -> list[Path]:
     return files
 
 
-def _settings(args: argparse.Namespace) -> EvalSettings:
+def _settings(req: EvalRequest, device: str | None = None) -> EvalSettings:
     import torch
 
     from latentrl.preflight import check_device
 
-    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    device = device or req.device or ("cuda" if torch.cuda.is_available() else "cpu")
     check_device(device, "--device")
-    settings = EvalSettings(episodes=args.episodes, max_steps=args.max_steps, deterministic=args.deterministic,
-                            seed=args.seed, device=device)
+    settings = EvalSettings(episodes=req.episodes, max_steps=req.max_steps, deterministic=req.deterministic,
+                            seed=req.seed, device=device)
     try:
         settings.validate()
     except ConfigError as exc:  # name the flag: "max_steps: ..." -> "--max-steps: ..."
-        field, _, message = str(exc).partition(": ")
-        raise ConfigError(f"--{field.replace('_', '-')}: {message}") from None
-    if args.render < 0:
-        raise ConfigError(f"--render must be >= 0, got {args.render}")
+        field_name, _, message = str(exc).partition(": ")
+        raise ConfigError(f"--{field_name.replace('_', '-')}: {message}") from None
+    if req.render < 0:
+        raise ConfigError(f"--render must be >= 0, got {req.render}")
     return settings
 
 
-def check_eval_args(episodes: int, max_steps: int, paths: list[str] | tuple[str, ...] | None) -> None:
+def check_eval_request(req: EvalRequest) -> None:
     """What ``latentrl quickstart`` checks before it trains: the settings and path files of its evaluation."""
     from latentrl.envs import load_paths
 
-    _settings(argparse.Namespace(episodes=episodes, max_steps=max_steps, deterministic=False, seed=0,
-                                 device="cpu", render=0))
-    for file in resolve_path_files(list(paths) if paths else None):
+    _settings(req, device="cpu")
+    for file in resolve_path_files(req.paths):
         load_paths(file)
 
 
-def _load(args: argparse.Namespace, settings: EvalSettings) -> tuple[Any, Any, dict, dict]:
+def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dict]:
     """Motion model, loaded policy and their identities (refuses a policy trained on another model)."""
     from latentrl.motion.checkpoint import file_sha256, load_motion_model
     from latentrl.ppo import load_policy
 
-    model = load_motion_model(args.motion, device=settings.device)
+    model = load_motion_model(req.motion, device=settings.device)
     motion = {"source": model.info.get("source"), "sha256": model.info.get("sha256")}
-    loaded = load_policy(args.policy, settings.device, motion={"path": motion["source"], "sha256": motion["sha256"]},
-                         allow_motion_mismatch=args.allow_motion_mismatch)
+    loaded = load_policy(req.policy, settings.device, motion={"path": motion["source"], "sha256": motion["sha256"]},
+                         allow_motion_mismatch=req.allow_motion_mismatch)
     meta = loaded.checkpoint
-    policy = {"path": str(args.policy), "sha256": file_sha256(args.policy), "iteration": meta.get("iteration"),
+    policy = {"path": str(req.policy), "sha256": file_sha256(req.policy), "iteration": meta.get("iteration"),
               "env_steps": meta.get("env_steps"), "trainer": meta.get("trainer"), "version": meta.get("version"),
               "config_hash": meta.get("config_hash"), "trained_on": meta.get("motion")}
     return model, loaded.policy, motion, policy
@@ -120,29 +156,29 @@ def _progress(result: PathResult) -> None:
           flush=True)
 
 
-def evaluate(args: argparse.Namespace) -> int:
+def evaluate(req: EvalRequest) -> int:
     """``latentrl eval``: run the suites, measure speed, write the report, plot and motions."""
-    from latentrl.bench import hardware
     from latentrl.envs import load_paths
     from latentrl.evaluation import plots, report
     from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
     from latentrl.preflight import NewOutput, check_writable
+    from latentrl.timing import hardware
 
-    settings = _settings(args)
-    files = resolve_path_files(args.paths)
+    settings = _settings(req)
+    files = resolve_path_files(req.paths)
     first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
-    out_dir = Path(args.out) if args.out else Path(args.policy).resolve().parent / f"eval-{Path(args.policy).stem}"
+    out_dir = Path(req.out) if req.out else Path(req.policy).resolve().parent / f"eval-{Path(req.policy).stem}"
     check_writable(out_dir, "--out")
-    model, policy, motion, policy_info = _load(args, settings)
+    model, policy, motion, policy_info = _load(req, settings)
     observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings)
     act = policy_fn(policy, settings.deterministic)
     with NewOutput(out_dir):  # a failure from here on removes the output folder this command created
         suites = run_suites(act, model, files, settings, observe_next=observe_next,
-                            sink=_sink(out_dir, args.render, args.motions), progress=_progress)
+                            sink=_sink(out_dir, req.render, req.motions), progress=_progress)
         speed = measure_speed(act, model, first_path, settings, [1, settings.episodes], observe_next)
         png = plots.save_paths_png(out_dir / report.PATHS_PNG, suites)
-        outputs = {"paths_png": png.name, "motions": "motions/" if args.motions else None,
-                   "renders": "renders/" if args.render else None}
+        outputs = {"paths_png": png.name, "motions": "motions/" if req.motions else None,
+                   "renders": "renders/" if req.render else None}
         data = report.build_report(suites, settings, policy=policy_info, motion=motion, speed=speed,
                                    hardware=hardware(), files=outputs)
         js, md = report.write_report(out_dir, data)
@@ -151,31 +187,18 @@ def evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def compare(args: argparse.Namespace) -> int:
+def compare(req: CompareRequest) -> int:
     """``latentrl compare``: print (and optionally write) several reports side by side."""
     from latentrl.evaluation.report import compare_reports
     from latentrl.preflight import check_output_file
 
-    if args.out:
-        check_output_file(args.out)
-    table = compare_reports(args.reports)
+    if req.out:
+        check_output_file(req.out)
+    table = compare_reports(req.reports)
     print(table, end="")
-    if args.out:
+    if req.out:
         from latentrl.safe_io import atomic_write_text
 
-        atomic_write_text(args.out, table)
-        print(f"wrote {args.out}")
-    return 0
-
-
-def export_bvh(args: argparse.Namespace) -> int:
-    """``latentrl motion export-bvh``: a motion ``.npz`` (shared format) as BVH (SMPL-22, Y-up, cm)."""
-    from latentrl.preflight import check_output_file
-    from latentrl.render import load_motion_npz, save_bvh
-
-    motion = load_motion_npz(args.motion)
-    out = Path(args.out) if args.out else Path(args.motion).with_suffix(".bvh")
-    check_output_file(out)
-    save_bvh(out, motion["joints"], float(motion["fps"]))
-    print(f"wrote {out} ({len(motion['joints'])} frames at {float(motion['fps']):g} fps)")
+        atomic_write_text(req.out, table)
+        print(f"wrote {req.out}")
     return 0

@@ -11,10 +11,8 @@ about linearly once the machine is saturated).
 
 from __future__ import annotations
 
-import argparse
 import sys
-import time
-from collections.abc import Callable
+from dataclasses import dataclass, field
 from functools import partial
 
 import gymnasium as gym
@@ -22,10 +20,26 @@ import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode
 
+from latentrl.app.bench.common import default_devices, official_size_model, write_json
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.envs.single import SingleEnv
 from latentrl.errors import LatentRLError
 from latentrl.motion.rollout import MotionModel
+from latentrl.timing import hardware, mean_time
+
+
+@dataclass
+class EnvBenchRequest:
+    """``latentrl bench env`` flags (tests may pass any object with these attributes)."""
+
+    models: list[str] = field(default_factory=lambda: ["default", "official"])
+    num_envs: list[int] = field(default_factory=lambda: [1, 64, 256, 1024])
+    device: list[str] | None = None
+    steps: int = 5
+    max_seconds: float = 120.0
+    baseline: bool = True
+    threads: int | None = None
+    json: str | None = None
 
 
 def standing_seed() -> tuple[torch.Tensor, torch.Tensor]:
@@ -55,8 +69,6 @@ def bench_model(name: str) -> MotionModel:
     from latentrl.motion.text import HashedTextEncoder
 
     if name == "official":
-        from latentrl.bench import official_size_model
-
         model = official_size_model()
     elif name == "tiny":
         model = tiny_model()
@@ -91,28 +103,12 @@ def tiny_model() -> MotionModel:
     )
 
 
-def _sync(device: str) -> None:
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
-
-
-def _time_steps(step: Callable[[], object], steps: int, device: str) -> float:
-    """Seconds per call of ``step`` over ``steps`` calls, after one warm-up call."""
-    step()
-    _sync(device)
-    start = time.perf_counter()
-    for _ in range(steps):
-        step()
-    _sync(device)
-    return (time.perf_counter() - start) / steps
-
-
 def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int) -> float:
     """Seconds per step of one batched ReachLocation env of ``num_envs`` envs."""
     env = ReachLocationEnv(num_envs, motion=model, device=device)
     env.reset(seed=0)
     actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
-    return _time_steps(lambda: env.step(actions), steps, device)
+    return mean_time(lambda: env.step(actions), steps, device)
 
 
 def _single(model: MotionModel, device: str) -> SingleEnv:
@@ -124,7 +120,7 @@ def time_loop_env(model: MotionModel, num_envs: int, device: str, steps: int) ->
     env = gym.vector.SyncVectorEnv([partial(_single, model, device) for _ in range(num_envs)])
     env.reset(seed=0)
     actions = np.random.default_rng(0).standard_normal((num_envs, model.latent_dim)).astype(np.float32)
-    return _time_steps(lambda: env.step(actions), steps, device)
+    return mean_time(lambda: env.step(actions), steps, device)
 
 
 def _figures(seconds_per_step: float, num_envs: int) -> dict:
@@ -145,7 +141,7 @@ def _run_kind(kind: str, timer, model, name, device, n, args, last: dict) -> dic
     return _figures(seconds, n)
 
 
-def bench_env(args: argparse.Namespace) -> int:
+def bench_env(args: EnvBenchRequest) -> int:
     """Env steps/s and frames/s per model, device and env count; batched env vs per-env loop.
 
     ``args`` fields (``latentrl bench env`` flags): ``models`` (list: 'default', 'official',
@@ -154,8 +150,6 @@ def bench_env(args: argparse.Namespace) -> int:
     (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too),
     ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``).
     """
-    from latentrl.bench import default_devices, hardware, write_json
-
     if args.threads:
         torch.set_num_threads(args.threads)
     devices = default_devices(args.device)

@@ -1,0 +1,51 @@
+"""What the benchmarks share: devices to run on, JSON output, and the models they time."""
+
+from __future__ import annotations
+
+import json
+
+import torch
+
+from latentrl.errors import LatentRLError
+
+
+def write_json(path: str | None, data: dict) -> None:
+    if path:
+        from latentrl.safe_io import atomic_write_text
+
+        atomic_write_text(path, json.dumps(data, indent=2) + "\n")
+        print(f"wrote {path}")
+
+
+def default_devices(requested: list[str] | None) -> list[str]:
+    if requested:
+        for d in requested:
+            if d.startswith("cuda") and not torch.cuda.is_available():
+                raise LatentRLError(f"device '{d}' requested but CUDA is not available on this machine")
+        return requested
+    return ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+def official_size_model():
+    """DART's released architecture with random weights, for timing only.
+
+    8-layer 512-wide transformer denoiser, 7-layer 256-wide VAE, latent (1, 256), CLIP 512.
+    """
+    from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
+    from latentrl.motion.diffusion import DiffusionConfig
+    from latentrl.motion.representation import Normalizer
+    from latentrl.motion.rollout import MotionModel
+    from latentrl.motion.vae import PrimitiveVAE, VAEConfig
+
+    g = torch.random.fork_rng()
+    with g:
+        torch.manual_seed(0)
+        vae = PrimitiveVAE(VAEConfig())
+        den = build_denoiser(DenoiserConfig())
+    return MotionModel(
+        vae,
+        den,
+        DiffusionConfig(),
+        Normalizer(torch.zeros(276), torch.ones(276)),
+        info={"source": "official-size (random weights)"},
+    )

@@ -1,0 +1,183 @@
+"""``latentrl bench rollout``: primitives/s of the motion model, side by side with DART's own sampler."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from latentrl.app.bench.common import default_devices, official_size_model, write_json
+from latentrl.constants import GUIDANCE_SCALE
+from latentrl.errors import LatentRLError
+from latentrl.timing import hardware, matmul_peak_gflops, median_time
+
+
+@dataclass
+class RolloutBenchRequest:
+    """``latentrl bench rollout`` flags."""
+
+    batches: list[int] = field(default_factory=lambda: [1, 16, 256])
+    models: list[str] = field(default_factory=lambda: ["official", "default"])
+    device: list[str] | None = None
+    repeats: int = 5
+    threads: int | None = None
+    amp: list[str] | None = None
+    dart_src: str | None = None
+    dart_python: str | None = None
+    dart_bench: str | None = None
+    json: str | None = None
+
+
+def analytic_flops_per_primitive(model) -> float:
+    """2 x multiply-adds per primitive: 10 steps x 2 (CFG) denoiser passes + one VAE decode.
+
+    Counts the work DART's sampler does (every token through every layer); our sampler skips
+    some of it (the last layer only computes the read-out token), so achieved GFLOP/s above the
+    matmul peak are possible and mean the same thing as a speed ratio.
+    """
+    den, vae = model.denoiser.config, model.vae.config
+
+    def layer(tokens: int, d: int, ff: int) -> float:
+        return tokens * 2 * (3 * d * d + d * d + 2 * d * ff) + 4 * tokens * tokens * d
+
+    steps = model.diffusion.num_timesteps
+    if den.model_type == "transformer":
+        tokens = 2 + den.history_shape[0] + den.noise_shape[0]
+        d = den.h_dim
+        embed = 2 * 2 * d * d + 2 * den.clip_dim * d + 2 * den.history_shape[0] * den.history_shape[1] * d
+        embed += 2 * den.noise_shape[0] * den.noise_shape[1] * d
+        per_pass = embed + den.num_layers * layer(tokens, d, den.ff_size) + 2 * d * den.noise_shape[1]
+    else:
+        d = den.h_dim
+        inp = d + den.clip_dim + den.history_shape[0] * den.history_shape[1] + den.noise_shape[0] * den.noise_shape[1]
+        per_pass = 2 * 2 * d * d + 2 * inp * d + den.n_blocks * 2 * 2 * d * d + 2 * d * den.noise_shape[1]
+    vtok = vae.latent_dim[0] + vae.history_length + vae.future_length
+    h = vae.h_dim
+    decode = (
+        2 * vae.latent_dim[1] * h
+        + 2 * vae.history_length * vae.nfeats * h
+        + vae.num_layers * layer(vtok, h, vae.ff_size)
+        + ((vae.num_layers - 1) // 2) * vtok * 4 * h * h
+        + 2 * vae.future_length * h * vae.nfeats
+    )
+    return steps * 2 * per_pass + decode
+
+
+def time_sampler(model, batch: int, device: str, repeats: int) -> dict:
+    """Ms per primitive-batch of :meth:`MotionModel.sample_primitive` with DART's CFG (DDIM 10)."""
+    g = torch.Generator().manual_seed(0)
+    hist = torch.randn(batch, 2, 276, generator=g).to(device) * 0.1
+    text = torch.randn(batch, model.text_dim, generator=g).to(device)
+    noise = torch.randn(batch, *model.latent_shape, generator=g).to(device)
+    sec = median_time(
+        lambda: model.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE), repeats=repeats,
+        device=device,
+    )
+    return {
+        "batch": batch,
+        "ms_per_batch": sec * 1e3,
+        "ms_per_primitive": sec * 1e3 / batch,
+        "primitives_per_s": batch / sec,
+        "frames_per_s": 8 * batch / sec,
+    }
+
+
+def run_dart_peer(req: RolloutBenchRequest, batches: list[int]) -> dict | None:
+    """Run shared/tools/dart_peer_bench.py (DART's own sampler) in its own Python environment."""
+    src = req.dart_src or os.environ.get("DART_SRC")
+    if not src:
+        return None
+    shared = Path(os.environ.get("LATENTRL_SHARED", Path.cwd().parent / "shared"))
+    script = Path(req.dart_bench) if req.dart_bench else shared / "tools" / "dart_peer_bench.py"
+    if not script.is_file():
+        raise LatentRLError(f"DART peer benchmark not found at {script}; pass --dart-bench PATH")
+    stubs = os.environ.get("DART_STUBS", str(script.parent / "dart_stubs"))
+    python = req.dart_python or os.environ.get("DART_PYTHON") or sys.executable
+    cmd = [python, str(script), "--batches", *map(str, batches)]
+    if req.threads:
+        cmd += ["--threads", str(req.threads)]
+    env = {**os.environ, "DART_SRC": src, "DART_STUBS": stubs}
+    print(f"running DART's sampler: {' '.join(cmd)}", file=sys.stderr)
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise LatentRLError(
+            f"DART peer benchmark failed (exit {proc.returncode}): "
+            f"{proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else ''}"
+        )
+    lines = [ln for ln in proc.stdout.splitlines() if ln.strip().startswith("{")]
+    return json.loads(lines[-1])
+
+
+def _dart_ms(dart: dict, batch: int) -> float | None:
+    for row in dart.get("results", dart.get("batches", [])):
+        if int(row.get("batch", row.get("batch_size", -1))) == batch:
+            return float(row.get("ms_per_batch_median", row.get("ms_per_batch", 0.0)))
+    return None
+
+
+def bench_rollout(req: RolloutBenchRequest) -> int:
+    """Primitives/s and frames/s per model, device and batch size; DART's sampler side by side."""
+    from latentrl.motion.checkpoint import load_motion_model
+
+    if req.threads:
+        torch.set_num_threads(req.threads)
+    devices = default_devices(req.device)
+    peak = matmul_peak_gflops()
+    out = {"benchmark": "rollout", "hardware": hardware(), "matmul_peak_gflops": peak, "models": {}}
+    print(
+        f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads); "
+        f"fp32 matmul peak {peak:.1f} GFLOP/s"
+    )
+    for name in req.models:
+        try:
+            model = official_size_model() if name == "official" else load_motion_model(name)
+        except LatentRLError as exc:
+            print(f"skipping model '{name}': {exc}", file=sys.stderr)
+            continue
+        flops = analytic_flops_per_primitive(model)
+        rows = []
+        for device in devices:
+            model = model.to(device)
+            for batch in req.batches:
+                row = {"device": device, **time_sampler(model, batch, device, req.repeats)}
+                if device == "cpu":
+                    row["gflops"] = flops * row["primitives_per_s"] / 1e9
+                    row["fraction_of_matmul_peak"] = row["gflops"] / peak
+                rows.append(row)
+                print(
+                    f"{name:>10} {device:>5} batch {batch:>4}: {row['ms_per_primitive']:8.2f} ms/primitive "
+                    f"{row['primitives_per_s']:8.1f} primitives/s {row['frames_per_s']:9.1f} frames/s"
+                )
+            for amp in req.amp or []:
+                model.amp_dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}[amp]
+                for batch in req.batches:
+                    row = {"device": device, "amp": amp, **time_sampler(model, batch, device, req.repeats)}
+                    rows.append(row)
+                    print(f"{name:>10} {device:>5} {amp} batch {batch:>4}: {row['ms_per_primitive']:8.2f} "
+                          f"ms/primitive {row['primitives_per_s']:8.1f} primitives/s")
+                model.amp_dtype = None
+        out["models"][name] = {
+            "flops_per_primitive": flops,
+            "latent_shape": list(model.latent_shape),
+            "source": model.info.get("source"),
+            "results": rows,
+        }
+    dart = run_dart_peer(req, req.batches)
+    if dart is not None:
+        out["dart_peer"] = dart
+        ours = out["models"].get("official", {}).get("results", [])
+        ratios = {}
+        for row in ours:
+            ref = _dart_ms(dart, row["batch"])
+            if row["device"] == "cpu" and "amp" not in row and ref:
+                ratios[str(row["batch"])] = ref / row["ms_per_batch"]
+        out["speedup_vs_dart_official_cpu"] = ratios
+        for b, r in ratios.items():
+            print(f"official size, CPU fp32, batch {b}: {r:.2f}x DART's sampler speed (same run)")
+    write_json(req.json, out)
+    return 0

@@ -1,0 +1,198 @@
+"""Bodies of the ``latentrl motion ...`` commands: info, sample, train and export-bvh."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from latentrl.constants import GUIDANCE_SCALE
+from latentrl.errors import ConfigError
+
+MAX_BATCH = 1024
+"""Most motions one ``latentrl motion sample`` call writes."""
+
+
+@dataclass
+class InfoRequest:
+    """``latentrl motion info``: which model to describe."""
+
+    motion: str = "default"
+    seed_history: str | None = None
+
+
+@dataclass
+class SampleRequest:
+    """``latentrl motion sample``: a model, a text timeline and where to write the motion."""
+
+    motion: str = "default"
+    seed_history: str | None = None
+    text: list[str] | None = None
+    seconds: float = 10.0
+    seed: int = 0
+    guidance: float = GUIDANCE_SCALE
+    batch: int = 1
+    device: str = "cpu"
+    out: str = "motion.npz"
+    render: str | None = None
+
+
+@dataclass
+class MotionTrainRequest:
+    """``latentrl motion train``: a config (or a run to resume), overrides and outputs."""
+
+    config: str | None = None
+    overrides: list[str] = field(default_factory=list)
+    run_dir: str | None = None
+    resume: str | None = None
+    out: str | None = None
+    progress: bool = True
+
+
+@dataclass
+class ExportBvhRequest:
+    """``latentrl motion export-bvh``: a motion ``.npz`` and the BVH file to write."""
+
+    motion: str
+    out: str | None = None
+
+
+def info(req: InfoRequest) -> int:
+    """Print what a motion model is: source, sizes, sampler, texts."""
+    from latentrl.motion.checkpoint import load_motion_model
+
+    model = load_motion_model(req.motion, seed_history=req.seed_history)
+    vae, den = model.vae.config, model.denoiser.config
+    n_vae = sum(p.numel() for p in model.vae.parameters())
+    n_den = sum(p.numel() for p in model.denoiser.parameters())
+    print(f"source:      {model.info.get('source')} ({model.info.get('format')})")
+    print(f"sha256:      {model.info.get('sha256', '')[:16]}")
+    print(f"latent:      {model.latent_shape} (the RL action has {model.latent_dim} values)")
+    print(f"VAE:         {vae.num_layers} layers x {vae.h_dim} wide, ff {vae.ff_size}, {n_vae / 1e6:.2f} M parameters")
+    print(f"denoiser:    {den.model_type}, {den.num_layers} layers x {den.h_dim} wide, {n_den / 1e6:.2f} M parameters")
+    print(f"diffusion:   {model.diffusion_config.diffusion_steps} steps, {model.diffusion_config.noise_schedule}")
+    print(f"text:        {model.text_dim}-D, encoder {getattr(model.text_encoder, 'name', None)}")
+    prompts = getattr(model.text_encoder, "prompts", None)
+    if prompts:
+        print(f"prompts:     {', '.join(prompts)}")
+    seeds = None if model.seed_history is None else model.seed_history.shape[0]
+    print(f"seeds:       {seeds}")
+    return 0
+
+
+def _check_sample(req: SampleRequest, texts: list[str]) -> None:
+    from latentrl.motion.text import prompt_problem
+    from latentrl.preflight import check_device, check_output_file
+
+    if not 0 < req.seconds <= 3600:  # also refuses nan
+        raise ConfigError(f"--seconds must be in (0, 3600], got {req.seconds}")
+    if not 1 <= req.batch <= MAX_BATCH:
+        raise ConfigError(f"--batch must be in [1, {MAX_BATCH}], got {req.batch}")
+    if not math.isfinite(req.guidance):
+        raise ConfigError(f"--guidance must be a finite number, got {req.guidance}")
+    for text in texts:
+        if prompt_problem(text) is not None:
+            raise ConfigError(f"--text: {prompt_problem(text)}")
+    if not req.out.endswith(".npz"):
+        raise ConfigError(f"--out must name a .npz file, got '{req.out}'")
+    if req.render and not req.render.endswith(".gif"):
+        raise ConfigError(f"--render must name a .gif file, got '{req.render}'")
+    check_device(req.device, "--device")
+    for out_file in (req.out, req.render):
+        if out_file:
+            check_output_file(out_file, "--render" if out_file == req.render else "--out")
+
+
+def sample(req: SampleRequest) -> int:
+    """``latentrl motion sample``: roll the model out over a text timeline; write .npz (and a GIF)."""
+    import torch
+
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.render import render_gif, save_motion_npz
+
+    texts = req.text or ["walk"]
+    _check_sample(req, texts)
+    model = load_motion_model(req.motion, seed_history=req.seed_history, device=req.device)
+    model.encode_text(texts)  # fail early on unknown prompts
+    steps = max(1, math.ceil(req.seconds * 30 / 8))
+    # each text gets an equal share of the steps, in the order given
+    per_step = [texts[min(len(texts) - 1, i * len(texts) // steps)] for i in range(steps)]
+    g = torch.Generator().manual_seed(req.seed)
+    roll = model.rollout(per_step, steps, batch=req.batch, generator=g, guidance_scale=req.guidance)
+    frame_texts = [""] * 2 + [t for t in per_step for _ in range(8)]
+    primitive = [-1] * 2 + [i for i in range(steps) for _ in range(8)]
+    for b in range(req.batch):
+        path = req.out if req.batch == 1 else req.out.replace(".npz", f"_{b}.npz")
+        save_motion_npz(
+            path,
+            roll.joints_world[b].cpu(),
+            texts=frame_texts,
+            features=roll.features_world[b].cpu(),
+            actions=roll.noise[:, b, 0].cpu(),
+            primitive=primitive,
+            seed=req.seed,
+            guidance_scale=req.guidance,
+            motion_model=model.info.get("sha256", ""),
+        )
+        print(f"wrote {path} ({roll.joints_world.shape[1]} frames, {roll.joints_world.shape[1] / 30:.1f} s)")
+    if req.render:
+        render_gif(req.render, roll.joints_world[0].cpu().numpy(), texts=frame_texts)
+        print(f"wrote {req.render}")
+    return 0
+
+
+def train(req: MotionTrainRequest) -> int:
+    """Body of ``latentrl motion train``: every input is checked before the run directory is created."""
+    from latentrl.config import load_config
+    from latentrl.motion.trainer import MotionTrainConfig, MotionTrainer
+    from latentrl.preflight import NewOutput, check_device, check_free_space, check_output_file, check_writable
+    from latentrl.resources import config_file
+
+    if req.resume:
+        run_dir = Path(req.resume)
+        cfg_path = run_dir / "config.yaml"
+        if not cfg_path.is_file():
+            raise ConfigError(f"--resume {run_dir}: no config.yaml there; is it a motion training run directory?")
+        if req.overrides:
+            raise ConfigError(f"--set {req.overrides[0]}: a resumed run keeps its own config.yaml; "
+                              "start a new run instead")
+        cfg = load_config(MotionTrainConfig, cfg_path)
+    else:
+        if not req.config:
+            raise ConfigError("give a CONFIG file (e.g. configs/motion/default.yaml) or --resume RUN_DIR")
+        cfg = load_config(MotionTrainConfig, config_file(req.config), req.overrides)
+        run_dir = Path(req.run_dir) if req.run_dir else Path("runs") / f"motion-{time.strftime('%Y%m%d-%H%M%S')}"
+        if (run_dir / "config.yaml").is_file() or (run_dir / "checkpoints" / "state.pt").is_file():
+            raise ConfigError(f"--run-dir {run_dir} already holds a motion training run; continue it with "
+                              f"--resume {run_dir} or choose another --run-dir")
+    check_device(cfg.device, "device")
+    if cfg.data.source != "locomotion" and not Path(cfg.data.source).is_dir():
+        raise ConfigError(f"data.source: folder not found: {cfg.data.source} (give 'locomotion' or a folder of "
+                          "motion-text .npz files)")
+    check_writable(run_dir, "run directory")
+    if req.out:
+        check_output_file(req.out)
+    with NewOutput(run_dir) as output:  # a failure before training starts removes the folder it created
+        trainer = MotionTrainer(cfg, run_dir, out=req.out, progress=req.progress)
+        ckpt = run_dir / "checkpoints" / "state.pt"
+        if req.resume and ckpt.is_file():
+            trainer.load_checkpoint(ckpt)
+        check_free_space(run_dir, trainer.disk_estimate(), "run directory")
+        output.keep()
+    out = trainer.run()
+    print(f"motion model written to {out} ({trainer.elapsed:.0f} s of training)")
+    return 0
+
+
+def export_bvh(req: ExportBvhRequest) -> int:
+    """``latentrl motion export-bvh``: a motion ``.npz`` (shared format) as BVH (SMPL-22, Y-up, cm)."""
+    from latentrl.preflight import check_output_file
+    from latentrl.render import load_motion_npz, save_bvh
+
+    motion = load_motion_npz(req.motion)
+    out = Path(req.out) if req.out else Path(req.motion).with_suffix(".bvh")
+    check_output_file(out)
+    save_bvh(out, motion["joints"], float(motion["fps"]))
+    print(f"wrote {out} ({len(motion['joints'])} frames at {float(motion['fps']):g} fps)")
+    return 0

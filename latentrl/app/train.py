@@ -1,0 +1,194 @@
+"""The composition root of a training run: ``latentrl train`` and ``latentrl quickstart``.
+
+One ``TrainConfig`` (env + ppo + policy + eval sections), the env it describes, the evaluation
+hook, and the command bodies. This package is the only place that wires environments to
+trainers; ``ppo/`` never sees ``envs/``.
+
+A YAML config holds values only::
+
+    env:    {task: reach, num_envs: 64, texts: [walk]}
+    ppo:    {total_steps: 200000, num_steps: 32, learning_rate: 3.0e-4}
+    policy: {architecture: dart, latent_dim: 256}
+    eval:   {paths: [tasks/paths/dart_demo_walk.json], episodes: 8, max_steps: 96}
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from latentrl.config import load_config, require
+from latentrl.envs.config import EnvConfig, build, resolve_task_file
+from latentrl.errors import ConfigError
+from latentrl.evaluation.config import EvalConfig
+from latentrl.ppo.config import PolicyConfig, PPOConfig
+from latentrl.preflight import check_device, check_writable
+from latentrl.resources import config_file
+
+
+@dataclass
+class TrainConfig:
+    """Everything ``latentrl train`` needs; YAML files in configs/ hold its values."""
+
+    env: EnvConfig = field(default_factory=EnvConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    threads: int = 2
+    """torch CPU threads (0: torch's default)."""
+
+    def validate(self) -> None:
+        require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")
+        try:  # the batch must split into minibatches for this many envs
+            self.ppo.plan(self.env.num_envs)
+        except ConfigError as exc:
+            raise ConfigError(f"ppo.{exc}") from None
+
+
+@dataclass
+class TrainRequest:
+    """``latentrl train``: a config file (or a run to resume) and the flags that override it."""
+
+    config: str | None = None
+    overrides: list[str] = field(default_factory=list)
+    trainer: str = "native"
+    device: str | None = None
+    seed: int | None = None
+    total_steps: int | None = None
+    run_dir: str | None = None
+    resume: str | None = None
+    allow_motion_mismatch: bool = False
+    progress: bool = True
+
+
+@dataclass
+class QuickstartRequest:
+    """``latentrl quickstart``: train ``configs/quick.yaml``, then evaluate the policy."""
+
+    overrides: list[str] = field(default_factory=list)
+    run_dir: str | None = None
+    episodes: int = 8
+    max_steps: int = 128
+    progress: bool = True
+
+
+QUICK_CONFIG = "quick"
+QUICK_EVAL_PATHS = ("dart_demo_walk", "random_smooth")
+
+
+def load_motion(cfg: EnvConfig, device: str):
+    from latentrl.motion import load_motion_model
+
+    return load_motion_model(cfg.motion, device=device)
+
+
+def motion_info(model) -> dict:
+    """What checkpoints record of the motion model: source path and content hash."""
+    return {"path": str(model.info.get("source")), "sha256": str(model.info.get("sha256"))}
+
+
+def make_eval_hook(cfg: TrainConfig, motion, device: str):
+    """The trainer's periodic evaluation: our path runner on ``cfg.eval.paths``, plus a track plot."""
+    if cfg.ppo.eval_every <= 0:
+        return None
+    from latentrl.evaluation.runner import training_eval_hook
+
+    files = [resolve_task_file(p) for p in cfg.eval.paths]
+    return training_eval_hook(files, motion, cfg.env, cfg.eval, device=device)
+
+
+def load_train_config(config: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> TrainConfig:
+    """A ``TrainConfig`` from a file (or a packaged name such as ``quick``) and ``key=value`` overrides."""
+    return load_config(TrainConfig, config_file(config), list(overrides))
+
+
+def train(req: TrainRequest) -> int:
+    """Body of ``latentrl train``."""
+    overrides = list(req.overrides)
+    if req.seed is not None:
+        overrides.append(f"ppo.seed={req.seed}")
+    if req.device is not None:
+        overrides.append(f"ppo.device={req.device}")
+    if req.total_steps is not None:
+        overrides.append(f"ppo.total_steps={req.total_steps}")
+    if req.resume:
+        run_dir = Path(req.resume)
+        cfg_path = run_dir / "config.yaml"
+        if not cfg_path.is_file():
+            raise ConfigError(f"--resume {run_dir}: no config.yaml there; is it a training run directory?")
+        cfg = load_config(TrainConfig, cfg_path, overrides)
+    else:
+        if not req.config:
+            raise ConfigError("give a CONFIG file (e.g. configs/quick.yaml) or --resume RUN_DIR")
+        cfg = load_train_config(req.config, overrides)
+        name = Path(req.config).stem
+        run_dir = Path(req.run_dir) if req.run_dir else Path("runs") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        check_new_run(run_dir)
+    result = run_training(cfg, run_dir, trainer=req.trainer, resume=bool(req.resume),
+                          allow_motion_mismatch=req.allow_motion_mismatch, progress=req.progress)
+    print(f"trained {result.iterations} iterations ({result.env_steps} env steps) in {result.elapsed_s:.0f} s; "
+          f"final policy: {result.final_checkpoint}")
+    return 0
+
+
+def check_new_run(run_dir: Path) -> None:
+    """A fresh run must not start in a folder that holds another run (its checkpoints would mix with ours)."""
+    from latentrl.ppo.checkpoint import FINAL, iteration_checkpoints
+
+    if (run_dir / "config.yaml").is_file() or (run_dir / FINAL).is_file() or iteration_checkpoints(run_dir):
+        raise ConfigError(f"--run-dir {run_dir} already holds a training run; continue it with --resume {run_dir} "
+                          "or choose another --run-dir")
+
+
+def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resume: bool = False,
+                 allow_motion_mismatch: bool = False, progress: bool = True):
+    """Build env + hooks from ``cfg`` and train in ``run_dir``.
+
+    Every input is checked (device, batch sizes, run directory, motion model, path files) before
+    anything is written; :func:`latentrl.ppo.run.train` then checks the free disk space.
+    """
+    from latentrl.ppo.run import train as train_ppo
+
+    if trainer not in ("native", "sb3"):
+        raise ConfigError(f"--trainer must be 'native' or 'sb3', got '{trainer}'")
+    device = str(check_device(cfg.ppo.device, "ppo.device"))
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
+    run_dir = Path(run_dir)
+    check_writable(run_dir, "run directory")
+    motion = load_motion(cfg.env, device)
+    env = build(cfg.env, device, motion=motion)
+    venv = env
+    if trainer == "sb3":
+        from latentrl.envs import Sb3VecEnv
+
+        venv = Sb3VecEnv(env)
+    hook = make_eval_hook(cfg, motion, device)
+    return train_ppo(venv, run_dir, cfg.ppo, cfg.policy, trainer=trainer, config=cfg, resume=resume,
+                     motion=motion_info(motion), evaluate=hook, allow_motion_mismatch=allow_motion_mismatch,
+                     progress=progress)
+
+
+def quickstart(req: QuickstartRequest) -> int:
+    """Body of ``latentrl quickstart``: train ``configs/quick.yaml`` on the default model, then evaluate."""
+    from latentrl.app.evaluate import EvalRequest, check_eval_request, evaluate
+
+    cfg = load_train_config(QUICK_CONFIG, req.overrides)
+    run_dir = Path(req.run_dir) if req.run_dir else Path("runs") / f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}"
+    check_new_run(run_dir)
+    eval_req = EvalRequest(policy="", paths=list(QUICK_EVAL_PATHS), episodes=req.episodes, max_steps=req.max_steps,
+                           motion=cfg.env.motion, device=cfg.ppo.device, out=str(run_dir / "eval"), render=1)
+    check_eval_request(eval_req)  # before training, not after
+    print(f"[quickstart] training configs/quick.yaml on the '{cfg.env.motion}' motion model in {run_dir}")
+    result = run_training(cfg, run_dir, progress=req.progress)
+    print(f"[quickstart] trained {result.iterations} iterations ({result.env_steps} env steps) in "
+          f"{result.elapsed_s:.0f} s; TensorBoard: tensorboard --logdir {run_dir}")
+    eval_req.policy = str(result.final_checkpoint)
+    print(f"[quickstart] evaluating on {', '.join(QUICK_EVAL_PATHS)}: latentrl {' '.join(eval_req.argv())}")
+    code = evaluate(eval_req)
+    print(f"[quickstart] done: report {run_dir / 'eval' / 'report.md'}, plot {run_dir / 'eval' / 'paths.png'}")
+    return code

@@ -1,0 +1,58 @@
+"""The files latentrl ships inside its package, found through :mod:`importlib.resources`.
+
+``latentrl/configs/`` holds the training configs (``configs/motion/`` the motion-training ones,
+``configs/policies/`` those of the shipped policies) and ``latentrl/tasks/paths/`` the waypoint-path
+suites. A checkout also has ``configs`` and ``tasks`` links at its root, so ``latentrl train
+configs/quick.yaml`` works there as well as ``latentrl train quick`` anywhere.
+
+A file argument is looked up, in order: as given (relative to the working directory), then
+relative to the package (``configs/quick.yaml``, ``tasks/paths/dart_walk_long.json``), then as a
+packaged name (``quick``, ``motion/default``, ``dart_walk_long``).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+CONFIGS = "configs"
+PATH_SUITES = ("tasks", "paths")
+
+
+def packaged(*parts: str) -> Path:
+    """``latentrl/<parts...>`` inside the installed package (a real file-system path)."""
+    root = resources.files("latentrl")
+    for part in parts:
+        root = root.joinpath(part)
+    return Path(str(root))
+
+
+def suites_folder() -> Path:
+    """The folder of the shipped path suites (``latentrl/tasks/paths``)."""
+    return packaged(*PATH_SUITES)
+
+
+def config_file(spec: str | Path) -> Path:
+    """A config file by path, by path inside the package, or by packaged name (``quick``, ``motion/tiny``).
+
+    Returns ``spec`` itself when nothing matches, so the caller's "not found" message names what was given.
+    """
+    return find_file(spec, (packaged(), packaged(CONFIGS)), ".yaml")
+
+
+def task_file(spec: str | Path) -> Path | None:
+    """A path file by path, by path inside the package, or by suite name; None if there is none."""
+    found = find_file(spec, (packaged(), suites_folder()), ".json")
+    return found if found.is_file() else None
+
+
+def find_file(spec: str | Path, roots: tuple[Path, ...], suffix: str) -> Path:
+    """``spec`` if it is a file, else the first ``root / spec`` (or ``root / spec + suffix``) that is one."""
+    given = Path(spec).expanduser()
+    if given.is_file() or given.is_absolute():
+        return given
+    for root in roots:
+        for cand in (root / given, root / f"{given}{suffix}"):
+            if cand.is_file():
+                return cand
+    return given
