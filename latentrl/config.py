@@ -4,7 +4,9 @@
 ``key=value`` overrides (``--set ppo.learning_rate=1e-4``), using OmegaConf's structured configs
 for type checking. Every problem is one :class:`~latentrl.errors.ConfigError` line naming the
 file and the dotted key (with a "did you mean" for typos). After merging, each dataclass in the
-tree may check its ranges in a ``validate()`` method.
+tree may check its ranges in a ``validate()`` method. A config class may name renamed keys in an
+``ALIASES`` class attribute (old dotted key -> new dotted key); files and overrides that use an old
+key still load.
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequenc
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
-    base = OmegaConf.structured(cls)
-    merged = base
+    aliases = getattr(cls, "ALIASES", {})
+    merged = OmegaConf.structured(cls)
     if path is not None:
         path = Path(path)
         if not path.is_file():
@@ -48,6 +50,7 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequenc
             data = {}
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: expected a mapping of config fields, got {type(data).__name__}")
+        data = apply_aliases(data, aliases)
         try:
             merged = OmegaConf.merge(merged, OmegaConf.create(data))
         except OmegaConfBaseException as exc:
@@ -55,8 +58,9 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequenc
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"override '{item}': expected key=value (e.g. ppo.learning_rate=1e-4)")
+        key, _, value = item.partition("=")
         try:
-            merged = OmegaConf.merge(merged, OmegaConf.from_dotlist([item]))
+            merged = OmegaConf.merge(merged, OmegaConf.from_dotlist([f"{aliases.get(key.strip(), key)}={value}"]))
         except OmegaConfBaseException as exc:
             raise _error(f"override '{item}'", exc) from None
     try:
@@ -65,6 +69,40 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequenc
         raise _error(str(path or "config"), exc) from None
     validate_tree(obj, str(path or "config"))
     return obj
+
+
+def from_dict(cls: type[T], data: dict, source: str) -> T:
+    """A ``cls`` instance from a plain dict (e.g. a config stored in a checkpoint), checked like a file."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        obj = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(cls), OmegaConf.create(data)))
+    except OmegaConfBaseException as exc:
+        raise _error(source, exc) from None
+    validate_tree(obj, source)
+    return obj
+
+
+def apply_aliases(data: dict, aliases: dict[str, str]) -> dict:
+    """A copy of the nested ``data`` with every old dotted key of ``aliases`` moved to its new place."""
+    import copy
+
+    data = copy.deepcopy(data)
+    for old, new in aliases.items():
+        *where, name = old.split(".")
+        node = data
+        for part in where:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not isinstance(node, dict) or name not in node:
+            continue
+        value = node.pop(name)
+        *where, name = new.split(".")
+        node = data
+        for part in where:
+            node = node.setdefault(part, {})
+        node.setdefault(name, value)
+    return data
 
 
 def validate_tree(obj: Any, source: str, prefix: str = "") -> None:

@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from latentrl.errors import ConfigError, DataError
-from latentrl.evaluation.runner import EpisodeResult, EvalSettings, PathResult
+from latentrl.evaluation.config import EvalSettings
+from latentrl.evaluation.results import EpisodeResult, PathResult
 
 DEFAULT_SUITES = ("dart_walk_long", "dart_run_long", "dart_hop_long")
 """What ``latentrl eval`` runs without ``--paths``: DART's Table 4 suites."""
@@ -111,8 +112,13 @@ def check_eval_request(req: EvalRequest) -> None:
         load_paths(file)
 
 
-def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dict]:
-    """Motion model, loaded policy and their identities (refuses a policy trained on another model)."""
+def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dict, bool | None]:
+    """Motion model, loaded policy, their identities, and the policy's ``observe_next`` (None: not stored).
+
+    Refuses a policy trained on another model. The env config stored in the checkpoint sets the
+    settings' guidance and action bound, so the eval env steps the motion as training did.
+    """
+    from latentrl.envs.config import stored_env_config
     from latentrl.motion.checkpoint import file_sha256, load_motion_model
     from latentrl.ppo import load_policy
 
@@ -124,7 +130,10 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     policy = {"path": str(req.policy), "sha256": file_sha256(req.policy), "iteration": meta.get("iteration"),
               "env_steps": meta.get("env_steps"), "trainer": meta.get("trainer"), "version": meta.get("version"),
               "config_hash": meta.get("config_hash"), "trained_on": meta.get("motion")}
-    return model, loaded.policy, motion, policy
+    env = stored_env_config(meta.get("config"))
+    if env is not None:
+        settings.guidance_scale, settings.action_bound = env.guidance_scale, env.action_bound
+    return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 
 def _sink(out_dir: Path, render: int, write_motions: bool):
@@ -169,8 +178,8 @@ def evaluate(req: EvalRequest) -> int:
     first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
     out_dir = Path(req.out) if req.out else Path(req.policy).resolve().parent / f"eval-{Path(req.policy).stem}"
     check_writable(out_dir, "--out")
-    model, policy, motion, policy_info = _load(req, settings)
-    observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings)
+    model, policy, motion, policy_info, observe_next = _load(req, settings)
+    observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
     with NewOutput(out_dir):  # a failure from here on removes the output folder this command created
         suites = run_suites(act, model, files, settings, observe_next=observe_next,

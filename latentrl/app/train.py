@@ -17,10 +17,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import torch
 
 from latentrl.config import load_config, require
+from latentrl.envs.config import ALIASES as ENV_ALIASES
 from latentrl.envs.config import EnvConfig, build, resolve_task_file
 from latentrl.errors import ConfigError
 from latentrl.evaluation.config import EvalConfig
@@ -39,6 +41,9 @@ class TrainConfig:
     eval: EvalConfig = field(default_factory=EvalConfig)
     threads: int = 2
     """torch CPU threads (0: torch's default)."""
+
+    ALIASES: ClassVar[dict[str, str]] = {f"env.{old}": f"env.{new}" for old, new in ENV_ALIASES.items()}
+    """Keys of earlier versions (the flat ``env:`` section) -> where they live now."""
 
     def validate(self) -> None:
         require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")

@@ -28,6 +28,14 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from latentrl.config import require
+from latentrl.constants import (
+    ACTION_BOUND,
+    GUIDANCE_SCALE,
+    OBS_GOAL_ANGLE_CLIP_DEG,
+    OBS_GOAL_DIST_CLIP_M,
+    SUCCESS_RADIUS_M,
+    TERMINATE_DISTANCE_M,
+)
 from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder
 from latentrl.errors import ConfigError, NonFiniteError, closest
@@ -109,14 +117,14 @@ class LatentMotionVectorEnv(VectorEnv):
         device: str | torch.device = "cpu",
         max_episode_steps: int = 32,
         autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
-        action_bound: float = 4.0,
-        guidance_scale: float = 5.0,
+        action_bound: float = ACTION_BOUND,
+        guidance_scale: float = GUIDANCE_SCALE,
         nonfinite_actions: str = "error",
-        obs_goal_angle_clip_deg: float = 60.0,
-        obs_goal_dist_clip: float = 5.0,
+        obs_goal_angle_clip_deg: float = OBS_GOAL_ANGLE_CLIP_DEG,
+        obs_goal_dist_clip: float = OBS_GOAL_DIST_CLIP_M,
         floor_height: float = 0.0,
-        success_threshold: float = 0.3,
-        terminate_distance: float = 100.0,
+        success_threshold: float = SUCCESS_RADIUS_M,
+        terminate_distance: float = TERMINATE_DISTANCE_M,
         divergence_limit: float = 1e3,
         random_initial_steps: bool = False,
         reward_weights: Mapping[str, float] | None = None,

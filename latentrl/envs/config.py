@@ -1,17 +1,93 @@
-"""``EnvConfig``: the ``env:`` section of a training config, and :func:`build`, the env it describes."""
+"""``EnvConfig``: the ``env:`` section of a training config, and :func:`build`, the env it describes.
+
+Settings every task shares sit at the top of the section; each task has its own sub-section
+(``env.reach``, ``env.path``) holding its constructor's arguments, and an entry in :data:`TASKS`::
+
+    env:
+      task: path
+      num_envs: 64
+      texts: [walk]
+      rewards: {weights: {skate: 100}, contact_threshold: 0.03}
+      path: {observe_next: true, random_waypoints: 5}
+
+Configs written before the sections existed named the task arguments at the top
+(``env.observe_next``); :data:`ALIASES` maps those keys onto their sections.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from latentrl.config import require
+from latentrl.config import apply_aliases, require
+from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.errors import ConfigError, closest
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
-from latentrl.rewards import TERM_NAMES
+from latentrl.rewards import TERM_NAMES, RewardConfig
 
-TASKS = ("reach", "path")
+
+@dataclass
+class ReachConfig:
+    """``env.reach``: arguments of :class:`~latentrl.envs.ReachLocationEnv` (DART's reach task)."""
+
+    goal_angle_deg: float = 60.0
+    """Goals within +/- this angle of the body's forward axis."""
+    goal_distance: list[float] = field(default_factory=lambda: [0.5, 5.0])
+    """Goal distance range (m)."""
+
+    def validate(self) -> None:
+        require(len(self.goal_distance) == 2, "goal_distance", f"must be [min, max], got {self.goal_distance}")
+
+    def kwargs(self) -> dict[str, Any]:
+        return {"goal_angle_deg": self.goal_angle_deg, "goal_distance": tuple(self.goal_distance)}
+
+
+@dataclass
+class PathConfig:
+    """``env.path``: arguments of :class:`~latentrl.envs.FollowPathEnv`."""
+
+    paths: str | None = None
+    """A DART path file (or suite name); None draws random smooth paths each episode."""
+    observe_next: bool = False
+    """Also observe the waypoint after the current one."""
+    random_waypoints: int = 5
+    """Waypoints per random path."""
+    text_per_waypoint: bool = False
+    """Random paths draw a new text per waypoint (mixed-skill paths)."""
+
+    def kwargs(self) -> dict[str, Any]:
+        paths = str(resolve_task_file(self.paths)) if self.paths else None
+        return {"paths": paths, "observe_next": self.observe_next, "random_waypoints": self.random_waypoints,
+                "text_per_waypoint": self.text_per_waypoint}
+
+
+def _reach_env() -> type:
+    from latentrl.envs.reach import ReachLocationEnv
+
+    return ReachLocationEnv
+
+
+def _path_env() -> type:
+    from latentrl.envs.path import FollowPathEnv
+
+    return FollowPathEnv
+
+
+TASKS: dict[str, Callable[[], type]] = {"reach": _reach_env, "path": _path_env}
+"""Task name (= the name of its ``EnvConfig`` section) -> its env class, imported when first built."""
+
+ALIASES: dict[str, str] = {
+    "goal_angle_deg": "reach.goal_angle_deg",
+    "goal_distance": "reach.goal_distance",
+    "paths": "path.paths",
+    "observe_next": "path.observe_next",
+    "random_waypoints": "path.random_waypoints",
+    "text_per_waypoint": "path.text_per_waypoint",
+}
+"""Keys of the flat ``env:`` section of earlier versions -> where they live now."""
 
 
 @dataclass
@@ -30,31 +106,25 @@ class EnvConfig:
     """Sampling weight per text (default: uniform)."""
     max_episode_steps: int | None = None
     """Primitives per episode before truncation (default: 32 for reach, 256 for path)."""
-    guidance_scale: float = 5.0
+    guidance_scale: float = GUIDANCE_SCALE
     """Classifier-free guidance of the motion model (DART: 5)."""
-    action_bound: float = 4.0
+    action_bound: float = ACTION_BOUND
     """Actions are clamped to +/- this inside the env."""
     random_initial_steps: bool = False
     """Randomize the first episode counters so truncations do not synchronize."""
     reward_weights: dict[str, float] = field(default_factory=dict)
     """Overrides of DART's reward weights, e.g. {skate: 100, foot_floor: 100, jerk: 0}."""
-    goal_angle_deg: float = 60.0
-    """reach: goals within +/- this angle of the body's forward axis."""
-    goal_distance: list[float] = field(default_factory=lambda: [0.5, 5.0])
-    """reach: goal distance range (m)."""
-    paths: str | None = None
-    """path: a DART path file; None draws random smooth paths each episode."""
-    observe_next: bool = False
-    """path: also observe the waypoint after the current one."""
-    random_waypoints: int = 5
-    """path: waypoints per random path."""
-    text_per_waypoint: bool = False
-    """path: random paths draw a new text per waypoint (mixed-skill paths)."""
+    rewards: RewardConfig = field(default_factory=RewardConfig)
+    """Reward weights and thresholds (``reward_weights`` overrides its weights)."""
     nonfinite_actions: str = "error"
     """'error' stops on NaN/inf actions; 'zero' replaces them and reports it."""
+    reach: ReachConfig = field(default_factory=ReachConfig)
+    """Arguments of the reach task."""
+    path: PathConfig = field(default_factory=PathConfig)
+    """Arguments of the path task."""
 
     def validate(self) -> None:
-        require(self.task in TASKS, "task", f"expected one of {TASKS}, got '{self.task}'")
+        require(self.task in TASKS, "task", f"expected one of {tuple(TASKS)}, got '{self.task}'")
         require(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
         require(len(self.texts) >= 1, "texts", "give at least one prompt")
         for problem in map(prompt_problem, self.texts):
@@ -63,10 +133,14 @@ class EnvConfig:
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
-        require(len(self.goal_distance) == 2, "goal_distance", f"must be [min, max], got {self.goal_distance}")
         for name in self.reward_weights:
             require(name in TERM_NAMES, "reward_weights",
                     f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")
+
+    @property
+    def observe_next(self) -> bool:
+        """Whether the env observes the waypoint after the current one (path task only)."""
+        return self.task == "path" and self.path.observe_next
 
 
 def resolve_task_file(path: str) -> Path:
@@ -79,19 +153,22 @@ def resolve_task_file(path: str) -> Path:
 
 def build(cfg: EnvConfig, device: str, motion=None, **extra):
     """The torch VectorEnv an ``EnvConfig`` describes (``motion`` may be a loaded model)."""
-    from latentrl.envs.path import FollowPathEnv
-    from latentrl.envs.reach import ReachLocationEnv
-
     common = dict(motion=motion if motion is not None else cfg.motion, texts=list(cfg.texts),
                   text_weights=cfg.text_weights, device=device, guidance_scale=cfg.guidance_scale,
                   action_bound=cfg.action_bound, random_initial_steps=cfg.random_initial_steps,
-                  reward_weights=dict(cfg.reward_weights) or None, nonfinite_actions=cfg.nonfinite_actions)
+                  reward_weights=dict(cfg.reward_weights) or None, reward_config=cfg.rewards,
+                  nonfinite_actions=cfg.nonfinite_actions)
     if cfg.max_episode_steps is not None:
         common["max_episode_steps"] = cfg.max_episode_steps
     common.update(extra)
-    if cfg.task == "reach":
-        return ReachLocationEnv(cfg.num_envs, goal_angle_deg=cfg.goal_angle_deg,
-                                goal_distance=tuple(cfg.goal_distance), **common)
-    paths = str(resolve_task_file(cfg.paths)) if cfg.paths else None
-    return FollowPathEnv(cfg.num_envs, paths=paths, observe_next=cfg.observe_next,
-                         random_waypoints=cfg.random_waypoints, text_per_waypoint=cfg.text_per_waypoint, **common)
+    return TASKS[cfg.task]()(cfg.num_envs, **getattr(cfg, cfg.task).kwargs(), **common)
+
+
+def stored_env_config(config: Mapping[str, Any] | None) -> EnvConfig | None:
+    """The ``EnvConfig`` a run saved (in its checkpoints' ``config``), or None when it saved no ``env`` section."""
+    env = (config or {}).get("env") if isinstance(config, Mapping) else None
+    if not isinstance(env, Mapping):
+        return None
+    from latentrl.config import from_dict
+
+    return from_dict(EnvConfig, apply_aliases(dict(env), ALIASES), "policy checkpoint: env")

@@ -11,6 +11,7 @@ import math
 
 import torch
 
+from latentrl.constants import OBS_GOAL_ANGLE_CLIP_DEG, OBS_GOAL_DIST_CLIP_M
 from latentrl.motion.canonical import canonical_frame
 
 
@@ -31,8 +32,8 @@ def goal_features(
     last_frame_joints: torch.Tensor,
     canonical_rotation: torch.Tensor,
     goal_world: torch.Tensor,
-    angle_clip_deg: float = 60.0,
-    dist_clip: float = 5.0,
+    angle_clip_deg: float = OBS_GOAL_ANGLE_CLIP_DEG,
+    dist_clip: float = OBS_GOAL_DIST_CLIP_M,
 ) -> torch.Tensor:
     """DART's goal observation: clipped unit direction (canonical frame) and clipped distance.
 

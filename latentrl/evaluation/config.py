@@ -1,10 +1,19 @@
-"""``EvalConfig``: the ``eval:`` section of a training config (periodic evaluation during training)."""
+"""How evaluations run: the ``eval:`` config section and the path runner's settings.
+
+``EvalConfig`` is the ``eval:`` section of a training config (periodic evaluation during training);
+:class:`EvalSettings` is what the path runner needs (``report.json`` records it).
+
+The training hook builds the settings from the ``eval:`` and ``env:`` sections; ``latentrl eval``
+from its flags and from the env config stored in the policy's checkpoint.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 from latentrl.config import require
+from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, SUCCESS_RADIUS_M
+from latentrl.motion.skeleton import FPS
 
 
 @dataclass
@@ -27,3 +36,37 @@ class EvalConfig:
     def validate(self) -> None:
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
+
+
+@dataclass
+class EvalSettings:
+    """How an evaluation runs; stored in ``report.json`` under ``settings``."""
+
+    episodes: int = 32
+    """Episodes per path, run in parallel as one batch (DART: 32 envs)."""
+    max_steps: int = 256
+    """Step budget per episode in primitives of 8 frames (DART's ``num_steps`` 256 = 68.3 s, enough for
+    its longest walking path, 36 m, at half of DART's walking speed). Episodes still running are failures."""
+    deterministic: bool = False
+    """Use the policy's mean action instead of sampling (DART samples)."""
+    seed: int = 0
+    """Base seed; each path gets its own seed derived from it, the file stem and the path index."""
+    device: str = "cpu"
+    guidance_scale: float = GUIDANCE_SCALE
+    """Classifier-free guidance of the motion model (DART's ``guidance_param``); the policy's training value."""
+    success_threshold: float = SUCCESS_RADIUS_M
+    """Waypoint radius, metres (xy, pelvis); DART 0.3."""
+    action_bound: float = ACTION_BOUND
+    """Actions are clamped to +/- this inside the env; the policy's training value."""
+
+    def validate(self) -> None:
+        require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
+        require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
+        require(self.success_threshold > 0, "success_threshold", f"must be > 0, got {self.success_threshold}")
+
+    @property
+    def budget_s(self) -> float:
+        """The reach time a failed episode gets: the frames of a full budget (seed frames included) / 30."""
+        from latentrl.evaluation.results import frames_after
+
+        return frames_after(self.max_steps) / FPS

@@ -24,9 +24,10 @@ import math
 import numpy as np
 import torch
 
+from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
 
-SKATE_THRESHOLD_M = 0.03
+SKATE_THRESHOLD_M = CONTACT_HEIGHT_M
 CLOSD_TOLERANCE_M = 0.005
 
 

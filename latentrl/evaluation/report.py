@@ -24,7 +24,8 @@ import numpy as np
 
 from latentrl.errors import DataError
 from latentrl.evaluation import metrics as M
-from latentrl.evaluation.results import EvalSettings, PathResult, SuiteResult
+from latentrl.evaluation.config import EvalSettings
+from latentrl.evaluation.results import PathResult, SuiteResult
 from latentrl.motion.skeleton import FPS
 
 FORMAT = "latentrl.eval/1"

@@ -10,40 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from latentrl.config import require
 from latentrl.envs.path import WaypointPath
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
-from latentrl.motion.skeleton import FPS
 
-
-@dataclass
-class EvalSettings:
-    """How an evaluation runs; stored in ``report.json`` under ``settings``."""
-
-    episodes: int = 32
-    """Episodes per path, run in parallel as one batch (DART: 32 envs)."""
-    max_steps: int = 256
-    """Step budget per episode in primitives of 8 frames (DART's ``num_steps`` 256 = 68.3 s, enough for
-    its longest walking path, 36 m, at half of DART's walking speed). Episodes still running are failures."""
-    deterministic: bool = False
-    """Use the policy's mean action instead of sampling (DART samples)."""
-    seed: int = 0
-    """Base seed; each path gets its own seed derived from it, the file stem and the path index."""
-    device: str = "cpu"
-    guidance_scale: float = 5.0
-    """Classifier-free guidance of the motion model (DART's ``guidance_param``)."""
-    success_threshold: float = 0.3
-    """Waypoint radius, metres (xy, pelvis); DART 0.3."""
-
-    def validate(self) -> None:
-        require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
-        require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
-        require(self.success_threshold > 0, "success_threshold", f"must be > 0, got {self.success_threshold}")
-
-    @property
-    def budget_s(self) -> float:
-        """The reach time a failed episode gets: the frames of a full budget (seed frames included) / 30."""
-        return frames_after(self.max_steps) / FPS
+__all__ = ["EpisodeResult", "PathResult", "SuiteResult", "frames_after"]
 
 
 def frames_after(steps: int) -> int:

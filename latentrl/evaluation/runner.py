@@ -34,10 +34,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import FollowPathEnv, WaypointPath, load_paths
 from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
-from latentrl.evaluation.results import EpisodeResult, EvalSettings, PathResult, SuiteResult, frames_after
+from latentrl.evaluation.config import EvalSettings
+from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, frames_after
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 
@@ -82,17 +84,18 @@ def check_policy_shapes(obs_dim: int, action_dim: int, env: FollowPathEnv) -> No
         )
 
 
-def fit_policy(obs_dim: int, action_dim: int, motion, settings: EvalSettings) -> bool:
+def fit_policy(obs_dim: int, action_dim: int, motion, settings: EvalSettings, observe_next: bool | None = None) -> bool:
     """Check that a policy fits the eval env and return whether the env must ``observe_next``.
 
-    A FollowPath policy trained with ``observe_next`` has a goal group of 8 values instead of 4
-    (ReachLocation and plain FollowPath policies have 4), which is how it is recognised.
+    ``observe_next`` comes from the env config stored with the policy when there is one; otherwise it
+    is recognised from the observation size: a FollowPath policy trained with ``observe_next`` has a
+    goal group of 8 values instead of 4 (ReachLocation and plain FollowPath policies have 4).
     """
     probe = WaypointPath(((0.0, 1.0, 0.0),), ("walk",))
-    env = make_env(motion, [probe], 1, settings, observe_next=False)
-    observe_next = obs_dim == env.single_observation_space.shape[0] + 4
-    if observe_next:
-        env = make_env(motion, [probe], 1, settings, observe_next=True)
+    if observe_next is None:
+        env = make_env(motion, [probe], 1, settings, observe_next=False)
+        observe_next = obs_dim == env.single_observation_space.shape[0] + 4
+    env = make_env(motion, [probe], 1, settings, observe_next=observe_next)
     check_policy_shapes(obs_dim, action_dim, env)
     return observe_next
 
@@ -119,6 +122,7 @@ def make_env(
         max_episode_steps=max_steps or settings.max_steps,
         autoreset_mode="Disabled",
         guidance_scale=settings.guidance_scale,
+        action_bound=settings.action_bound,
         success_threshold=settings.success_threshold,
         record_history=record_history,
     )
@@ -269,12 +273,13 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
     ``max_steps``, ``deterministic`` and ``text``, and returns the overall DART-aggregated means
     (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ...; undefined ones left out),
     the ``eval/trajectories`` figure, and ``stop`` once ``success_rate >= eval_cfg.success_target``.
-    ``env_cfg`` gives ``guidance_scale`` and, for path policies, ``observe_next``. Files and texts are
+    ``env_cfg`` gives ``guidance_scale``, ``action_bound`` and, for path policies, ``observe_next``. Files and texts are
     checked now, not at the first evaluation. The trainer restores its random streams afterwards.
     """
     settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
                             deterministic=eval_cfg.deterministic, device=str(device),
-                            guidance_scale=getattr(env_cfg, "guidance_scale", 5.0))
+                            guidance_scale=getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE),
+                            action_bound=getattr(env_cfg, "action_bound", ACTION_BOUND))
     settings.validate()
     for _, paths in load_suites(files, eval_cfg.text):
         make_env(motion, paths, 1, settings)  # unknown prompts fail here (TextError), before training starts

@@ -18,6 +18,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
+from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError, TextError
 from latentrl.motion.canonical import WorldTransform, canonicalize, features_to_world
 from latentrl.motion.denoiser import Denoiser
@@ -171,7 +172,7 @@ class MotionModel(nn.Module):
         history: torch.Tensor,
         text_embedding: torch.Tensor,
         noise: torch.Tensor,
-        guidance_scale: float | torch.Tensor = 5.0,
+        guidance_scale: float | torch.Tensor = GUIDANCE_SCALE,
         sampler: str = "ddim",
         step_noise: torch.Tensor | None = None,
         generator: torch.Generator | None = None,
@@ -254,7 +255,7 @@ class MotionModel(nn.Module):
         state: RolloutState,
         text_embedding: torch.Tensor,
         noise: torch.Tensor,
-        guidance_scale: float | torch.Tensor = 5.0,
+        guidance_scale: float | torch.Tensor = GUIDANCE_SCALE,
         sampler: str = "ddim",
         generator: torch.Generator | None = None,
     ) -> StepResult:
@@ -277,7 +278,7 @@ class MotionModel(nn.Module):
         batch: int = 1,
         noise: torch.Tensor | None = None,
         generator: torch.Generator | None = None,
-        guidance_scale: float = 5.0,
+        guidance_scale: float = GUIDANCE_SCALE,
         state: RolloutState | None = None,
     ) -> Rollout:
         """Autoregressive rollout.

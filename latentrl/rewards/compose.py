@@ -32,6 +32,7 @@ from typing import NamedTuple
 import torch
 
 from latentrl.config import require
+from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import closest
 from latentrl.motion.representation import HISTORY_LENGTH
 from latentrl.motion.skeleton import PELVIS
@@ -76,11 +77,11 @@ class RewardInputs:
 
 @dataclass
 class RewardConfig:
-    """Reward weights and thresholds (YAML section ``rewards``)."""
+    """Reward weights and thresholds (YAML section ``env.rewards``)."""
 
     weights: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_WEIGHTS))
     """Weight per term name; names left out keep their default (:data:`DEFAULT_WEIGHTS`)."""
-    contact_threshold: float = 0.03
+    contact_threshold: float = CONTACT_HEIGHT_M
     """Foot height above the floor, metres, within which a foot counts as touching it
     (``foot_floor`` tolerance and ``skate`` ramp; DART's ``foot_floor_thresh``)."""
     floor_scale_words: tuple[str, ...] = ("hop", "run")

@@ -21,6 +21,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.motion.skeleton import FOOT_JOINTS, LEFT_HIP, RIGHT_HIP
 
 __all__ = [
@@ -69,7 +70,10 @@ def success(reached: torch.Tensor) -> torch.Tensor:
 
 
 def foot_floor(
-    foot_height: torch.Tensor, floor_height: float = 0.0, threshold: float = 0.03, scale: torch.Tensor | None = None
+    foot_height: torch.Tensor,
+    floor_height: float = 0.0,
+    threshold: float = CONTACT_HEIGHT_M,
+    scale: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """``foot_floor``: penalise the lower foot for leaving (or sinking into) the floor.
 
@@ -92,7 +96,9 @@ def foot_floor(
     return out if scale is None else out * scale
 
 
-def foot_skate(foot_positions: torch.Tensor, floor_height: float = 0.0, threshold: float = 0.03) -> torch.Tensor:
+def foot_skate(
+    foot_positions: torch.Tensor, floor_height: float = 0.0, threshold: float = CONTACT_HEIGHT_M
+) -> torch.Tensor:
     """``skate``: foot displacement weighted by how close the foot is to the floor.
 
     ``s_{t,f} = ||p_{t,f} - p_{t-1,f}|| * (2 - 2^clamp(max(h_{t,f}, h_{t-1,f}) / threshold, 0, 1))``
