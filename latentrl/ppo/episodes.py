@@ -5,10 +5,8 @@
 rolling window of the last ``window`` finished episodes, so ``rollout/ep_rew_mean`` means the same
 thing in native and SB3 runs.
 
-Env info keys read (Gymnasium vector conventions, SAME_STEP autoreset):
-``episode = {"r": (N,), "l": (N,)}`` with mask ``_episode``; ``is_success`` (N,) bool, read at
-episode ends; every ``reward/<term>`` (N,) float; ``diverged`` (N,) bool, envs whose motion diverged
-this step (the env terminated and reset them), counted per rollout.
+Env info keys read: ``episode``, ``is_success``, ``reward/<term>`` and ``diverged``, as
+:mod:`latentrl.ppo.contract` describes them.
 """
 
 from __future__ import annotations
@@ -20,6 +18,7 @@ from typing import Any, NamedTuple
 import torch
 
 from latentrl.monitor import REWARD_PREFIX, RolloutStats
+from latentrl.ppo.contract import DIVERGED, EPISODE, IS_SUCCESS
 
 
 class RolloutSummary(NamedTuple):
@@ -55,17 +54,17 @@ class EpisodeRecorder:
 
     def record(self, t: int, infos: Mapping[str, Any]) -> None:
         """Copy step ``t``'s episode ends, success flags and reward terms (no host sync)."""
-        if "_episode" in infos:
-            self._put(self.ended[t], infos["_episode"])
-            self._put(self.returns[t], infos["episode"]["r"])
-            self._put(self.lengths[t], infos["episode"]["l"])
+        if f"_{EPISODE}" in infos:
+            self._put(self.ended[t], infos[f"_{EPISODE}"])
+            self._put(self.returns[t], infos[EPISODE]["r"])
+            self._put(self.lengths[t], infos[EPISODE]["l"])
         else:
             self.ended[t].zero_()
-        if "is_success" in infos:
-            self._put(self.success[t], infos["is_success"])
+        if IS_SUCCESS in infos:
+            self._put(self.success[t], infos[IS_SUCCESS])
             self.has_success = True
-        if "diverged" in infos:
-            count = torch.as_tensor(infos["diverged"], device=self.device).sum()
+        if DIVERGED in infos:
+            count = torch.as_tensor(infos[DIVERGED], device=self.device).sum()
             self.diverged = count if self.diverged is None else self.diverged + count
         for key, value in infos.items():
             if key.startswith(REWARD_PREFIX):

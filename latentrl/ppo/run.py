@@ -13,7 +13,7 @@ Run directory::
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,11 +21,11 @@ from latentrl.errors import ConfigError
 from latentrl.ppo import checkpoint as ckpt
 from latentrl.ppo.checkpoint import plain_config
 from latentrl.ppo.config import PolicyConfig, PPOConfig
-from latentrl.ppo.trainer import Evaluator, NativeTrainer, TrainResult
+from latentrl.ppo.runner import Evaluator, Runner, TrainResult
+from latentrl.ppo.trainer import NativeTrainer
 from latentrl.preflight import MIB, NewOutput, check_free_space, check_writable
 from latentrl.safe_io import atomic_write_text
 
-TRAINERS = ("native", "sb3")
 CONFIG_FILE = "config.yaml"
 
 
@@ -42,17 +42,13 @@ def write_config(run_dir: str | Path, config: Any) -> Path:
     return atomic_write_text(Path(run_dir) / CONFIG_FILE, text)
 
 
-def make_trainer(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *, trainer: str = "native",
-                 config: Any = None, motion: Mapping[str, Any] | None = None, evaluate: Evaluator | None = None,
-                 layout: Mapping[str, Any] | None = None, progress: bool = True):
-    """Build a :class:`NativeTrainer` (torch ``VectorEnv``) or an ``Sb3Trainer`` (SB3 ``VecEnv``)."""
-    if trainer not in TRAINERS:
-        raise ConfigError(f"trainer: expected one of {TRAINERS}, got '{trainer}'")
-    kwargs = dict(config=config, motion=motion, evaluate=evaluate, layout=layout, progress=progress)
-    if trainer == "native":
-        if hasattr(env, "step_async"):
-            raise ConfigError("trainer 'native' needs the torch VectorEnv itself, not an SB3 VecEnv adapter")
-        return NativeTrainer(env, run_dir, ppo, policy, **kwargs)
+def _native(env: Any) -> type:
+    if hasattr(env, "step_async"):
+        raise ConfigError("trainer 'native' needs the torch VectorEnv itself, not an SB3 VecEnv adapter")
+    return NativeTrainer
+
+
+def _sb3(env: Any) -> type:
     from stable_baselines3.common.vec_env import VecEnv
 
     from latentrl.ppo.sb3 import Sb3Trainer
@@ -60,7 +56,27 @@ def make_trainer(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyCo
     if not isinstance(env, VecEnv):
         raise ConfigError(f"trainer 'sb3' needs an SB3 VecEnv (wrap the env: latentrl.envs.Sb3VecEnv(env)), "
                           f"got {type(env).__name__}")
-    return Sb3Trainer(env, run_dir, ppo, policy, **kwargs)
+    return Sb3Trainer
+
+
+TRAINERS: dict[str, Callable[[Any], type]] = {"native": _native, "sb3": _sb3}
+"""Trainer name -> a function of the env that checks it fits and returns the :class:`Runner` subclass."""
+
+
+def register_trainer(name: str, select: Callable[[Any], type]) -> None:
+    """Make ``trainer=name`` available: ``select(env)`` returns a :class:`Runner` subclass (or raises ConfigError)."""
+    TRAINERS[name] = select
+
+
+def make_trainer(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *, trainer: str = "native",
+                 config: Any = None, motion: Mapping[str, Any] | None = None, evaluate: Evaluator | None = None,
+                 layout: Mapping[str, Any] | None = None, progress: bool = True) -> Runner:
+    """Build the trainer named ``trainer`` in :data:`TRAINERS` (native: torch ``VectorEnv``; sb3: SB3 ``VecEnv``)."""
+    if trainer not in TRAINERS:
+        raise ConfigError(f"trainer: expected one of {tuple(TRAINERS)}, got '{trainer}'")
+    cls = TRAINERS[trainer](env)
+    return cls(env, run_dir, ppo, policy, config=config, motion=motion, evaluate=evaluate, layout=layout,
+               progress=progress)
 
 
 def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *, trainer: str = "native",

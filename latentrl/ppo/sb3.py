@@ -5,9 +5,9 @@
   log-std and zero init as the native trainer, and the same state dict, so ``final.pt`` of either
   trainer loads with :func:`latentrl.ppo.checkpoint.load_policy`.
 - :func:`sb3_ppo_kwargs` maps :class:`PPOConfig` onto ``PPO(...)`` arguments.
-- :class:`Sb3Trainer` runs ``PPO.learn`` with a callback that routes SB3's logger into our
-  :class:`~latentrl.monitor.Monitor` (env steps on the x-axis, one events file per run), adds
-  ``reward/<term>``, ``time/collection_s`` and ``time/update_s``, and writes our checkpoints.
+- :class:`Sb3Trainer` (a :class:`~latentrl.ppo.runner.Runner`) runs ``PPO.learn`` with a callback that
+  routes SB3's logger into our :class:`~latentrl.monitor.Monitor` (env steps on the x-axis, one events
+  file per run), adds ``reward/<term>``, ``time/collection_s`` and ``time/update_s``, and writes our checkpoints.
 
 Where SB3 and CleanRL/DART differ at equal settings (documented in docs/training.md): SB3 clips the
 value *prediction* (not ``max`` of clipped and unclipped losses) and always clips actions to the
@@ -35,23 +35,13 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from latentrl.monitor import REWARD_PREFIX, TRAIN_PREFIX, EvalReport, Monitor, RolloutStats
+from latentrl.monitor import REWARD_PREFIX, TRAIN_PREFIX, Monitor, RolloutStats
 from latentrl.ppo import checkpoint as ckpt
+from latentrl.ppo.algorithm import adam_kwargs
 from latentrl.ppo.config import BatchPlan, PolicyConfig, PPOConfig
+from latentrl.ppo.contract import DIVERGED, observation_layout
 from latentrl.ppo.policy import ActorCritic, plain_layout
-from latentrl.ppo.progress import RunProgress
-from latentrl.ppo.trainer import (
-    ROLLOUT_HINT,
-    Evaluator,
-    IterationTime,
-    TrainResult,
-    adam_kwargs,
-    nonfinite_update,
-    observation_layout,
-    run_evaluation,
-    seed_everything,
-    stop_if_nonfinite,
-)
+from latentrl.ppo.runner import ROLLOUT_HINT, Runner, nonfinite_update, stop_if_nonfinite
 from latentrl.safe_io import atomic_write_bytes
 
 SB3_ZIP_SUFFIX = ".sb3.zip"
@@ -177,7 +167,7 @@ class _TrainingHooks(BaseCallback):
         self.collection_s = 0.0
         self.term_sums: dict[str, float] = {}
         self.term_count = 0
-        self.diverged: int | None = 0 if getattr(trainer.venv, "reports_diverged", False) else None
+        self.diverged: int | None = 0 if getattr(trainer.env, "reports_diverged", False) else None
         """Env steps with ``diverged`` infos this rollout (None: the VecEnv does not report them)."""
         self.moments: tuple[torch.Tensor, torch.Tensor, int] | None = None
 
@@ -196,7 +186,7 @@ class _TrainingHooks(BaseCallback):
             for key, value in info.items():
                 if key.startswith(REWARD_PREFIX):
                     self.term_sums[key] = self.term_sums.get(key, 0.0) + float(value)
-            if self.diverged is not None and info.get("diverged"):
+            if self.diverged is not None and info.get(DIVERGED):
                 self.diverged += 1
         self.term_count += len(self.locals["infos"])
         return not self.trainer.stop_requested  # False aborts PPO.learn (an evaluation asked to stop)
@@ -239,112 +229,60 @@ class _TrainingHooks(BaseCallback):
 
 
 # --------------------------------------------------------------------------- trainer
-class Sb3Trainer:
+class Sb3Trainer(Runner):
     """``stable_baselines3.PPO`` on an SB3 ``VecEnv`` with the native trainer's config, tags and checkpoints.
 
-    Args are those of :class:`latentrl.ppo.trainer.NativeTrainer`, except ``venv``: an SB3 ``VecEnv``
-    (e.g. ``latentrl.envs.Sb3VecEnv(env)``).
+    Args are those of :class:`latentrl.ppo.runner.Runner`, with ``env`` an SB3 ``VecEnv`` (e.g.
+    ``latentrl.envs.Sb3VecEnv(env)``).
     """
 
     name = "sb3"
+    checkpoint_suffixes = (SB3_ZIP_SUFFIX,)
 
-    def __init__(self, venv: Any, run_dir: str | Path, ppo: PPOConfig, policy_cfg: PolicyConfig, *,
-                 config: Any = None, motion: Mapping[str, Any] | None = None, evaluate: Evaluator | None = None,
-                 layout: Mapping[str, Any] | None = None, progress: bool = True):
+    def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
         from stable_baselines3 import PPO
 
-        ppo.validate()
-        policy_cfg.validate()
-        self.venv, self.run_dir, self.cfg = venv, Path(run_dir), ppo
-        self.config = config if config is not None else {"ppo": ppo, "policy": policy_cfg}
-        self.motion, self.evaluate, self.progress = motion, evaluate, progress
-        self.plan = ppo.plan(venv.num_envs)
-        seed_everything(ppo.seed, ppo.torch_deterministic)
-        kwargs = sb3_ppo_kwargs(ppo, policy_cfg, self.plan, plain_layout(observation_layout(venv, layout)))
-        self.model = PPO(LatentActorCriticPolicy, venv, **kwargs)
+        kwargs = sb3_ppo_kwargs(self.cfg, policy_cfg, self.plan, plain_layout(observation_layout(self.env, layout)))
+        self.model = PPO(LatentActorCriticPolicy, self.env, **kwargs)
         self.policy: ActorCritic = self.model.policy.net
-        self.iteration, self.env_steps, self.elapsed_s = 0, 0, 0.0
-        self._pending_rng: dict | None = None
-        self.last_train: dict[str, float] = {}
-        self.last_eval: EvalReport | None = None
-        self.times: list[IterationTime] = []
-        self.stop_requested = False
-        self.last_checkpoint: Path | None = None
-        """The newest checkpoint this run wrote or resumed from (named by non-finite errors)."""
+        self.optimizer = self.model.policy.optimizer
+
+    @property
+    def venv(self) -> Any:
+        """The SB3 ``VecEnv`` trained on (the runner's ``env``)."""
+        return self.env
 
     # ------------------------------------------------------------------ checkpoints
-    def checkpoint(self) -> dict:
-        extra = {"num_timesteps": self.env_steps, "n_updates": int(self.model._n_updates)}
-        return ckpt.make_checkpoint(trainer=self.name, iteration=self.iteration, env_steps=self.env_steps,
-                                    elapsed_s=self.elapsed_s, policy=self.policy, optimizer=self.model.policy.optimizer,
-                                    config=self.config, motion=self.motion, env=self.venv, extra=extra)
+    def checkpoint_extra(self) -> dict:
+        return {"num_timesteps": self.env_steps, "n_updates": int(self.model._n_updates)}
 
-    def save(self, path: str | Path) -> Path:
-        """Our checkpoint at ``path`` plus SB3's own zip (``PPO.load``-able) beside it as ``*.sb3.zip``."""
-        path = ckpt.save_checkpoint(self.checkpoint(), path)
+    def load_extra(self, extra: Mapping[str, Any]) -> None:
+        self.model.num_timesteps = extra["num_timesteps"]
+        self.model._n_updates = extra["n_updates"]
+
+    def after_save(self, path: Path) -> None:
+        """SB3's own zip (``PPO.load``-able) beside our checkpoint, as ``*.sb3.zip``."""
         buf = io.BytesIO()
         self.model.save(buf)
         atomic_write_bytes(path.with_suffix(SB3_ZIP_SUFFIX), buf.getvalue())
-        self.last_checkpoint = path
-        return path
-
-    def resume(self, allow_motion_mismatch: bool = False) -> Path | None:
-        """Continue from the newest readable checkpoint in ``run_dir``; None (fresh start) if there is none."""
-        import warnings
-
-        found = ckpt.load_latest(self.run_dir, map_location=self.model.device)
-        if found is None:
-            warnings.warn(f"{self.run_dir}: no checkpoint to resume from; starting at step 0", stacklevel=2)
-            return None
-        path, state = found
-        ckpt.check_resumable(state, path, trainer=self.name, config=self.config, motion=self.motion,
-                             allow_motion_mismatch=allow_motion_mismatch)
-        ckpt.check_shapes(state, path, self.policy.obs_dim, self.policy.action_dim)
-        self.policy.load_state_dict(state["policy"])
-        self.model.policy.optimizer.load_state_dict(state["optimizer"])
-        self.iteration, self.env_steps, self.elapsed_s = state["iteration"], state["env_steps"], state["elapsed_s"]
-        self.model.num_timesteps = state["extra"]["num_timesteps"]
-        self.model._n_updates = state["extra"]["n_updates"]
-        self._pending_rng = state["rng"]
-        self.last_checkpoint = path
-        return path
 
     # ------------------------------------------------------------------ loop
-    def train(self) -> TrainResult:
-        """``PPO.learn`` up to ``plan.num_iterations`` iterations; checkpoint periodically and write ``final.pt``."""
-        self.monitor = Monitor(self.run_dir, resume_step=self.env_steps if self.iteration else None)
+    def learn(self) -> None:
+        """``PPO.learn`` up to ``plan.num_iterations`` iterations (SB3 resets the env)."""
         self.output = MonitorOutput(self.monitor)
         self.model.set_logger(Logger(str(self.run_dir), [self.output]))
-        self.bar = RunProgress(self.run_dir, self.plan.num_iterations * self.plan.batch_size, self.env_steps,
-                               self.progress)
-        if self.iteration == 0:
-            self.monitor.log_hparams(ckpt.plain_config(self.config))
-        self.bar.write(f"{self.name} trainer: start at iteration {self.iteration}, {self.env_steps} env steps, "
-                       f"{self.plan.num_iterations} iterations of {self.plan.batch_size} steps")
-        self.venv.seed(self.cfg.seed + self.iteration)
-        start_iteration = self.iteration
+        self.env.seed(self.cfg.seed + self.iteration)
         remaining = self.plan.num_iterations * self.plan.batch_size - self.env_steps
-        try:
-            if remaining > 0:
-                self.model.learn(remaining, callback=_TrainingHooks(self), log_interval=self.cfg.log_every,
-                                 reset_num_timesteps=self.iteration == 0)
-        finally:
-            self.monitor.close()
-            self.bar.close()
-        final = self.run_dir / ckpt.FINAL
-        if self.iteration > start_iteration or not final.is_file():
-            self.save(final)
-        return TrainResult(self.run_dir, final, self.iteration, self.env_steps, self.elapsed_s, self._rollout_stats(),
-                           self.last_train, self.last_eval, self.times, self.stop_requested)
+        if remaining > 0:
+            self.model.learn(remaining, callback=_TrainingHooks(self), log_interval=self.cfg.log_every,
+                             reset_num_timesteps=self.iteration == 0)
 
     def _on_training_start(self) -> None:
         """After SB3 reset the env: restore the random streams of a resumed run; start the clocks."""
-        if self._pending_rng is not None:
-            ckpt.restore_rng(self._pending_rng, self.venv)
-            self._pending_rng = None
-        self._start, self._steps_at_start, self._elapsed_at_start = time.perf_counter(), self.env_steps, self.elapsed_s
+        self.restore_pending_rng()
+        self.restart_clock()
 
-    def _rollout_stats(self) -> RolloutStats:
+    def rollout_stats(self) -> RolloutStats:
         eps, succ = self.model.ep_info_buffer or [], self.model.ep_success_buffer or []
         return RolloutStats(float(np.mean([e["r"] for e in eps])) if eps else None,
                             float(np.mean([e["l"] for e in eps])) if eps else None,
@@ -352,42 +290,26 @@ class Sb3Trainer:
 
     def _after_iteration(self, reward_terms: dict[str, float], collection_s: float, update_s: float,
                          diverged: int | None = None) -> None:
-        """Called after each PPO update: SB3's train/* dump, our extra tags, eval, checkpoint, progress."""
-        cfg = self.cfg
+        """Called after each PPO update: SB3's train/* dump, our extra tags, then the runner's eval and checkpoint."""
         recorded = {k[len(TRAIN_PREFIX):]: v for k, v in self.model.logger.name_to_value.items()
                     if k.startswith(TRAIN_PREFIX) and isinstance(v, (int, float, np.floating, np.integer))}
         stop_if_nonfinite(self, self.bar, nonfinite_update(recorded, self.policy))
-        self.iteration, self.env_steps = self.iteration + 1, int(self.model.num_timesteps)
-        self.times.append(IterationTime(collection_s, update_s))
-        k, step, last = self.iteration, self.env_steps, self.iteration == self.plan.num_iterations
-        now = time.perf_counter()
-        self.elapsed_s = self._elapsed_at_start + (now - self._start)
-        fps = (step - self._steps_at_start) / max(now - self._start, 1e-9)
-        logging = k % cfg.log_every == 0 or last
+        fps = self.count_iteration(int(self.model.num_timesteps), collection_s, update_s)
+        k, step, logging = self.iteration, self.env_steps, self.logging_now
         if logging:
             self.model.logger.dump(step=step)  # the train/* SB3 recorded during this iteration's update
         else:
             _clear(self.model.logger)
         self.last_train = {k_[len(TRAIN_PREFIX):]: float(v) for k_, v in self.output.latest.items()
                            if k_.startswith(TRAIN_PREFIX) and isinstance(v, (int, float, np.floating, np.integer))}
-        rollout = self._rollout_stats()
+        rollout = self.rollout_stats()
         if logging:
             self.monitor.log_rewards(step, reward_terms)
             self.monitor.log_diverged(step, diverged)
             self.monitor.log_time(step, collection_s=collection_s, update_s=update_s)
             self.bar.log_iteration(k, step, fps, rollout, self.last_train, collection_s, update_s, reward_terms,
                                    diverged)
-        if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
-            self.last_eval = run_evaluation(self.evaluate, self.policy)
-            self.stop_requested = bool(self.last_eval.stop)
-            self.monitor.log_eval(step, self.last_eval)
-            self.bar.write(f"eval iter {k} steps {step}: "
-                           + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
-        if cfg.checkpoint_every and k % cfg.checkpoint_every == 0 and not (last or self.stop_requested):
-            self.save(ckpt.iteration_path(self.run_dir, k))
-            ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints, suffixes=(SB3_ZIP_SUFFIX,))
-        self.monitor.flush()
-        self.bar.update(step, fps, rollout)
+        self.finish_iteration(fps, rollout)
 
 
 def _clear(logger: Logger) -> None:

@@ -130,8 +130,8 @@ def test_real_env_divergence_is_reset_and_counted(tiny_model, tmp_path):
 
 
 def test_nonfinite_rollout_names_the_quantity_env_and_step():
+    from latentrl.ppo.runner import nonfinite_rollout
     from latentrl.ppo.storage import RolloutBuffer
-    from latentrl.ppo.trainer import nonfinite_rollout
 
     buf = RolloutBuffer(4, 3, 5, 2)
     buf.final_obs[1, 2] = math.nan  # stale row: no episode ended there, so GAE never reads it

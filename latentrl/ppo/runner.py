@@ -1,0 +1,312 @@
+"""The runner around a PPO implementation: loop bookkeeping, logging, evaluation, checkpoints, resume, guards.
+
+:class:`Runner` owns what the native and the SB3 trainer share: the run's config and identity,
+seeding, the iteration/step/time counters, checkpoints (save, prune, resume with its checks),
+the TensorBoard :class:`~latentrl.monitor.Monitor` and progress bar around :meth:`Runner.learn`,
+the periodic evaluation, and the non-finite guards. A backend (:mod:`latentrl.ppo.trainer`,
+:mod:`latentrl.ppo.sb3`) builds its policy and optimizer, runs its iterations in :meth:`Runner.learn`
+and calls :meth:`Runner.finish_iteration` after each.
+
+Non-finite values stop the run: the backend checks the rollout and, after each update, the losses
+and weights, and :func:`stop_if_nonfinite` raises a :class:`~latentrl.errors.NonFiniteError` naming
+the iteration, the quantity and the last good checkpoint, which is left as it was (nothing is
+saved after the bad iteration).
+"""
+
+from __future__ import annotations
+
+import random
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import torch
+
+from latentrl.errors import NonFiniteError
+from latentrl.monitor import EvalReport, Monitor, RolloutStats
+from latentrl.ppo import checkpoint as ckpt
+from latentrl.ppo.config import PolicyConfig, PPOConfig
+from latentrl.ppo.policy import ActorCritic
+from latentrl.ppo.progress import RunProgress
+from latentrl.ppo.storage import RolloutBuffer
+
+Evaluator = Callable[[ActorCritic], EvalReport]
+"""Evaluation hook: gets the policy (eval mode), returns metrics and figures; must not train it."""
+
+
+class IterationTime(NamedTuple):
+    collection_s: float
+    """Wall seconds collecting the rollout (GAE included)."""
+    update_s: float
+    """Wall seconds in the PPO update."""
+
+
+class TrainResult(NamedTuple):
+    run_dir: Path
+    final_checkpoint: Path
+    iterations: int
+    env_steps: int
+    elapsed_s: float
+    rollout: RolloutStats
+    """Episode statistics over the last ``stats_window`` episodes at the end."""
+    train: dict[str, float]
+    """Update statistics of the last iteration ({} if no iteration ran)."""
+    eval: EvalReport | None
+    """The last evaluation, if any ran."""
+    times: list[IterationTime]
+    """Per-iteration timings of the iterations this call ran (benchmarks)."""
+    stopped_early: bool
+    """An evaluation asked to stop (``EvalReport.stop``) before ``num_iterations``."""
+
+
+def seed_everything(seed: int, deterministic: bool = True) -> None:
+    """Seed python, numpy and torch (all devices); ask cuDNN for deterministic kernels."""
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+    torch.backends.cudnn.deterministic = deterministic
+    if deterministic:
+        torch.backends.cudnn.benchmark = False
+
+
+def run_evaluation(evaluate: Evaluator, policy: ActorCritic) -> EvalReport:
+    """Call the hook in eval mode without perturbing the training random streams (restored afterwards)."""
+    state = ckpt.capture_rng()
+    was_training = policy.training
+    policy.eval()
+    try:
+        with torch.no_grad():
+            report = evaluate(policy)
+    finally:
+        ckpt.restore_rng(state)
+        policy.train(was_training)
+    return report if isinstance(report, EvalReport) else EvalReport(dict(report))
+
+
+# --------------------------------------------------------------------------- non-finite guards
+LOSS_NAMES = {"policy_gradient_loss": "policy loss", "value_loss": "value loss", "entropy_loss": "entropy loss",
+              "loss": "total loss", "approx_kl": "approx KL", "grad_norm": "gradient norm"}
+"""Update statistics that must be finite, and how errors name them."""
+ROLLOUT_HINT = "the env must return finite observations and rewards"
+UPDATE_HINT = "a new run with a lower ppo.learning_rate or max_grad_norm may avoid it"
+
+
+def nonfinite_rollout(buffer: RolloutBuffer) -> str | None:
+    """The first non-finite quantity of a filled buffer, e.g. ``'reward of env 3 at rollout step 5 is nan'``.
+
+    The fast path sums each tensor (a sum is finite only if every element is) and syncs once; the
+    slow path, which finds the env and step, runs only when something is wrong. None if all is finite.
+    Final observations count only where an episode ended (the rows GAE reads).
+    """
+    checks = (("observation", buffer.obs), ("reward", buffer.rewards), ("value estimate", buffer.values),
+              ("advantage", buffer.advantages))
+    read_final = torch.where(buffer.dones[..., None], buffer.final_obs, 0.0)
+    if bool(torch.isfinite(torch.stack([x.sum() for _, x in checks] + [read_final.sum()])).all()):
+        return None
+    T, N = buffer.num_steps, buffer.num_envs
+    ended = buffer.dones.nonzero()  # (M, 2) [t, n] of the rows whose final observation is read
+    final = buffer.final_obs[buffer.dones]  # (M, D)
+    found = [(name, (~torch.isfinite(x.reshape(T, N, -1)).all(-1)).nonzero(), x) for name, x in checks]
+    found.append(("final observation", ended[(~torch.isfinite(final).all(-1)).nonzero()[:, 0]], buffer.final_obs))
+    for name, where, x in found:
+        if len(where):
+            t, n = (int(i) for i in where[0])
+            row = x[t, n].reshape(-1)
+            value = row[~torch.isfinite(row)][0].item()
+            if name == "observation":  # row t holds the observation step t - 1 returned (row 0: the rollout's start)
+                when = f"returned by rollout step {t - 1}" if t else "at the start of the rollout"
+                return f"observation of env {n} {when} is {value}"
+            return f"{name} of env {n} at rollout step {t} is {value}"
+    return None  # a sum overflowed, but every value is finite
+
+
+def nonfinite_update(stats: Mapping[str, float], policy: torch.nn.Module) -> str | None:
+    """The first non-finite update statistic or weight after a PPO update, or None."""
+    for key, name in LOSS_NAMES.items():
+        value = stats.get(key)
+        if value is not None and not np.isfinite(value):
+            others = ", ".join(f"{LOSS_NAMES[k]} {stats[k]:.4g}" for k in LOSS_NAMES if k in stats and k != key)
+            return f"{name} is {value} ({others})"
+    params = dict(policy.named_parameters())
+    if not bool(torch.stack([torch.isfinite(p).all() for p in params.values()]).all()):
+        bad = next(n for n, p in params.items() if not bool(torch.isfinite(p).all()))
+        return f"policy weight '{bad}' became non-finite"
+    return None
+
+
+def stop_if_nonfinite(trainer: Any, bar: RunProgress, problem: str | None, hint: str = UPDATE_HINT) -> None:
+    """Raise :class:`NonFiniteError` for ``problem`` in the trainer's current iteration (also logged to train.log)."""
+    if problem is None:
+        return
+    last = trainer.last_checkpoint or "none yet"
+    message = (f"iteration {trainer.iteration + 1}: {problem}; training stopped without saving this iteration "
+               f"(last good checkpoint: {last}); {hint}")
+    bar.write(f"stopped: {message}")
+    raise NonFiniteError(message)
+
+
+# --------------------------------------------------------------------------- runner
+class Runner:
+    """One training run in ``run_dir``; subclasses supply the PPO implementation.
+
+    Args:
+        env: the training env (a torch ``VectorEnv``, or an SB3 ``VecEnv`` for the SB3 backend).
+        run_dir: where events, checkpoints and ``train.log`` go.
+        ppo: PPO settings.
+        policy_cfg: network settings.
+        config: the full resolved run config stored in checkpoints (default: the two sections).
+        motion: ``{"path", "sha256"}`` of the env's motion model, stored and checked on resume.
+        evaluate: optional evaluation hook called every ``ppo.eval_every`` iterations.
+        layout: observation layout override (default: ``env.metadata["observation_layout"]``).
+        progress: show the tqdm bar.
+
+    Subclasses set :attr:`name`, build ``self.policy`` and ``self.optimizer`` in :meth:`build`, and
+    implement :meth:`learn`; they may add checkpoint fields (:meth:`checkpoint_extra`,
+    :meth:`load_extra`), files beside a checkpoint (:meth:`after_save`) and rollout statistics.
+    """
+
+    name = "runner"
+    checkpoint_suffixes: tuple[str, ...] = ()
+    """Suffixes of files the backend writes beside each checkpoint (pruned with it)."""
+
+    def __init__(self, env: Any, run_dir: str | Path, ppo: PPOConfig, policy_cfg: PolicyConfig, *,
+                 config: Any = None, motion: Mapping[str, Any] | None = None, evaluate: Evaluator | None = None,
+                 layout: Mapping[str, Any] | None = None, progress: bool = True):
+        ppo.validate()
+        policy_cfg.validate()
+        self.env, self.run_dir, self.cfg = env, Path(run_dir), ppo
+        self.config = config if config is not None else {"ppo": ppo, "policy": policy_cfg}
+        self.motion, self.evaluate, self.progress = motion, evaluate, progress
+        self.plan = ppo.plan(env.num_envs)
+        seed_everything(ppo.seed, ppo.torch_deterministic)
+        self.iteration, self.env_steps, self.elapsed_s = 0, 0, 0.0
+        self._pending_rng: dict | None = None
+        self.last_train: dict[str, float] = {}
+        self.last_eval: EvalReport | None = None
+        self.times: list[IterationTime] = []
+        self.stop_requested = False
+        self.last_checkpoint: Path | None = None
+        """The newest checkpoint this run wrote or resumed from (named by non-finite errors)."""
+        self.policy: ActorCritic
+        self.optimizer: torch.optim.Optimizer
+        self.build(policy_cfg, layout)
+
+    # ------------------------------------------------------------------ backend
+    def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
+        raise NotImplementedError
+
+    def learn(self) -> None:
+        """Run iterations until ``plan.num_iterations`` (or a stop); call :meth:`finish_iteration` after each."""
+        raise NotImplementedError
+
+    def rollout_stats(self) -> RolloutStats:
+        raise NotImplementedError
+
+    def checkpoint_extra(self) -> dict:
+        return {}
+
+    def load_extra(self, extra: Mapping[str, Any]) -> None:
+        pass
+
+    def after_save(self, path: Path) -> None:
+        pass
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self) -> dict:
+        return ckpt.make_checkpoint(trainer=self.name, iteration=self.iteration, env_steps=self.env_steps,
+                                    elapsed_s=self.elapsed_s, policy=self.policy, optimizer=self.optimizer,
+                                    config=self.config, motion=self.motion, env=self.env,
+                                    extra=self.checkpoint_extra())
+
+    def save(self, path: str | Path) -> Path:
+        path = ckpt.save_checkpoint(self.checkpoint(), path)
+        self.after_save(path)
+        self.last_checkpoint = path
+        return path
+
+    def resume(self, allow_motion_mismatch: bool = False) -> Path | None:
+        """Continue from the newest readable checkpoint in ``run_dir``; None (fresh start) if there is none."""
+        found = ckpt.load_latest(self.run_dir, map_location=self.policy_device)
+        if found is None:
+            warnings.warn(f"{self.run_dir}: no checkpoint to resume from; starting at step 0", stacklevel=2)
+            return None
+        path, state = found
+        ckpt.check_resumable(state, path, trainer=self.name, config=self.config, motion=self.motion,
+                             allow_motion_mismatch=allow_motion_mismatch)
+        ckpt.check_shapes(state, path, self.policy.obs_dim, self.policy.action_dim)
+        self.policy.load_state_dict(state["policy"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.iteration, self.env_steps, self.elapsed_s = state["iteration"], state["env_steps"], state["elapsed_s"]
+        self.load_extra(state["extra"])
+        self._pending_rng = state["rng"]
+        self.last_checkpoint = path
+        return path
+
+    @property
+    def policy_device(self) -> torch.device:
+        return next(self.policy.parameters()).device
+
+    def restore_pending_rng(self) -> None:
+        """After the env was reset: put back the random streams a resumed run saved."""
+        if self._pending_rng is not None:
+            ckpt.restore_rng(self._pending_rng, self.env)
+            self._pending_rng = None
+
+    # ------------------------------------------------------------------ loop
+    def train(self) -> TrainResult:
+        """Run :meth:`learn` between the monitor's and the progress bar's set-up and close; write ``final.pt``."""
+        self.monitor = Monitor(self.run_dir, resume_step=self.env_steps if self.iteration else None)
+        self.bar = RunProgress(self.run_dir, self.plan.num_iterations * self.plan.batch_size, self.env_steps,
+                               self.progress)
+        if self.iteration == 0:
+            self.monitor.log_hparams(ckpt.plain_config(self.config))
+        self.bar.write(f"{self.name} trainer: start at iteration {self.iteration}, {self.env_steps} env steps, "
+                       f"{self.plan.num_iterations} iterations of {self.plan.batch_size} steps")
+        start_iteration = self.iteration
+        self._start, self._steps_at_start, self._elapsed_at_start = time.perf_counter(), self.env_steps, self.elapsed_s
+        try:
+            self.learn()
+        finally:
+            self.monitor.close()
+            self.bar.close()
+        final = self.run_dir / ckpt.FINAL
+        if self.iteration > start_iteration or not final.is_file():
+            self.save(final)
+        return TrainResult(self.run_dir, final, self.iteration, self.env_steps, self.elapsed_s, self.rollout_stats(),
+                           self.last_train, self.last_eval, self.times, self.stop_requested)
+
+    def restart_clock(self) -> None:
+        """Start the throughput and elapsed-time clocks now (after set-up work such as the first reset)."""
+        self._start, self._steps_at_start, self._elapsed_at_start = time.perf_counter(), self.env_steps, self.elapsed_s
+
+    def count_iteration(self, env_steps: int, collection_s: float, update_s: float) -> float:
+        """Advance the counters after an update; returns env steps/s since the (re)start."""
+        self.iteration, self.env_steps = self.iteration + 1, env_steps
+        self.times.append(IterationTime(collection_s, update_s))
+        now = time.perf_counter()
+        self.elapsed_s = self._elapsed_at_start + (now - self._start)
+        return (self.env_steps - self._steps_at_start) / max(now - self._start, 1e-9)
+
+    @property
+    def logging_now(self) -> bool:
+        """Whether the iteration just counted is logged (every ``log_every``, and the last)."""
+        return self.iteration % self.cfg.log_every == 0 or self.iteration == self.plan.num_iterations
+
+    def finish_iteration(self, fps: float, rollout: RolloutStats) -> None:
+        """After the backend logged iteration k: evaluate and checkpoint when due, flush, move the bar."""
+        cfg, k, step = self.cfg, self.iteration, self.env_steps
+        last = k == self.plan.num_iterations
+        if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
+            self.last_eval = run_evaluation(self.evaluate, self.policy)
+            self.stop_requested = bool(self.last_eval.stop)
+            self.monitor.log_eval(step, self.last_eval)
+            self.bar.write(f"eval iter {k} steps {step}: "
+                           + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
+        if cfg.checkpoint_every and k % cfg.checkpoint_every == 0 and not (last or self.stop_requested):
+            self.save(ckpt.iteration_path(self.run_dir, k))
+            ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints, suffixes=self.checkpoint_suffixes)
+        self.monitor.flush()
+        self.bar.update(step, fps, rollout)
