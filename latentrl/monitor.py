@@ -20,6 +20,8 @@ native and SB3 runs overlay. Tags use SB3's names where SB3 has one:
 ``eval/<metric>``           periodic evaluation: ``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``
 ``eval/trajectories``       top-down trajectory plot (image)
 ``hyperparameters``         the resolved config as a markdown table (text)
+``motion/<stage>/<term>``   motion-model training (``latentrl motion train``): each loss term of the
+                            ``vae`` and ``denoiser`` stages, ``rollout_p`` and ``learning_rate``; x-axis: stage steps
 ==========================  ====================================================================
 """
 
@@ -48,6 +50,8 @@ EVAL_PREFIX = "eval/"
 EVAL_METRICS = ("success_rate", "reach_time_s", "skate_cm_s", "floor_cm")
 EVAL_TRAJECTORIES = "eval/trajectories"
 HPARAMS = "hyperparameters"
+MOTION_PREFIX = "motion/"
+"""Prefix of motion-model training tags: ``motion/<stage>/<term>``."""
 
 SB3_ONLY_CONSOLE = ("time/iterations", "time/time_elapsed", "time/total_timesteps", "train/n_updates")
 """Keys SB3 records for its console table only (it excludes them from TensorBoard too)."""
@@ -146,6 +150,12 @@ class Monitor:
                 self._scalar(key, float(value), step)
             except (TypeError, ValueError):
                 continue  # SB3 Figure/Video/HParam objects: not part of our scheme
+
+    def log_motion_stage(self, stage: str, step: int, terms: Mapping[str, Any]) -> None:
+        """``motion/<stage>/<term>`` scalars of a motion-training stage (tensors or numbers)."""
+        for name, value in terms.items():
+            value = value.detach() if hasattr(value, "detach") else value
+            self._scalar(f"{MOTION_PREFIX}{stage}/{name}", float(value), step)
 
     def log_hparams(self, config: Mapping[str, Any]) -> None:
         """The (nested) config as a markdown ``| parameter | value |`` table under ``hyperparameters``."""

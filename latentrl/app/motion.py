@@ -145,7 +145,7 @@ def sample(req: SampleRequest) -> int:
 def train(req: MotionTrainRequest) -> int:
     """Body of ``latentrl motion train``: every input is checked before the run directory is created."""
     from latentrl.config import load_config
-    from latentrl.motion.trainer import MotionTrainConfig, MotionTrainer
+    from latentrl.motion_training.trainer import MotionTrainConfig, MotionTrainer
     from latentrl.preflight import NewOutput, check_device, check_free_space, check_output_file, check_writable
     from latentrl.resources import config_file
 

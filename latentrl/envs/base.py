@@ -17,6 +17,7 @@ origin facing +y. "Canonical" is the frame of the current history's first frame 
 from __future__ import annotations
 
 import math
+import os
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -40,8 +41,9 @@ from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder
 from latentrl.errors import ConfigError, NonFiniteError, closest
 from latentrl.motion.canonical import WorldTransform, features_to_world
+from latentrl.motion.prior import MotionPrior
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import MotionModel, RolloutState
+from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import RewardComposer, RewardConfig, RewardInputs
@@ -74,7 +76,8 @@ class LatentMotionVectorEnv(VectorEnv):
     Args:
         num_envs: N, environments stepped together.
         motion: ``"default"`` (the embedded model), a model path, or a loaded
-            :class:`~latentrl.motion.MotionModel` (moved to ``device`` in place).
+            :class:`~latentrl.motion.MotionPrior` such as :class:`~latentrl.motion.MotionModel` (moved to
+            ``device`` in place).
         texts: prompts an episode's text is drawn from (encoded once, at construction).
         text_weights: (K,) sampling weights of ``texts``; ``None`` = uniform.
         device: where state, model and outputs live.
@@ -111,7 +114,7 @@ class LatentMotionVectorEnv(VectorEnv):
         self,
         num_envs: int = 1,
         *,
-        motion: str | MotionModel = "default",
+        motion: str | MotionPrior = "default",
         texts: Sequence[str] = ("walk",),
         text_weights: Sequence[float] | None = None,
         device: str | torch.device = "cpu",
@@ -182,8 +185,8 @@ class LatentMotionVectorEnv(VectorEnv):
         self._all = torch.ones(n, dtype=torch.bool, device=dev)
 
     # ------------------------------------------------------------------ construction
-    def _load_motion(self, motion: str | MotionModel) -> MotionModel:
-        if isinstance(motion, MotionModel):
+    def _load_motion(self, motion: str | MotionPrior) -> MotionPrior:
+        if not isinstance(motion, (str, os.PathLike)):
             model = motion.to(self.device)
         else:
             from latentrl.motion.checkpoint import load_motion_model

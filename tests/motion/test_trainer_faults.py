@@ -8,7 +8,7 @@ from pathlib import Path
 import torch
 
 from latentrl.app.cli import main
-from latentrl.motion import trainer as trainer_module
+from latentrl.motion_training import trainer as trainer_module
 from latentrl.safe_io import load_torch
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -9,8 +9,8 @@ from latentrl.config import load_config
 from latentrl.errors import ConfigError
 from latentrl.motion import load_motion_model
 from latentrl.motion.representation import FEATURE_DIM
-from latentrl.motion.trainer import MotionTrainConfig, MotionTrainer
-from latentrl.motion.training import StageConfig, consistency_losses
+from latentrl.motion_training.losses import StageConfig, consistency_losses
+from latentrl.motion_training.trainer import MotionTrainConfig, MotionTrainer
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = ROOT / "configs" / "motion" / "tiny.yaml"

@@ -22,7 +22,7 @@ import torch
 from latentrl.config import require, to_dict, to_yaml
 from latentrl.datasets.locomotion import LocomotionConfig
 from latentrl.errors import CheckpointError, ConfigError, NonFiniteError
-from latentrl.motion.training import (
+from latentrl.motion_training.losses import (
     EMA,
     DenoiserTrainConfig,
     ModelShapeConfig,
@@ -126,9 +126,9 @@ class MotionTrainer:
         self.vae_opt = make_optimizer(self.vae, cfg.vae_train)
         self.den_opt = make_optimizer(self.denoiser, cfg.denoiser_train)
         self.stage, self.step, self.elapsed = "vae", 0, 0.0
-        from torch.utils.tensorboard import SummaryWriter
+        from latentrl.monitor import Monitor
 
-        self.writer = SummaryWriter(str(self.run_dir))
+        self.monitor = Monitor(self.run_dir)
         atomic_write_text(self.run_dir / "config.yaml", to_yaml(cfg))
 
     # ------------------------------------------------------------------ data
@@ -202,9 +202,7 @@ class MotionTrainer:
 
     # ------------------------------------------------------------------ loops
     def _log(self, prefix: str, step: int, terms: dict, lr: float, bar) -> None:
-        for k, v in terms.items():
-            self.writer.add_scalar(f"motion/{prefix}/{k}", float(torch.as_tensor(v).detach()), step)
-        self.writer.add_scalar(f"motion/{prefix}/learning_rate", lr, step)
+        self.monitor.log_motion_stage(prefix, step, {**terms, "learning_rate": lr})
         line = f"{prefix} step {step}: " + " ".join(
             f"{k}={float(torch.as_tensor(v).detach()):.4g}" for k, v in terms.items()
         )
@@ -265,7 +263,7 @@ class MotionTrainer:
             "latent_std": float(self.vae_ema.module.latent_std),
         }
         save_motion_model(model, self.out, meta=meta)
-        self.writer.close()
+        self.monitor.close()
         return self.out
 
     def _train_vae(self, bar, start: float) -> None:

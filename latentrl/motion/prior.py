@@ -1,0 +1,54 @@
+"""``MotionPrior``: what the envs (and the evaluation) need of a frozen motion model.
+
+A latent-action env samples one motion primitive per step from noise it is handed, so it needs
+only the calls below. :class:`~latentrl.motion.MotionModel` (DART's VAE + latent diffusion) is the
+one implementation; another architecture fits the envs by providing the same members, without
+the envs changing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol, runtime_checkable
+
+import torch
+
+from latentrl.motion.rollout import RolloutState, StepResult
+
+
+@runtime_checkable
+class MotionPrior(Protocol):
+    """A text-conditioned generator of 8-frame motion primitives whose input noise is the RL action."""
+
+    seed_history: torch.Tensor | None
+    """(K, 2, 276) canonical seed histories episodes start from (None: the model cannot start episodes)."""
+    pelvis_delta: torch.Tensor | None
+    """(3,) rest pelvis offset used to place features in the world."""
+
+    @property
+    def device(self) -> torch.device: ...
+
+    @property
+    def latent_shape(self) -> tuple[int, int]:
+        """Shape of one primitive's noise (the action, flattened, has ``latent_dim`` values)."""
+        ...
+
+    @property
+    def latent_dim(self) -> int: ...
+
+    def to(self, device: str | torch.device) -> MotionPrior: ...
+
+    def encode_text(self, texts: Sequence[str]) -> torch.Tensor:
+        """(len(texts), E) text embeddings."""
+        ...
+
+    def initial_state(self, batch: int, generator: torch.Generator | None = None,
+                      seed_index: torch.Tensor | None = None) -> RolloutState:
+        """Start states of ``batch`` rollouts (a seed history each, the world at the origin)."""
+        ...
+
+    def rollout_step(self, state: RolloutState, text_embedding: torch.Tensor, noise: torch.Tensor,
+                     guidance_scale: float | torch.Tensor = ..., sampler: str = "ddim",
+                     generator: torch.Generator | None = None) -> StepResult:
+        """One primitive from ``noise`` (B, *latent_shape) for every rollout, placed in the world."""
+        ...
