@@ -22,7 +22,7 @@ FLOORS = (
     ("datasets", "render", "rewards"),
     ("motion_training", "envs", "ppo"),
     ("evaluation",),
-    ("app",),
+    ("app", "cli"),
 )
 """Ground floor first; a unit is a top-level module or subpackage of ``latentrl``."""
 
@@ -31,6 +31,7 @@ APART = {
     "ppo": ("motion", "envs", "rewards", "datasets", "render", "evaluation", "motion_training"),
     "envs": ("ppo", "datasets", "motion_training"),
     "rewards": ("datasets", "render"),
+    "motion_training": ("envs", "ppo", "rewards", "render"),
 }
 """unit -> units it must not import, whatever their floor."""
 

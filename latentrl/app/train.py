@@ -155,10 +155,11 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     Every input is checked (device, batch sizes, run directory, motion model, path files) before
     anything is written; :func:`latentrl.ppo.run.train` then checks the free disk space.
     """
+    from latentrl.ppo.run import TRAINERS
     from latentrl.ppo.run import train as train_ppo
 
-    if trainer not in ("native", "sb3"):
-        raise ConfigError(f"--trainer must be 'native' or 'sb3', got '{trainer}'")
+    if trainer not in TRAINERS:
+        raise ConfigError(f"--trainer must be {' or '.join(repr(t) for t in TRAINERS)}, got '{trainer}'")
     device = str(check_device(cfg.ppo.device, "ppo.device"))
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
