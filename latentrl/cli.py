@@ -187,6 +187,8 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--guidance", type=float, default=5.0)
     motion.add_argument("--seed", type=int, default=0)
     motion.add_argument("--json", help="write all figures to this JSON file")
+    motion.add_argument("--no-floor-snap", action="store_true",
+                        help="measure the model alone, without the rollout's floor snap")
     motion.set_defaults(func=lambda a: _call("latentrl.bench", "bench_motion", a))
 
 
