@@ -191,6 +191,8 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--guidance", type=float, default=GUIDANCE_SCALE)
     motion.add_argument("--seed", type=int, default=0)
     motion.add_argument("--json", help="write all figures to this JSON file")
+    motion.add_argument("--no-floor-snap", action="store_true",
+                        help="measure the model alone, without the rollout's floor snap")
     motion.set_defaults(func=_bench_motion)
 
 

@@ -195,3 +195,19 @@ def dart_mean_ci95(values) -> dict[str, float]:
     if v.ndim != 2:
         raise ValueError(f"values must be (paths, episodes), got shape {v.shape}")
     return mean_ci95(v.mean(axis=0))
+
+
+def lowest_joint_penetration_cm(joints, floor: float = 0.0) -> torch.Tensor:
+    """Mean over frames of how far the lowest of all joints is below the floor, cm -> (...)."""
+    low = _t(joints)[..., 2].amin(dim=-1) - floor
+    return (-low).clamp(min=0).mean(dim=-1) * 100
+
+
+def body_frame_velocity_m_s(joints, fps: float = 30.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """Mean pelvis velocity along the body's forward and rightward axes (hip axis), m/s -> two (...)."""
+    j = _t(joints)
+    right = j[..., :-1, 2, :2] - j[..., :-1, 1, :2]
+    right = right / right.norm(dim=-1, keepdim=True).clamp(min=1e-9)
+    forward = torch.stack((-right[..., 1], right[..., 0]), dim=-1)  # z x right
+    v = (j[..., 1:, PELVIS, :2] - j[..., :-1, PELVIS, :2]) * fps
+    return (v * forward).sum(-1).mean(-1), (v * right).sum(-1).mean(-1)

@@ -27,6 +27,9 @@ from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_L
 from latentrl.motion.text import TextEncoder
 from latentrl.motion.vae import PrimitiveVAE
 
+#: Contact band of the floor snap (metres): see :meth:`MotionModel._snap_to_floor`; ``None`` turns it off.
+FLOOR_SNAP_M = 0.05
+
 
 class PrimitiveSample(NamedTuple):
     """Result of sampling one primitive."""
@@ -102,6 +105,7 @@ class MotionModel(nn.Module):
         self.register_buffer("seed_history", None if seed_history is None else torch.as_tensor(seed_history).float())
         self.info = dict(info or {})
         self.amp_dtype: torch.dtype | None = None
+        self.floor_snap: float | None = FLOOR_SNAP_M
         self._text_cache: dict[str, torch.Tensor] = {}
 
     # ------------------------------------------------------------------ properties
@@ -269,7 +273,26 @@ class MotionModel(nn.Module):
             joints_world = state.world.apply(joints_of(sample.future))
             history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
             world = state.world.compose(rotation, origin)
+            if self.floor_snap is not None:
+                joints_world, world = self._snap_to_floor(joints_world, world)
         return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world))
+
+    def _snap_to_floor(self, joints_world: torch.Tensor, world: WorldTransform) -> tuple[torch.Tensor, WorldTransform]:
+        """Keep the world floor at z = 0: shift each primitive so its lowest joint touches it.
+
+        Why: the canonical frame has its origin at the pelvis, so the model never sees where the
+        floor is, and small per-primitive errors in height add up over a long rollout (a body that
+        sinks or floats by decimetres in a minute). The shift changes only the world placement, never
+        the model's input. A primitive whose lowest joint is below the floor is lifted; one within
+        ``floor_snap`` metres above it (a foot on the floor) is lowered onto it; one higher up is in
+        the air (a jump or a hop's flight) and keeps its height. DART's ``rollout_mld.py`` has a
+        ``fix_floor`` option of the same kind.
+        """
+        lowest = joints_world[..., 2].amin(dim=(1, 2))  # (B,)
+        shift = torch.where(lowest <= self.floor_snap, -lowest, torch.zeros_like(lowest))
+        joints_world = joints_world + torch.nn.functional.pad(shift[:, None], (2, 0))[:, None, None, :]
+        translation = world.translation + torch.nn.functional.pad(shift[:, None], (2, 0))
+        return joints_world, WorldTransform(world.rotation, translation)
 
     def rollout(
         self,

@@ -32,7 +32,7 @@ from latentrl.config import require
 from latentrl.motion.canonical import canonicalize
 from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
 from latentrl.motion.diffusion import DiffusionConfig, GaussianDiffusion
-from latentrl.motion.representation import Normalizer, split_frames
+from latentrl.motion.representation import Normalizer, joints_of, split_frames
 from latentrl.motion.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 from latentrl.motion.vae import PrimitiveVAE, VAEConfig
 
@@ -88,6 +88,8 @@ class VAETrainConfig(StageConfig):
     kl_weight: float = 1e-6
     aux_weight: float = 100.0
     """Weight of each temporal-difference consistency term."""
+    plant_weight: float = 0.0
+    """Weight of the planted-foot loss (``plant_loss``): feet still in the data stay still when decoded."""
     batch_size: int = 128
     num_primitives: int = 8
 
@@ -95,6 +97,7 @@ class VAETrainConfig(StageConfig):
         super().validate()
         require(self.kl_weight >= 0, "kl_weight", f"must be >= 0, got {self.kl_weight}")
         require(self.aux_weight >= 0, "aux_weight", f"must be >= 0, got {self.aux_weight}")
+        require(self.plant_weight >= 0, "plant_weight", f"must be >= 0, got {self.plant_weight}")
 
 
 @dataclass
@@ -104,10 +107,12 @@ class DenoiserTrainConfig(StageConfig):
     aux_weight: float = 1e4
     rollout_history_latent: bool = True
     """Encode the target latent with the rollout history (DART's ``train_rollout_history rollout``)."""
+    plant_weight: float = 0.0
+    """Weight of the planted-foot loss on the decoded prediction (see ``VAETrainConfig.plant_weight``)."""
 
     def validate(self) -> None:
         super().validate()
-        for name in ("latent_rec_weight", "feature_rec_weight", "aux_weight"):
+        for name in ("latent_rec_weight", "feature_rec_weight", "aux_weight", "plant_weight"):
             require(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
 
 
@@ -148,6 +153,27 @@ def consistency_losses(history_last: torch.Tensor, future: torch.Tensor) -> dict
         "transl_delta": huber(seq.transl[:, 1:] - seq.transl[:, :-1], seq.transl_delta[:, :-1]),
         "orient_delta": huber(calc_orient_delta, seq.global_orient_delta_6d[:, :-1]),
     }
+
+
+#: Joints whose stillness marks a planted foot: both ankles and both toe bases (SMPL-22 indices).
+PLANT_JOINTS = (7, 8, 10, 11)
+#: A joint moving less than this per frame in the data counts as planted (metres; 15 cm/s at 30 fps).
+PLANT_STILL_M = 0.005
+
+
+def plant_loss(future: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Mean squared per-frame displacement (m^2) of predicted foot joints where the data's stand still.
+
+    Why: free rollouts of the first default model slid their feet (walk skate 26 cm/s once kept on
+    the floor) although the data has none; reconstruction and consistency losses weigh a few
+    millimetres of foot drift per frame as nothing. Both inputs (B, F, 276) unnormalized, same frame.
+    """
+    def step(x: torch.Tensor) -> torch.Tensor:
+        j = joints_of(x)[..., list(PLANT_JOINTS), :]
+        return j[:, 1:] - j[:, :-1]
+
+    planted = (step(target).norm(dim=-1) < PLANT_STILL_M).float()
+    return (step(future).pow(2).sum(-1) * planted).sum() / planted.sum().clamp(min=1.0)
 
 
 def rollout_history(
@@ -215,6 +241,9 @@ def vae_step(
         + cfg.kl_weight * kl
         + cfg.aux_weight * (terms["joints_delta"] + terms["transl_delta"] + terms["orient_delta"])
     )
+    if cfg.plant_weight:
+        terms["plant"] = plant_loss(normalizer.denormalize(pred), normalizer.denormalize(future_n))
+        loss = loss + cfg.plant_weight * terms["plant"]
     terms["loss"] = loss
     return loss, terms, pred
 
@@ -250,6 +279,9 @@ def denoiser_step(
         + cfg.feature_rec_weight * terms["feature_rec"]
         + cfg.aux_weight * (terms["joints_delta"] + terms["transl_delta"] + terms["orient_delta"])
     )
+    if cfg.plant_weight:
+        terms["plant"] = plant_loss(normalizer.denormalize(pred), normalizer.denormalize(future_n))
+        loss = loss + cfg.plant_weight * terms["plant"]
     terms["loss"] = loss
     return loss, terms
 

@@ -170,7 +170,7 @@ def test_hop_uses_one_foot_with_small_ballistic_hops(skill, stance, free):
     assert 1.7 <= rate <= 2.3
     takeoffs = np.flatnonzero((feet_z[1:, stance] > TOE_HEIGHT_M + 1e-4) & (feet_z[:-1, stance] <= TOE_HEIGHT_M + 1e-4))
     rises = [joints[a:b, 0, 2].max() - joints[a, 0, 2] for a, b in zip(takeoffs, downs[downs > takeoffs[0]])]
-    assert 0.04 <= np.median(rises) <= 0.16
+    assert 0.02 <= np.median(rises) <= 0.10  # low hops (apex 3-7 cm) keep DART's floor distance <= 5 cm
 
 
 def test_jump_forward_takes_off_with_both_feet():
@@ -179,7 +179,7 @@ def test_jump_forward_takes_off_with_both_feet():
     air = feet_z.min(axis=1) > 0.05
     assert air.any() and np.array_equal(air, feet_z.max(axis=1) > 0.05)  # both feet leave and land together
     standing = np.median(joints[:, 0, 2])
-    assert joints[:, 0, 2].max() - standing > 0.15  # flight apex
+    assert joints[:, 0, 2].max() - standing > 0.04  # flight apex (5-10 cm: floor distance <= 5 cm)
     assert joints[:, 0, 2].min() < standing - 0.12  # crouch and landing absorption
     assert np.linalg.norm(joints[-1, 0, :2] - joints[0, 0, :2]) > 0.5
 

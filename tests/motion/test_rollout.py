@@ -68,3 +68,30 @@ def test_pelvis_delta_from_seed_matches(tiny_model):
     seed = tiny_model.seed_history[0, 0]
     d = seed[SLICES["joints"]][:3] - seed[SLICES["transl"]]
     torch.testing.assert_close(d, tiny_model.pelvis_delta, atol=1e-5, rtol=0)
+
+
+def test_floor_snap_lifts_sinking_lowers_hovering_and_keeps_flight(tiny_model):
+    from latentrl.motion.canonical import WorldTransform
+
+    world = WorldTransform.identity(3)
+    joints = torch.zeros(3, 8, 22, 3)
+    joints[..., 2] = torch.linspace(0.0, 1.0, 22)  # lowest joint at 0, pelvis-ish joints above
+    lows = torch.tensor([-0.20, 0.03, 0.30])  # sunk, hovering within the band, in the air
+    joints[..., 2] += lows[:, None, None]
+    snapped, new_world = tiny_model._snap_to_floor(joints, world)
+    assert torch.allclose(snapped[..., 2].amin(dim=(1, 2)), torch.tensor([0.0, 0.0, 0.30]), atol=1e-6)
+    assert torch.allclose(new_world.translation[:, 2], torch.tensor([0.20, -0.03, 0.0]), atol=1e-6)
+    assert torch.equal(snapped[..., :2], joints[..., :2]) and torch.equal(new_world.rotation, world.rotation)
+
+
+def test_floor_snap_keeps_long_rollouts_on_the_floor_and_can_be_turned_off(tiny_model):
+    g = torch.Generator().manual_seed(0)
+    roll = tiny_model.rollout("walk", num_steps=6, batch=4, generator=g)
+    lowest = roll.joints_world[:, 2:, :, 2].reshape(4, 6, 8 * 22).amin(dim=-1)
+    assert (lowest >= -1e-5).all()  # never below the floor
+    tiny_model.floor_snap = None
+    try:
+        free = tiny_model.rollout("walk", num_steps=6, batch=4, generator=torch.Generator().manual_seed(0))
+    finally:
+        tiny_model.floor_snap = 0.05
+    assert torch.allclose(free.joints_world[..., :2], roll.joints_world[..., :2], atol=1e-5)

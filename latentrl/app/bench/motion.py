@@ -22,6 +22,7 @@ class MotionBenchRequest:
     guidance: float = GUIDANCE_SCALE
     seed: int = 0
     json: str | None = None
+    no_floor_snap: bool = False
 
 
 # --------------------------------------------------------------------------- motion quality
@@ -36,6 +37,8 @@ MOTION_PROBES = {
     "turn right": "turn_right",
     "jump forward": "jump_forward",
     "walk backwards": "walk_backward",
+    "sidestep left": "sidestep_left",
+    "sidestep right": "sidestep_right",
 }
 
 
@@ -68,13 +71,14 @@ def _pelvis_over_feet(joints: torch.Tensor) -> torch.Tensor:
 
 
 def steering_spread_deg(model, text: str, batch: int = 64, steps: int = 4, seed: int = 0,
-                        guidance: float = GUIDANCE_SCALE) -> float:
+                        guidance: float = GUIDANCE_SCALE, action_box: float | None = None) -> float:
     """How much the action (initial noise) can steer ``text``: 5-95 % spread of the yaw change, degrees.
 
     Every sequence starts from the same state (seed history 0 and two primitives with shared
     noise, so the gait is under way), then takes ``steps`` primitives with independent N(0, I)
     noise. A controller can only turn as far as the noise moves the heading, so a narrow spread
-    means a policy cannot steer this prompt toward a goal, whatever the reward.
+    means a policy cannot steer this prompt toward a goal, whatever the reward. With ``action_box``
+    the noise is uniform in +-``action_box`` per value instead (a policy's whole action range).
     """
     from latentrl.evaluation import metrics as M
 
@@ -84,10 +88,102 @@ def steering_spread_deg(model, text: str, batch: int = 64, steps: int = 4, seed:
     for _ in range(2):
         shared = torch.randn(1, *model.latent_shape, generator=g).expand(batch, *model.latent_shape)
         state = model.rollout_step(state, emb, shared.contiguous().to(model.device), guidance).state
-    roll = model.rollout(text, steps, batch=batch, generator=g, guidance_scale=guidance, state=state)
+    noise = None
+    if action_box is not None:
+        noise = (torch.rand(steps, batch, *model.latent_shape, generator=g) * 2 - 1) * action_box
+    roll = model.rollout(text, steps, batch=batch, noise=noise, generator=g, guidance_scale=guidance, state=state)
     yaw = M.heading_change_rad(roll.joints_world[:, 1:]) * 180 / math.pi
     lo, hi = torch.quantile(yaw.float().cpu(), torch.tensor([0.05, 0.95])).tolist()
     return hi - lo
+
+
+#: The skill-switch probe: (prompt, seconds) in order; each switch should show within 1 s.
+SWITCH_TIMELINE = (("walk", 4.0), ("run", 4.0), ("hop on left leg", 4.0), ("walk", 4.0))
+_SWITCH_WINDOW = 15  # frames (0.5 s) over which a skill's signature must hold
+
+
+def _skill_signature(text: str, joints: torch.Tensor) -> torch.Tensor:
+    """(B, W, 22, 3) windows -> (B,) True where the window moves like ``text`` (run, hop, walk)."""
+    from latentrl.evaluation import metrics as M
+
+    speed = M.pelvis_speed_m_s(joints)
+    shares = M.foot_contact_shares(joints)
+    if text == "run":
+        return speed > 2.0
+    if text == "hop on left leg":
+        return (shares["left_only"] >= 0.5) & (shares["right_only"] <= 0.1)
+    return (speed > 0.5) & (speed < 2.0) & (shares["left_only"] >= 0.15) & (shares["right_only"] >= 0.15)
+
+
+def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float = 5.0) -> dict:
+    """Roll ``SWITCH_TIMELINE`` out; per switch, seconds until the new skill's signature holds.
+
+    Latency is from the text change to the start of the first 0.5 s window that moves like the new
+    text (run: speed > 2 m/s; hop on left leg: left foot alone >= 50 % of frames, right alone <= 10 %;
+    walk: 0.5-2 m/s with each foot alone >= 15 %); ``inf`` where it never does. Also the lowest joint's
+    worst depth below the floor over the whole timeline.
+    """
+    from latentrl.evaluation import metrics as M
+
+    texts, starts = [], []
+    for text, seconds in SWITCH_TIMELINE:
+        starts.append(len(texts))
+        texts += [text] * max(1, round(seconds * 30 / 8))
+    g = torch.Generator().manual_seed(seed)
+    roll = model.rollout(texts, len(texts), batch=batch, generator=g, guidance_scale=guidance)
+    j = roll.joints_world[:, 2:]
+    out = {"switches": []}
+    for k in range(1, len(SWITCH_TIMELINE)):
+        text, first = SWITCH_TIMELINE[k][0], starts[k] * 8
+        last = (starts[k + 1] * 8 if k + 1 < len(starts) else j.shape[1]) - _SWITCH_WINDOW
+        latency = torch.full((batch,), math.inf)
+        for f in range(last, first - 1, -1):  # backwards: the earliest matching window wins
+            hit = _skill_signature(text, j[:, f:f + _SWITCH_WINDOW])
+            latency = torch.where(hit, torch.tensor((f - first) / 30), latency)
+        out["switches"].append({
+            "to": text,
+            "median_s": float(latency.median()),
+            "within_1s": float((latency <= 1.0).float().mean()),
+        })
+    out["deepest_below_floor_cm"] = float((-j[..., 2].amin(dim=-1)).clamp(min=0).max()) * 100
+    out["penetration_cm"] = float(M.lowest_joint_penetration_cm(j).mean())
+    return out
+
+
+#: Steering-spread floors (degrees over 32 frames) of the default-model targets.
+STEER_FLOOR_DEG = {"walk": 35.0, "run": 30.0, "hop on left leg": 25.0, "hop on right leg": 25.0}
+#: Floor-distance ceilings (cm) and skate ceilings (cm/s) of the default-model targets.
+FLOOR_MAX_CM = {"walk": 3.0, "run": 3.0, "stand still": 3.0, "hop on left leg": 5.0, "hop on right leg": 5.0,
+                "jump forward": 5.0}
+SKATE_MAX_CM_S = {"walk": 2.0, "run": 3.0, "hop on left leg": 3.0, "hop on right leg": 3.0}
+
+
+def motion_targets(p: dict, switch: dict, ref: dict | None) -> dict[str, bool]:
+    """The default motion model's targets (docs/benchmarks.md) as named pass/fail checks."""
+    checks = {}
+    for text, floor in STEER_FLOOR_DEG.items():
+        checks[f"steer {text} >= {floor:g} deg"] = p[text]["steer_spread_deg"] >= floor
+    if ref:
+        low = [t for t, r in p.items() if (r.get("data") or {}).get("steer_spread_deg")
+               and r["steer_spread_deg"] < 0.6 * r["data"]["steer_spread_deg"]]
+        checks["steer >= 60% of the data's for every prompt" + (f" (short: {', '.join(low)})" if low else "")] = not low
+    for text, cap in FLOOR_MAX_CM.items():
+        checks[f"floor {text} <= {cap:g} cm"] = p[text]["floor_cm"] <= cap
+    checks["penetration <= 1 cm for every prompt"] = all(r["penetration_cm"] <= 1.0 for r in p.values())
+    for text, cap in SKATE_MAX_CM_S.items():
+        checks[f"skate {text} <= {cap:g} cm/s"] = p[text]["skate_cm_s"] <= cap
+    checks["hop on left leg: left foot alone >= 60%"] = p["hop on left leg"]["left_only"] >= 0.6
+    checks["hop on right leg: right foot alone >= 60%"] = p["hop on right leg"]["right_only"] >= 0.6
+    checks["walk 1.0-1.6 m/s"] = 1.0 <= p["walk"]["speed_m_s"] <= 1.6
+    checks["run >= 2.5 m/s"] = p["run"]["speed_m_s"] >= 2.5
+    checks["walk backwards moves backwards"] = p["walk backwards"]["forward_m_s"] < -0.2
+    checks["sidestep left moves left"] = (p["sidestep left"]["rightward_m_s"] < -0.1
+                                          and abs(p["sidestep left"]["forward_m_s"]) < 0.1)
+    checks["sidestep right moves right"] = (p["sidestep right"]["rightward_m_s"] > 0.1
+                                            and abs(p["sidestep right"]["forward_m_s"]) < 0.1)
+    checks["walk -> run -> hop -> walk: each switch within 1 s in >= 75% of rollouts, on the floor"] = (
+        all(x["within_1s"] >= 0.75 for x in switch["switches"]) and switch["deepest_below_floor_cm"] <= 1.0)
+    return checks
 
 
 def bench_motion(args: MotionBenchRequest) -> int:
@@ -96,6 +192,8 @@ def bench_motion(args: MotionBenchRequest) -> int:
     from latentrl.motion.checkpoint import load_motion_model
 
     model = load_motion_model(args.motion)
+    if args.no_floor_snap:
+        model.floor_snap = None
     steps = max(1, round(args.seconds * 30 / 8))
     ref = _data_reference(model)
     out = {
@@ -109,7 +207,8 @@ def bench_motion(args: MotionBenchRequest) -> int:
     }
     print(
         f"{'prompt':>18} {'speed m/s':>9} {'skate cm/s':>10} {'floor cm':>8} {'pelvis z':>13} "
-        f"{'turn deg/s':>10} {'L-only':>6} {'R-only':>6} {'steer deg':>9}"
+        f"{'turn deg/s':>10} {'L-only':>6} {'R-only':>6} {'steer deg':>9} {'box4':>5} {'pen cm':>6} "
+        f"{'fwd':>5} {'right':>5}"
     )
     for text, skill in MOTION_PROBES.items():
         g = torch.Generator().manual_seed(args.seed)
@@ -131,15 +230,26 @@ def bench_motion(args: MotionBenchRequest) -> int:
             "left_only": float(shares["left_only"].mean()),
             "right_only": float(shares["right_only"].mean()),
             "steer_spread_deg": steering_spread_deg(model, text, seed=args.seed, guidance=args.guidance),
+            "steer_spread_box4_deg": steering_spread_deg(model, text, seed=args.seed, guidance=args.guidance,
+                                                         action_box=4.0),
+            "penetration_cm": float(M.lowest_joint_penetration_cm(j).mean()),
         }
+        fwd, side = M.body_frame_velocity_m_s(j)
+        row["forward_m_s"], row["rightward_m_s"] = float(fwd.mean()), float(side.mean())
         if ref and skill in ref["skills"]:
             row["data"] = ref["skills"][skill]
         out["probes"][text] = row
         print(
             f"{text:>18} {row['speed_m_s']:9.2f} {row['skate_cm_s']:10.2f} {row['floor_cm']:8.2f} "
             f"{row['pelvis_z_min']:6.2f}-{row['pelvis_z_max']:<6.2f} {row['turn_deg_s']:10.1f} "
-            f"{row['left_only']:6.2f} {row['right_only']:6.2f} {row['steer_spread_deg']:9.1f}"
+            f"{row['left_only']:6.2f} {row['right_only']:6.2f} {row['steer_spread_deg']:9.1f} "
+            f"{row['steer_spread_box4_deg']:5.1f} {row['penetration_cm']:6.2f} {row['forward_m_s']:5.2f} "
+            f"{row['rightward_m_s']:5.2f}", flush=True
         )
+    out["skill_switch"] = sw = skill_switch_seconds(model, batch=args.batch, seed=args.seed, guidance=args.guidance)
+    print("skill switch:", ", ".join(f"->{x['to']} {x['median_s']:.2f}s ({x['within_1s']:.0%} <= 1 s)"
+                                     for x in sw["switches"]),
+          f"deepest below floor {sw['deepest_below_floor_cm']:.1f} cm")
     p = out["probes"]
     checks = {
         "stable: finite, body height (pelvis over lower foot) in data range +-10 cm": all(
@@ -159,16 +269,14 @@ def bench_motion(args: MotionBenchRequest) -> int:
         "turn left curves left": p["turn left"]["turn_deg_s"] > 5,
         "turn right curves right": p["turn right"]["turn_deg_s"] < -5,
     }
-    if ref and "walk" in ref["skills"]:
-        data_walk = ref["skills"]["walk"]
-        checks["walk skate within 1.5x of data"] = p["walk"]["skate_cm_s"] <= 1.5 * max(data_walk["skate_cm_s"], 0.1)
-        checks["walk floor within 1.5x of data"] = p["walk"]["floor_cm"] <= 1.5 * max(data_walk["floor_cm"], 0.1)
+    checks.update(motion_targets(p, out["skill_switch"], ref))
+    if ref:
         out["data_reference"] = {"pelvis_z_range": ref["pelvis_z_range"],
-                                 "pelvis_over_feet_range": ref["pelvis_over_feet_range"], "walk": data_walk}
+                                 "pelvis_over_feet_range": ref["pelvis_over_feet_range"], "skills": ref["skills"]}
     train_s = model.info.get("train_seconds")
     if train_s is not None:
         out["train_seconds"] = train_s
-        checks["training <= 20 min"] = train_s <= 1200
+        checks["training <= 2 h"] = train_s <= 7200
     out["checks"] = checks
     for name, ok in checks.items():
         print(f"[{'pass' if ok else 'FAIL'}] {name}")

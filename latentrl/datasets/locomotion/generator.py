@@ -150,7 +150,32 @@ def foot_skate(joints: np.ndarray, horizontal: bool = False) -> np.ndarray:
     return (np.linalg.norm(delta, axis=-1) * weight).mean(axis=-1)
 
 
-_STAT_KEYS = ("frames", "pure", "pairs", "speed", "skate", "skate_xy", "floor")
+_STAT_KEYS = ("frames", "pure", "pairs", "speed", "skate", "skate_xy", "floor", "left_only", "right_only")
+_CONTACT_SHARE_M = 0.05  # a foot joint this close to the floor counts as down (as ``bench motion``'s shares)
+_STEER_WINDOW = 32  # frames: the window of ``bench motion``'s steering spread (4 primitives)
+
+
+def _hip_yaw(joints: np.ndarray) -> np.ndarray:
+    """(T,) unwrapped heading of the hip axis (right_hip - left_hip), radians."""
+    x = joints[:, 2, :2] - joints[:, 1, :2]
+    return np.unwrap(np.arctan2(x[:, 1], x[:, 0]))
+
+
+def _window_turns(yaw: np.ndarray, mask: np.ndarray, stride: int = 8) -> list[float]:
+    """Yaw changes (deg) over every ``_STEER_WINDOW``-frame window (step ``stride``) inside ``mask``."""
+    out = []
+    for start in range(0, len(yaw) - _STEER_WINDOW, stride):
+        if mask[start:start + _STEER_WINDOW + 1].all():
+            out.append(math.degrees(yaw[start + _STEER_WINDOW] - yaw[start]))
+    return out
+
+
+def _spread_deg(turns: list[float]) -> float | None:
+    """5-95 % spread of the window turns, degrees (the data's side of ``bench motion``'s steer column)."""
+    if len(turns) < 20:
+        return None
+    lo, hi = np.percentile(turns, [5, 95])
+    return round(float(hi - lo), 2)
 
 
 def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
@@ -162,6 +187,7 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
     floor distance, in cm).
     """
     acc: dict[str, dict[str, float]] = {}
+    steer: dict[str, list[float]] = {}
     texts: dict[str, int] = {}
     total = transitions = 0
     for seq in seqs:
@@ -183,6 +209,8 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
         speed = np.linalg.norm(np.diff(joints[:, 0, :2], axis=0), axis=-1) * FPS
         skate, skate_xy = foot_skate(joints), foot_skate(joints, horizontal=True)
         floor = np.abs(joints[:, list(FOOT_JOINTS), 2].min(axis=-1))
+        yaw = _hip_yaw(joints)
+        feet_down = joints[:, list(FOOT_JOINTS), 2] < _CONTACT_SHARE_M
         for skill in set(owner[pure]):
             m, mp = pure & (owner == skill), pair & (owner[1:] == skill)
             a = acc[skill]
@@ -192,6 +220,9 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
             a["speed"] += float(speed[mp].sum())
             a["skate"] += float(skate[mp].sum())
             a["skate_xy"] += float(skate_xy[mp].sum())
+            a["left_only"] += float((feet_down[m, 0] & ~feet_down[m, 1]).sum())
+            a["right_only"] += float((feet_down[m, 1] & ~feet_down[m, 0]).sum())
+            steer.setdefault(skill, []).extend(_window_turns(yaw, m))
     skills = {}
     for skill, a in sorted(acc.items(), key=lambda kv: SKILLS.index(kv[0]) if kv[0] in SKILLS else 99):
         pairs, pure = max(a["pairs"], 1), max(a["pure"], 1)
@@ -202,6 +233,9 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
             "skate_cm_s": round(100 * FPS * a["skate"] / pairs, 3),
             "skate_xy_cm_s": round(100 * FPS * a["skate_xy"] / pairs, 3),
             "floor_cm": round(100 * a["floor"] / pure, 3),
+            "left_only": round(a["left_only"] / pure, 3),
+            "right_only": round(a["right_only"] / pure, 3),
+            "steer_spread_deg": _spread_deg(steer.get(skill, [])),
         }
     return {"frames": total, "transition_frames": transitions,
             "transition_fraction": round(transitions / max(total, 1), 3), "skills": skills, "texts": texts}

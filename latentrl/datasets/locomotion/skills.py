@@ -79,20 +79,37 @@ def _drift_params(rng: np.random.Generator, amplitude: float, strength: tuple[fl
     return (a[0], f[0], p[0], a[1], f[1], p[1])
 
 
-def _wander_params(rng: np.random.Generator, amplitude: float) -> tuple[float, ...]:
-    """Heading wander for walk, run and hop: two random sinusoids of 0.25-0.8 Hz, each up to ``amplitude``.
+class _Steering:
+    """A yaw rate that holds a random value and switches to a new one at random times (rad/s of ``t``).
 
-    Why: a policy steers these skills only through the diffusion noise, and the noise can only pick
-    among futures the data holds for the same 2-frame history. With slow drift alone the next 8 frames'
-    heading follows from the history, and the trained model ignored the noise for heading (5-95 %
-    yaw spread over 32 frames: walk 11 deg, run 5, hop 1), so run and hop reach policies could not
-    learn. Yaw rates that change within a primitive make the turn the noise's to choose. Each
-    block draws its own strength from 0 (straight) to ``amplitude`` (a weaving path).
+    Why: a policy steers walk, run and hop only through the diffusion noise, and the noise can only
+    pick among futures the data holds for the same 2-frame history. Smooth sinusoidal wander (the
+    previous design) is predictable from the history, and the trained model ignored the noise for
+    heading (5-95 % yaw spread over 32 frames: walk 14 deg, run 11, hop 1). Here the yaw rate holds
+    each value for 0.25-0.9 s and then eases to a new uniform draw in +-``amplitude`` within
+    ``ramp_s``, so whether the next primitive turns left, right or not at all is not in its history;
+    a quarter of the holds are straight (zero), so straight lines stay common.
     """
-    return _drift_params(rng, amplitude, strength=(0.0, 1.0), hz=(0.25, 0.8))
+
+    def __init__(self, rng: np.random.Generator, amplitude: float, hold_s: tuple[float, float] = (0.25, 0.9),
+                 ramp_s: float = 0.2, horizon_s: float = 60.0):
+        holds = rng.uniform(*hold_s, int(horizon_s / hold_s[0]) + 2)
+        self.knots = np.concatenate(([-1e9], np.cumsum(holds) - holds[0]))
+        values = amplitude * rng.uniform(-1.0, 1.0, len(self.knots))
+        values[rng.random(len(values)) < 0.25] = 0.0
+        self.values = values
+        self.ramp_s = ramp_s
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(self.knots, t, side="right") - 1, 0, len(self.knots) - 1)
+        prev = self.values[np.maximum(i - 1, 0)]
+        ease = _smoothstep((t - self.knots[i]) / self.ramp_s)
+        return prev + (self.values[i] - prev) * ease
 
 
-def _drift(t: np.ndarray, d: tuple[float, ...]) -> np.ndarray:
+def _drift(t: np.ndarray, d) -> np.ndarray:
+    if isinstance(d, _Steering):
+        return d(t)
     return d[0] * np.sin(2 * math.pi * d[1] * t + d[2]) + d[3] * np.sin(2 * math.pi * d[4] * t + d[5])
 
 
@@ -102,6 +119,9 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     edges = np.flatnonzero(np.diff(padded))
     return list(zip(edges[0::2].tolist(), edges[1::2].tolist()))
 
+
+#: Largest yaw rate (deg/s) of the random steering in walk, run and hop blocks.
+WALK_STEER_DEG_S, RUN_STEER_DEG_S, HOP_STEER_DEG_S = 80.0, 60.0, 55.0
 
 # --- skills: parameters and channels ----------------------------------------------------------------------
 
@@ -158,7 +178,7 @@ def _sample_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
         k = (v - 0.8) / 0.8
         steps = np.clip((1.7 + 0.4 * k) * scale + rng.normal(0, 0.03), 1.7, 2.1)
         yaw = turn * math.radians(rng.uniform(30, 90))
-        drift = _wander_params(rng, math.radians(25)) if turn == 0 else _drift_params(rng, math.radians(3))
+        drift = _Steering(rng, math.radians(WALK_STEER_DEG_S)) if turn == 0 else _drift_params(rng, math.radians(3))
         return dict(v_fwd=v, v_side=0.0, k=k, f=steps / 2, yaw_rate=yaw, drift=drift, rocker=0.10,
                     toe_off=0.62 - 0.03 * k, width=0.035 * body.height, shift=-(0.07 + 0.02 * k) * body.height)
     if skill == "walk_backward":
@@ -175,17 +195,17 @@ def _sample_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
         v = rng.uniform(2.5, 4.0)
         k = (v - 2.5) / 1.5
         steps = np.clip((2.6 + 0.4 * k) * scale + rng.normal(0, 0.03), 2.6, 3.0)
-        return dict(v_fwd=v, k=k, f=steps / 2, duty=0.36 - 0.06 * k, drift=_wander_params(rng, math.radians(20)),
-                    shift=-0.08 * body.height)
+        return dict(v_fwd=v, k=k, f=steps / 2, duty=0.45 - 0.05 * k,
+                    drift=_Steering(rng, math.radians(RUN_STEER_DEG_S)), shift=-0.08 * body.height)
     if skill in ("hop_left", "hop_right"):
         f = rng.uniform(1.8, 2.2)
         t_flight_max = 0.55 / f
-        apex = rng.uniform(0.05, min(0.15, G * t_flight_max**2 / 8))
+        apex = rng.uniform(0.03, min(0.07, G * t_flight_max**2 / 8))
         t_flight = math.sqrt(8 * apex / G)
         return dict(v_fwd=rng.uniform(0.0, 1.0), f=f, apex=apex, duty=1.0 - t_flight * f,
-                    drift=_wander_params(rng, math.radians(18)))
+                    drift=_Steering(rng, math.radians(HOP_STEER_DEG_S)))
     if skill == "jump_forward":
-        apex = rng.uniform(0.2, 0.35)
+        apex = rng.uniform(0.05, 0.10)
         t_flight = math.sqrt(8 * apex / G)
         return dict(f=1.0 / rng.uniform(1.8, 2.1), apex=apex, t_flight=t_flight,
                     v_jump=rng.uniform(0.6, 1.1) / t_flight, jumps=int(rng.integers(1, 3)))
@@ -295,9 +315,9 @@ def _hop(phase: np.ndarray, t: np.ndarray, p: dict, body: Body, side: float) -> 
     ch["elbow_r"][:] = math.radians(35)
     ch["stance_width"][:] = 0.02 * body.height
     ch["toe_out"][:] = math.radians(5)
-    ch["clearance"][:] = 0.03 + 1.2 * p["apex"]
-    ch["heel_rise"][:] = math.radians(28)
-    ch["toe_land"][:] = math.radians(14)
+    ch["clearance"][:] = 0.005 + 0.3 * p["apex"]
+    ch["heel_rise"][:] = math.radians(15)
+    ch["toe_land"][:] = math.radians(6)
     stance = _window(phase, 0.0, p["duty"])
     never = np.zeros_like(stance)
     contact = np.stack((stance, never) if side < 0 else (never, stance), axis=-1)
