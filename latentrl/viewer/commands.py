@@ -1,0 +1,84 @@
+"""Bodies of ``latentrl view`` and ``latentrl play``, taking plain arguments (the CLI only parses flags).
+
+Both check their input first (one-line errors, exit 2), then start a Viser server on ``host:port``,
+print the URL, and serve until Ctrl-C, which stops the server and returns 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from latentrl.errors import CheckpointError, ConfigError
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8080
+
+
+def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
+    """Show a motion ``.npz``, an evaluation folder, a run's latest evaluation or a folder of motions."""
+    from latentrl.viewer.server import announce, require_viser, serve_until_interrupted, start_server
+    from latentrl.viewer.sources import open_source
+
+    source = open_source(path)
+    require_viser()
+    server = start_server(host, port, label=f"latentrl view {Path(path).name}")
+    from latentrl.viewer.playback import Player
+
+    player = Player(server, source)
+    player.start()
+    announce("view", host, server.get_port())
+    return serve_until_interrupted(server, "view", player.stop)
+
+
+def _policy_text(checkpoint: dict, texts: list[str]) -> str:
+    """The first prompt the policy was trained with, if the env knows it, else the env's first."""
+    trained = ((checkpoint.get("config") or {}).get("env") or {}).get("texts") or []
+    return next((t for t in trained if t in texts), texts[0])
+
+
+def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str = "default",
+                 device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
+                 allow_motion_mismatch: bool = False) -> int:
+    """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list."""
+    import torch
+
+    from latentrl.viewer.server import announce, require_viser, serve_until_interrupted, start_server
+
+    policy = Path(policy)
+    if not policy.is_file():
+        raise CheckpointError(f"{policy}: no such policy checkpoint (give a .pt written by latentrl train)")
+    require_viser()
+    from latentrl.viewer.server import check_port
+
+    check_port(host, port)  # before the model loads
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.ppo import load_policy
+    from latentrl.ppo.checkpoint import check_shapes
+    from latentrl.preflight import check_device
+    from latentrl.viewer.live import ENV_FIELDS, LiveController, SteeredReachEnv
+
+    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+    check_device(device, "--device")
+    model = load_motion_model(motion, device=device)
+    loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
+                         allow_motion_mismatch=allow_motion_mismatch)
+    encoder = model.text_encoder
+    prompts = list(getattr(encoder, "prompts", None) or [])
+    trained = ((loaded.checkpoint.get("config") or {}).get("env") or {}).get("texts") or []
+    texts = list(dict.fromkeys([*([text] if text else []), *trained, *prompts])) or ["walk"]
+    env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
+    settings = {k: env_cfg[k] for k in ENV_FIELDS if env_cfg.get(k) is not None}
+    try:
+        env = SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
+                              autoreset_mode="Disabled", **settings)
+    except ConfigError as exc:
+        raise ConfigError(f"--text: {exc}") from None
+    check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
+    start = text or _policy_text(loaded.checkpoint, list(env.texts))
+    server = start_server(host, port, label=f"latentrl play {policy.name}")
+    title = (f"**latentrl play** `{policy}` on motion `{motion}`  \n"
+             "Click on the floor to set the goal; pick the text below.")
+    controller = LiveController(server, env, loaded.policy, title, start, deterministic=deterministic, seed=seed)
+    controller.start()
+    announce("play", host, server.get_port())
+    return serve_until_interrupted(server, "play", controller.stop)
