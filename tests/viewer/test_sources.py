@@ -44,7 +44,7 @@ def test_run_shows_its_latest_evaluation(tmp_path):
     with pytest.raises(DataError, match="no evaluation yet.*latentrl eval .*final.pt"):
         open_source(run)
     old = write_eval(run / "eval", episodes=1)
-    new = write_eval(run / "eval-final", episodes=2)
+    write_eval(run / "eval-final", episodes=2)
     past = time.time() - 100
     os.utime(old / "report.json", (past, past))
     source = open_source(run)
