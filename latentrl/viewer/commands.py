@@ -16,7 +16,7 @@ DEFAULT_PORT = 8080
 
 def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
     """Show a motion ``.npz``, an evaluation folder, a run's latest evaluation or a folder of motions."""
-    from latentrl.viewer.server import announce, require_viser, serve_until_interrupted, start_server
+    from latentrl.viewer.server import require_viser, serve_until_interrupted, start_server
     from latentrl.viewer.sources import open_source
 
     source = open_source(path)
@@ -26,8 +26,7 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
 
     player = Player(server, source)
     player.start()
-    announce("view", host, server.get_port())
-    return serve_until_interrupted(server, "view", player.stop)
+    return serve_until_interrupted(server, "view", host, player.stop)
 
 
 def _policy_text(checkpoint: dict, texts: list[str]) -> str:
@@ -42,7 +41,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list."""
     import torch
 
-    from latentrl.viewer.server import announce, require_viser, serve_until_interrupted, start_server
+    from latentrl.viewer.server import require_viser, serve_until_interrupted, start_server
 
     policy = Path(policy)
     if not policy.is_file():
@@ -80,5 +79,4 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
              "Click on the floor to set the goal; pick the text below.")
     controller = LiveController(server, env, loaded.policy, title, start, deterministic=deterministic, seed=seed)
     controller.start()
-    announce("play", host, server.get_port())
-    return serve_until_interrupted(server, "play", controller.stop)
+    return serve_until_interrupted(server, "play", host, controller.stop)

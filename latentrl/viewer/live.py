@@ -19,7 +19,7 @@ import torch
 
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.motion.skeleton import FPS, PELVIS
-from latentrl.viewer.playback import follow_cameras, move_cameras
+from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
 from latentrl.viewer.scene import SkeletonScene
 
 MAX_GOAL_DISTANCE_M = 50.0
@@ -130,7 +130,7 @@ class LiveController:
         self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
         self.reset_button.on_click(lambda event: self.reset())
         server.scene.on_click()(self._clicked)
-        self.followed: np.ndarray | None = None
+        self.follower = CameraFollower(server)
         self.reset()
         self.thread = threading.Thread(target=self._run, name="latentrl-play", daemon=True)
 
@@ -178,7 +178,7 @@ class LiveController:
             self.scene.show_goal(None)
             self.scene.show_pose(pose)
             self.scene.show_trail(np.array(self.trail))
-            self.followed = None
+            self.follower.reset()
             move_cameras(self.server, *(np.array(v) for v in START_CAMERA))
 
     def pelvis(self) -> np.ndarray:
@@ -203,6 +203,8 @@ class LiveController:
             self.active = False
             self.reached_at = time.perf_counter()
             self.message = f"reached the goal in {self.reached_at - self.goal_set_at:.1f} s; click again"
+            print(f"latentrl play: reached ({self.goal[0]:.2f}, {self.goal[1]:.2f}) "
+                  f"in {self.reached_at - self.goal_set_at:.1f} s", flush=True)
 
     def _show_next(self) -> None:
         pose = self.frames.popleft()
@@ -211,14 +213,12 @@ class LiveController:
         del self.trail[:-TRAIL_FRAMES]
         with self.server.atomic():
             self.scene.show_pose(pose)
-            self.scene.show_trail(np.array(self.trail))
+            if len(self.trail) % TRAIL_EVERY == 0 or not self.frames:
+                self.scene.show_trail(np.array(self.trail))
             if self.follow.value:
-                here = pose[PELVIS] * np.array([1.0, 1.0, 0.0])
-                if self.followed is not None:
-                    follow_cameras(self.server, here - self.followed)
-                self.followed = here
+                self.follower.update(pose[PELVIS])
             else:
-                self.followed = None
+                self.follower.reset()
 
     def status_text(self) -> str:
         p = self.pelvis()
@@ -246,7 +246,9 @@ class LiveController:
                     next_frame = now
                 if now - count_since >= 1.0:
                     self.show_fps, shown, count_since = shown / (now - count_since), 0, now
-                if now - last_status >= 0.2:
-                    self.status.content = self.status_text()
+                if now - last_status >= 0.25:
+                    text = self.status_text()
+                    if text != self.status.content:  # an idle page gets no messages
+                        self.status.content = text
                     last_status = now
             time.sleep(max(0.0, min(next_frame - time.perf_counter(), 0.01)))

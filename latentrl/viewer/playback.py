@@ -14,6 +14,8 @@ from latentrl.viewer.sources import Clip, Source, metrics_table
 
 SPEEDS = ("0.25", "0.5", "1", "2", "4")
 TICK_S = 1.0 / 30.0
+TRAIL_EVERY = 3
+"""While playing, the pelvis trail is redrawn every 3rd frame (it changes slowly; fewer messages)."""
 
 
 def move_cameras(server: Any, position: np.ndarray, look_at: np.ndarray) -> None:
@@ -27,13 +29,31 @@ def move_cameras(server: Any, position: np.ndarray, look_at: np.ndarray) -> None
             client.camera.look_at = look_at
 
 
-def follow_cameras(server: Any, shift: np.ndarray) -> None:
-    """Move every camera (and its target) by ``shift``: the view follows the body, keeping the user's angle."""
-    for client in server.get_clients().values():
-        cam = client.camera
-        with client.atomic():
-            cam.position = tuple(float(v) for v in np.asarray(cam.position) + shift)
-            cam.look_at = tuple(float(v) for v in np.asarray(cam.look_at) + shift)
+FOLLOW_STEP_M = 0.03
+"""The camera follows the body once it has moved this far (fewer camera messages, no visible lag)."""
+
+
+class CameraFollower:
+    """Keeps every browser's camera looking at the body, at the angle and distance the user left it."""
+
+    def __init__(self, server: Any):
+        self.server = server
+        self.target: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.target = None
+
+    def update(self, pelvis: np.ndarray, height: float = 0.8) -> None:
+        target = np.array([pelvis[0], pelvis[1], height], dtype=np.float64)
+        if self.target is not None and np.linalg.norm(target - self.target) < FOLLOW_STEP_M:
+            return
+        self.target = target
+        for client in self.server.get_clients().values():
+            cam = client.camera
+            offset = np.asarray(cam.position, dtype=np.float64) - np.asarray(cam.look_at, dtype=np.float64)
+            with client.atomic():
+                cam.look_at = tuple(float(v) for v in target)
+                cam.position = tuple(float(v) for v in target + offset)
 
 
 class Player:
@@ -46,7 +66,7 @@ class Player:
         self.clip: Clip | None = None
         self.frame = 0.0
         self.playing = True
-        self.followed: np.ndarray | None = None
+        self.follower = CameraFollower(server)
         gui = server.gui
         gui.add_markdown(f"**{source.kind}** `{source.title}`  \n{source.summary}")
         labels = [e.label for e in source.entries]
@@ -74,7 +94,8 @@ class Player:
         entry = next(e for e in self.source.entries if e.label == label)
         clip = entry.load()
         with self.lock:
-            self.clip, self.frame, self.followed = clip, 0.0, None
+            self.clip, self.frame = clip, 0.0
+            self.follower.reset()
             self.metrics.content = metrics_table(entry.metrics)
             self.slider.max = clip.frames - 1
             self.scene.set_floor(*floor_extent(clip.joints, clip.waypoints))
@@ -101,18 +122,16 @@ class Player:
         clip = self.clip
         i = int(min(max(self.frame, 0), clip.frames - 1))
         self.scene.show_pose(clip.joints[i])
-        self.scene.show_trail(clip.joints[: i + 1, PELVIS])
+        if i % TRAIL_EVERY == 0 or not self.playing:
+            self.scene.show_trail(clip.joints[: i + 1, PELVIS])
         self.scene.show_goal(None if clip.goals is None else clip.goals[i])
         self.slider.value = i
         text = clip.texts[i] or "(seed frames)"
         self.status.content = f"frame {i + 1}/{clip.frames} · {i / clip.fps:.2f} s · text: **{text}**"
         if self.follow.value:
-            pelvis = clip.joints[i, PELVIS] * np.array([1.0, 1.0, 0.0], dtype=np.float32)
-            if self.followed is not None:
-                follow_cameras(self.server, pelvis - self.followed)
-            self.followed = pelvis
+            self.follower.update(clip.joints[i, PELVIS])
         else:
-            self.followed = None
+            self.follower.reset()
 
     def _run(self) -> None:
         last = time.perf_counter()
@@ -125,6 +144,5 @@ class Player:
                 self.frame += dt * self.clip.fps * float(self.speed.value)
                 if self.frame > self.clip.frames - 1:  # loop
                     self.frame = 0.0
-                    self.followed = None
                 with self.server.atomic():
                     self._draw()

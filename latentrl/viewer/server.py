@@ -65,7 +65,7 @@ def start_server(host: str, port: int, label: str) -> Any:
         with contextlib.redirect_stdout(io.StringIO()):
             server.stop()
         raise ConfigError(f"--port {port}: already in use on {host}; choose another with --port")
-    server.gui.configure_theme(control_width="large", show_share_button=False)
+    server.gui.configure_theme(show_share_button=False)
     return server
 
 
@@ -74,11 +74,12 @@ def announce(command: str, host: str, port: int) -> None:
     print(f"latentrl {command}: open {url_of(host, port)} in a browser (Ctrl-C stops)", flush=True)
 
 
-def serve_until_interrupted(server: Any, command: str, stop: threading.Event | None = None,
+def serve_until_interrupted(server: Any, command: str, host: str, stop: threading.Event | None = None,
                             on_stop: Any = None) -> int:
-    """Block until Ctrl-C (or ``stop`` is set), then stop the server; returns exit status 0."""
+    """Print the URL, block until Ctrl-C (or ``stop`` is set), then stop the server; returns exit status 0."""
     stop = stop or threading.Event()
     try:
+        announce(command, host, server.get_port())  # inside the try: a Ctrl-C right after the line stops cleanly
         while not stop.wait(0.25):
             pass
     except KeyboardInterrupt:
