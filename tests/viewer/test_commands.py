@@ -47,6 +47,11 @@ def test_port_in_use(capsys, motion_file):
         one_line_error(capsys, ["play", str(POLICY), "--port", str(port)], f"--port {port}: already in use")
 
 
+def test_unresolvable_host(capsys, motion_file):
+    pytest.importorskip("viser")
+    one_line_error(capsys, ["view", str(motion_file), "--host", "no.such.host.invalid"], "cannot be resolved")
+
+
 def test_missing_extra_names_it(capsys, motion_file, monkeypatch):
     monkeypatch.setitem(sys.modules, "viser", None)  # import viser -> ImportError
     one_line_error(capsys, ["view", str(motion_file)], "pip install 'latentrl[viewer]'")
