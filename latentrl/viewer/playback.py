@@ -97,7 +97,7 @@ class Player:
             self.clip, self.frame = clip, 0.0
             self.follower.reset()
             self.metrics.content = metrics_table(entry.metrics)
-            self.slider.max = clip.frames - 1
+            self.slider.max = max(clip.frames - 1, 1)
             self.scene.set_floor(*floor_extent(clip.joints, clip.waypoints))
             self.scene.set_waypoints(clip.waypoints)
             move_cameras(self.server, *frame_camera(clip.joints, clip.waypoints))
