@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from latentrl.errors import CheckpointError, ConfigError
+from latentrl.errors import CheckpointError
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -29,27 +29,23 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
     return serve_until_interrupted(server, "view", host, player.stop)
 
 
-def _policy_text(checkpoint: dict, texts: list[str]) -> str:
-    """The first prompt the policy was trained with, if the env knows it, else the env's first."""
-    trained = ((checkpoint.get("config") or {}).get("env") or {}).get("texts") or []
-    return next((t for t in trained if t in texts), texts[0])
-
-
 def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str = "default",
                  device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
                  allow_motion_mismatch: bool = False) -> int:
-    """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list."""
+    """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list.
+
+    The text list is ``text`` (if given), the policy's training texts, then every prompt the motion
+    model's text table knows; the first is where the page starts.
+    """
     import torch
 
-    from latentrl.viewer.server import require_viser, serve_until_interrupted, start_server
+    from latentrl.viewer.server import check_port, require_viser, serve_until_interrupted, start_server
 
     policy = Path(policy)
     if not policy.is_file():
         raise CheckpointError(f"{policy}: no such policy checkpoint (give a .pt written by latentrl train)")
     require_viser()
-    from latentrl.viewer.server import check_port
-
-    check_port(host, port)  # before the model loads
+    check_port(host, port)  # before the models load
     from latentrl.motion.checkpoint import load_motion_model
     from latentrl.ppo import load_policy
     from latentrl.ppo.checkpoint import check_shapes
@@ -61,22 +57,17 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     model = load_motion_model(motion, device=device)
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)
-    encoder = model.text_encoder
-    prompts = list(getattr(encoder, "prompts", None) or [])
-    trained = ((loaded.checkpoint.get("config") or {}).get("env") or {}).get("texts") or []
-    texts = list(dict.fromkeys([*([text] if text else []), *trained, *prompts])) or ["walk"]
     env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
+    prompts = list(getattr(model.text_encoder, "prompts", None) or [])
+    texts = list(dict.fromkeys([*([text] if text else []), *(env_cfg.get("texts") or []), *prompts])) or ["walk"]
     settings = {k: env_cfg[k] for k in ENV_FIELDS if env_cfg.get(k) is not None}
-    try:
-        env = SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
-                              autoreset_mode="Disabled", **settings)
-    except ConfigError as exc:
-        raise ConfigError(f"--text: {exc}") from None
+    env = SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
+                          autoreset_mode="Disabled", **settings)
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
-    start = text or _policy_text(loaded.checkpoint, list(env.texts))
     server = start_server(host, port, label=f"latentrl play {policy.name}")
     title = (f"**latentrl play** `{policy}` on motion `{motion}`  \n"
              "Click on the floor to set the goal; pick the text below.")
-    controller = LiveController(server, env, loaded.policy, title, start, deterministic=deterministic, seed=seed)
+    controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
+                                seed=seed)
     controller.start()
     return serve_until_interrupted(server, "play", host, controller.stop)
