@@ -22,6 +22,7 @@ FLOORS = (
     ("datasets", "render", "rewards"),
     ("motion_training", "envs", "ppo"),
     ("evaluation",),
+    ("viewer", "export"),
     ("app", "cli"),
 )
 """Ground floor first; a unit is a top-level module or subpackage of ``latentrl``."""

@@ -226,6 +226,43 @@ def _eval_commands(sub) -> None:
     cmp.set_defaults(func=_compare)
 
 
+def _port(text: str) -> int:
+    """Argument type of ``--port``: 0..65535 (0 = any free port)."""
+    if not text.isdigit() or int(text) > 65535:
+        raise argparse.ArgumentTypeError(f"expected a port in 0..65535, got '{text}'")
+    return int(text)
+
+
+def _viewer_commands(sub) -> None:
+    def server_flags(p) -> None:
+        p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: this machine only)")
+        p.add_argument("--port", type=_port, default=8080, help="port to listen on (default 8080; 0 = any free port)")
+
+    view = sub.add_parser("view", help="browser viewer for a motion .npz, an evaluation folder or a training run")
+    view.add_argument("path", metavar="PATH", help="motion .npz, eval folder (report.json), run folder or .npz folder")
+    server_flags(view)
+    view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port))
+
+    play = sub.add_parser("play", help="steer a reach policy live in the browser: click on the floor to set the goal")
+    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach policy")
+    play.add_argument("--motion", default="default", help="the motion model the policy was trained on")
+    play.add_argument("--allow-motion-mismatch", action="store_true", help="run on another motion model (experts)")
+    play.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
+    play.add_argument("--text", help="prompt to start with (default: the policy's training text)")
+    play.add_argument("--deterministic", action="store_true", help="start with the policy's mean action")
+    play.add_argument("--seed", type=int, default=0, help="seed of the start pose and the action noise")
+    server_flags(play)
+    play.set_defaults(func=lambda a: _viewer(
+        "play_command", a.policy, host=a.host, port=a.port, motion=a.motion, device=a.device, text=a.text,
+        deterministic=a.deterministic, seed=a.seed, allow_motion_mismatch=a.allow_motion_mismatch))
+
+
+def _viewer(name: str, *args, **kwargs) -> int:
+    from latentrl import viewer
+
+    return int(getattr(viewer, name)(*args, **kwargs) or 0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from latentrl import __version__
 
@@ -239,6 +276,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train_commands(sub)
     _eval_commands(sub)
     _bench_commands(sub)
+    _viewer_commands(sub)
     return parser
 
 

@@ -1,0 +1,73 @@
+"""Bodies of ``latentrl view`` and ``latentrl play``, taking plain arguments (the CLI only parses flags).
+
+Both check their input first (one-line errors, exit 2), then start a Viser server on ``host:port``,
+print the URL, and serve until Ctrl-C, which stops the server and returns 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from latentrl.errors import CheckpointError
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8080
+
+
+def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
+    """Show a motion ``.npz``, an evaluation folder, a run's latest evaluation or a folder of motions."""
+    from latentrl.viewer.server import require_viser, serve_until_interrupted, start_server
+    from latentrl.viewer.sources import open_source
+
+    source = open_source(path)
+    require_viser()
+    server = start_server(host, port, label=f"latentrl view {Path(path).name}")
+    from latentrl.viewer.playback import Player
+
+    player = Player(server, source)
+    player.start()
+    return serve_until_interrupted(server, "view", host, player.stop)
+
+
+def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str = "default",
+                 device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
+                 allow_motion_mismatch: bool = False) -> int:
+    """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list.
+
+    The text list is ``text`` (if given), the policy's training texts, then every prompt the motion
+    model's text table knows; the first is where the page starts.
+    """
+    import torch
+
+    from latentrl.viewer.server import check_port, require_viser, serve_until_interrupted, start_server
+
+    policy = Path(policy)
+    if not policy.is_file():
+        raise CheckpointError(f"{policy}: no such policy checkpoint (give a .pt written by latentrl train)")
+    require_viser()
+    check_port(host, port)  # before the models load
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.ppo import load_policy
+    from latentrl.ppo.checkpoint import check_shapes
+    from latentrl.preflight import check_device
+    from latentrl.viewer.live import ENV_FIELDS, LiveController, SteeredReachEnv
+
+    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+    check_device(device, "--device")
+    model = load_motion_model(motion, device=device)
+    loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
+                         allow_motion_mismatch=allow_motion_mismatch)
+    env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
+    prompts = list(getattr(model.text_encoder, "prompts", None) or [])
+    texts = list(dict.fromkeys([*([text] if text else []), *(env_cfg.get("texts") or []), *prompts])) or ["walk"]
+    settings = {k: env_cfg[k] for k in ENV_FIELDS if env_cfg.get(k) is not None}
+    env = SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
+                          autoreset_mode="Disabled", **settings)
+    check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
+    server = start_server(host, port, label=f"latentrl play {policy.name}")
+    title = (f"**latentrl play** `{policy}` on motion `{motion}`  \n"
+             "Click on the floor to set the goal; pick the text below.")
+    controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
+                                seed=seed)
+    controller.start()
+    return serve_until_interrupted(server, "play", host, controller.stop)

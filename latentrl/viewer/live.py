@@ -1,0 +1,254 @@
+"""``latentrl play``: a trained reach policy and the motion model run live; a click on the floor sets the goal.
+
+:class:`SteeredReachEnv` is ``ReachLocation`` with one env whose goal and text come from the user
+instead of the sampler. :class:`LiveController` steps it with the policy whenever fewer than one
+primitive of frames is waiting, and shows the frames at the motion's own 30 frames/s, so the
+character moves in real time as long as generation keeps ahead (its speed is shown).
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+
+from latentrl.envs.reach import ReachLocationEnv
+from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
+from latentrl.viewer.scene import SkeletonScene
+
+MAX_GOAL_DISTANCE_M = 50.0
+"""Clicks farther than this from the body are ignored (the env ends episodes 100 m from the goal)."""
+TRAIL_FRAMES = 6000
+START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
+"""Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
+ENV_FIELDS = ("guidance_scale", "action_bound", "obs_goal_angle_clip_deg", "obs_goal_dist_clip", "success_threshold")
+"""Env settings taken from the policy's training config, so the policy sees what it was trained on."""
+
+
+class SteeredReachEnv(ReachLocationEnv):
+    """``ReachLocation`` whose goal and text are set from outside (:meth:`set_goal`, :meth:`set_text`).
+
+    Until a goal is set, the goal is the pelvis itself. Reaching the goal keeps it (no new goal is
+    sampled); :attr:`last_frames` holds the (N, 8, 22, 3) world frames of the last step.
+    """
+
+    def __init__(self, num_envs: int = 1, **kwargs):
+        self._user_goal: torch.Tensor | None = None
+        self._text_choice: int | None = None
+        self.last_frames: torch.Tensor | None = None
+        super().__init__(num_envs, **kwargs)
+
+    def set_goal(self, xy: Sequence[float]) -> None:
+        goal = torch.tensor([float(xy[0]), float(xy[1]), self.floor_height], device=self.device)
+        self._user_goal = goal
+        self._goal[:] = goal
+
+    def clear_goal(self) -> None:
+        """No goal: the next reset puts the goal at the pelvis."""
+        self._user_goal = None
+
+    def set_text(self, text: str) -> None:
+        self._text_choice = self.texts.index(text)
+        self._text_idx[:] = self._text_choice
+
+    @property
+    def text(self) -> str:
+        return self.texts[int(self._text_idx[0])]
+
+    def _sample_goals(self, idx: torch.Tensor) -> torch.Tensor:
+        if self._user_goal is not None:
+            return self._user_goal.expand(len(idx), 3).clone()
+        pelvis = self.history_world(idx)[:, -1, PELVIS]
+        return torch.cat((pelvis[:, :2], torch.full_like(pelvis[:, :1], self.floor_height)), dim=-1)
+
+    def _reset_task(self, idx: torch.Tensor) -> None:
+        super()._reset_task(idx)
+        if self._text_choice is not None:  # keep the chosen text across resets
+            self._text_idx[idx] = self._text_choice
+
+    def _advance_task(self, reached: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return torch.zeros_like(reached), reached
+
+    def _finish_step(self, reward, terms, reached, diverged, nonfinite, future, goal):
+        self.last_frames = future
+        return super()._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
+
+
+def floor_point(origin: Sequence[float], direction: Sequence[float], floor: float = 0.0) -> np.ndarray | None:
+    """Where a click ray meets the floor plane z = ``floor``, or None when it points up or along it."""
+    o, d = np.asarray(origin, dtype=np.float64), np.asarray(direction, dtype=np.float64)
+    if d[2] > -1e-6:
+        return None
+    t = (floor - o[2]) / d[2]
+    return o + t * d if t > 0 else None
+
+
+class LiveController:
+    """Runs a policy on a :class:`SteeredReachEnv` and draws the result in a Viser server.
+
+    Args:
+        server: a ``viser.ViserServer``.
+        env: a one-env :class:`SteeredReachEnv`.
+        policy: an ``ActorCritic`` (``act(obs, deterministic)``).
+        title: markdown shown at the top of the panel.
+        text: the prompt to start with (one of ``env.texts``).
+        deterministic: start with the policy's mean action instead of sampling it.
+        seed: seed of the env (seed pose) and of action sampling.
+    """
+
+    def __init__(self, server: Any, env: SteeredReachEnv, policy: Any, title: str, text: str,
+                 deterministic: bool = False, seed: int = 0):
+        self.server, self.env, self.policy, self.seed = server, env, policy, seed
+        self.lock = threading.Lock()
+        self.stop = threading.Event()
+        self.frames: collections.deque[np.ndarray] = collections.deque()
+        self.trail: list[np.ndarray] = []
+        self.goal: np.ndarray | None = None
+        self.active = False
+        self.reached_at: float | None = None
+        self.goal_set_at = 0.0
+        self.gen_fps = 0.0
+        self.show_fps = 0.0
+        self.message = "click on the floor to set a goal"
+        self.scene = SkeletonScene(server)
+        self.scene.set_floor(np.zeros(2), 40.0)
+        gui = server.gui
+        gui.add_markdown(title)
+        self.text = gui.add_dropdown("text", list(env.texts), initial_value=text)
+        self.deterministic = gui.add_checkbox("mean action", deterministic)
+        self.follow = gui.add_checkbox("follow camera", True)
+        self.show_body = gui.add_checkbox("skeleton", True)
+        self.reset_button = gui.add_button("Reset")
+        self.status = gui.add_markdown("")
+        self.text.on_update(lambda event: self._set_text(self.text.value))
+        self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
+        self.reset_button.on_click(lambda event: self.reset())
+        server.scene.on_click()(self._clicked)
+        self.follower = CameraFollower(server)
+        self.reset()
+        self.thread = threading.Thread(target=self._run, name="latentrl-play", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    # ------------------------------------------------------------------ user input
+    def _set_text(self, text: str) -> None:
+        with self.lock:
+            self.env.set_text(text)
+
+    def _clicked(self, event: Any) -> None:
+        point = floor_point(event.ray_origin, event.ray_direction, self.env.floor_height)
+        if point is None:
+            return
+        self.set_goal(point[:2])
+
+    def set_goal(self, xy: Sequence[float]) -> None:
+        """Send the character to ``xy`` (world metres); ignored beyond :data:`MAX_GOAL_DISTANCE_M`."""
+        with self.lock:
+            pelvis = self.pelvis()
+            if float(np.hypot(xy[0] - pelvis[0], xy[1] - pelvis[1])) > MAX_GOAL_DISTANCE_M:
+                self.message = f"goal ignored: more than {MAX_GOAL_DISTANCE_M:.0f} m away"
+                return
+            self.goal = np.array([float(xy[0]), float(xy[1]), 0.0])
+            self.env.set_goal(self.goal[:2])
+            self.active, self.reached_at, self.goal_set_at = True, None, time.perf_counter()
+            self.message = "walking to the goal"
+            self.scene.show_goal(self.goal)
+        print(f"latentrl play: goal ({xy[0]:.2f}, {xy[1]:.2f})", flush=True)
+
+    def reset(self) -> None:
+        """Back to a fresh seed pose at the origin, no goal."""
+        with self.lock:
+            torch.manual_seed(self.seed)
+            self.env.clear_goal()
+            self.env.set_text(self.text.value)
+            self.obs, _ = self.env.reset(seed=self.seed)
+            self.frames.clear()
+            pose = self.env.history_world()[0, -1].cpu().numpy()
+            self.current = pose
+            self.trail = [pose[PELVIS]]
+            self.goal, self.active, self.reached_at = None, False, None
+            self.message = "click on the floor to set a goal"
+            self.scene.show_goal(None)
+            self.scene.show_pose(pose)
+            self.scene.show_trail(np.array(self.trail))
+            self.follower.reset()
+            move_cameras(self.server, *(np.array(v) for v in START_CAMERA))
+
+    def pelvis(self) -> np.ndarray:
+        return self.current[PELVIS]
+
+    # ------------------------------------------------------------------ the loop
+    def _generate(self) -> None:
+        """One policy call and env step: 8 new frames (caller holds the lock)."""
+        start = time.perf_counter()
+        with torch.no_grad():
+            action = self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
+        self.obs, _, _, _, infos = self.env.step(action)
+        new = self.env.last_frames[0].cpu().numpy()
+        took = time.perf_counter() - start
+        rate = len(new) / max(took, 1e-6)
+        self.gen_fps = rate if self.gen_fps == 0 else 0.8 * self.gen_fps + 0.2 * rate
+        self.frames.extend(new)
+        if bool(infos["diverged"][0]):
+            self.message = "the motion diverged; press Reset"
+            self.active = False
+        elif bool(infos["goal_reached"][0]):
+            self.active = False
+            self.reached_at = time.perf_counter()
+            self.message = f"reached the goal in {self.reached_at - self.goal_set_at:.1f} s; click again"
+            print(f"latentrl play: reached ({self.goal[0]:.2f}, {self.goal[1]:.2f}) "
+                  f"in {self.reached_at - self.goal_set_at:.1f} s", flush=True)
+
+    def _show_next(self) -> None:
+        pose = self.frames.popleft()
+        self.current = pose
+        self.trail.append(pose[PELVIS])
+        del self.trail[:-TRAIL_FRAMES]
+        with self.server.atomic():
+            self.scene.show_pose(pose)
+            if len(self.trail) % TRAIL_EVERY == 0 or not self.frames:
+                self.scene.show_trail(np.array(self.trail))
+            if self.follow.value:
+                self.follower.update(pose[PELVIS])
+            else:
+                self.follower.reset()
+
+    def status_text(self) -> str:
+        p = self.pelvis()
+        goal = "none" if self.goal is None else f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) m"
+        dist = "–" if self.goal is None else f"{np.hypot(*(self.goal[:2] - p[:2])):.2f} m"
+        return (f"{self.message}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ngoal: {goal}  \ndistance: {dist}  \n"
+                f"text: **{self.env.text}**  \ngeneration: {self.gen_fps:.0f} frames/s (policy + motion model)  \n"
+                f"display: {self.show_fps:.0f} frames/s")
+
+    def _run(self) -> None:
+        period = 1.0 / FPS
+        next_frame = time.perf_counter()
+        shown, count_since = 0, time.perf_counter()
+        last_status = 0.0
+        while not self.stop.is_set():
+            with self.lock:
+                if self.active and len(self.frames) < 8:
+                    self._generate()
+                now = time.perf_counter()
+                if self.frames and now >= next_frame:
+                    self._show_next()
+                    shown += 1
+                    next_frame = max(next_frame + period, now - period)
+                elif not self.frames:
+                    next_frame = now
+                if now - count_since >= 1.0:
+                    self.show_fps, shown, count_since = shown / (now - count_since), 0, now
+                if now - last_status >= 0.25:
+                    text = self.status_text()
+                    if text != self.status.content:  # an idle page gets no messages
+                        self.status.content = text
+                    last_status = now
+            time.sleep(max(0.0, min(next_frame - time.perf_counter(), 0.01)))

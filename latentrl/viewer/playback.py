@@ -1,0 +1,148 @@
+"""``latentrl view``: play recorded motions in the browser (play/pause, scrub, speed, episode picker, metrics)."""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from latentrl.motion.skeleton import PELVIS
+from latentrl.viewer.scene import SkeletonScene, floor_extent, frame_camera
+from latentrl.viewer.sources import Clip, Source, metrics_table
+
+SPEEDS = ("0.25", "0.5", "1", "2", "4")
+TICK_S = 1.0 / 30.0
+TRAIL_EVERY = 3
+"""While playing, the pelvis trail is redrawn every 3rd frame (it changes slowly; fewer messages)."""
+
+
+def move_cameras(server: Any, position: np.ndarray, look_at: np.ndarray) -> None:
+    """Point every connected browser's camera (and the one new browsers get) at ``look_at``."""
+    position, look_at = tuple(float(v) for v in position), tuple(float(v) for v in look_at)
+    server.initial_camera.position = position
+    server.initial_camera.look_at = look_at
+    for client in server.get_clients().values():
+        with client.atomic():
+            client.camera.position = position
+            client.camera.look_at = look_at
+
+
+FOLLOW_STEP_M = 0.03
+"""The camera follows the body once it has moved this far (fewer camera messages, no visible lag)."""
+
+
+class CameraFollower:
+    """Keeps every browser's camera looking at the body, at the angle and distance the user left it."""
+
+    def __init__(self, server: Any):
+        self.server = server
+        self.target: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.target = None
+
+    def update(self, pelvis: np.ndarray, height: float = 0.8) -> None:
+        target = np.array([pelvis[0], pelvis[1], height], dtype=np.float64)
+        if self.target is not None and np.linalg.norm(target - self.target) < FOLLOW_STEP_M:
+            return
+        self.target = target
+        for client in self.server.get_clients().values():
+            cam = client.camera
+            offset = np.asarray(cam.position, dtype=np.float64) - np.asarray(cam.look_at, dtype=np.float64)
+            with client.atomic():
+                cam.look_at = tuple(float(v) for v in target)
+                cam.position = tuple(float(v) for v in target + offset)
+
+
+class Player:
+    """Plays the clips of a :class:`~latentrl.viewer.sources.Source` in a Viser server (a thread at 30 Hz)."""
+
+    def __init__(self, server: Any, source: Source):
+        self.server, self.source = server, source
+        self.lock = threading.Lock()
+        self.scene = SkeletonScene(server)
+        self.clip: Clip | None = None
+        self.frame = 0.0
+        self.playing = True
+        self.follower = CameraFollower(server)
+        gui = server.gui
+        gui.add_markdown(f"**{source.kind}** `{source.title}`  \n{source.summary}")
+        labels = [e.label for e in source.entries]
+        self.picker = gui.add_dropdown("episode", labels, initial_value=labels[0], visible=len(labels) > 1)
+        self.metrics = gui.add_markdown("")
+        self.play = gui.add_button("Pause")
+        self.slider = gui.add_slider("frame", 0, 1, 1, 0)
+        self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="1")
+        self.follow = gui.add_checkbox("follow camera", False)
+        self.show_body = gui.add_checkbox("skeleton", True)
+        self.status = gui.add_markdown("")
+        self.picker.on_update(lambda event: self.select(self.picker.value))
+        self.play.on_click(lambda event: self.toggle())
+        self.slider.on_update(self._scrubbed)
+        self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
+        self.stop = threading.Event()
+        self.select(labels[0])
+        self.thread = threading.Thread(target=self._run, name="latentrl-view", daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def select(self, label: str) -> None:
+        """Load the entry named ``label`` and show its first frame."""
+        entry = next(e for e in self.source.entries if e.label == label)
+        clip = entry.load()
+        with self.lock:
+            self.clip, self.frame = clip, 0.0
+            self.follower.reset()
+            self.metrics.content = metrics_table(entry.metrics)
+            self.slider.max = max(clip.frames - 1, 1)
+            self.scene.set_floor(*floor_extent(clip.joints, clip.waypoints))
+            self.scene.set_waypoints(clip.waypoints)
+            move_cameras(self.server, *frame_camera(clip.joints, clip.waypoints))
+            self._draw()
+
+    def toggle(self) -> None:
+        with self.lock:
+            self.playing = not self.playing
+            if self.playing and self.clip is not None and self.frame >= self.clip.frames - 1:
+                self.frame = 0.0
+            self.play.label = "Pause" if self.playing else "Play"
+
+    def _scrubbed(self, event: Any) -> None:
+        if event.client is None:  # our own update from the playback thread
+            return
+        with self.lock:
+            self.frame = float(self.slider.value)
+            self._draw()
+
+    def _draw(self) -> None:
+        """Show the current frame (caller holds the lock)."""
+        clip = self.clip
+        i = int(min(max(self.frame, 0), clip.frames - 1))
+        self.scene.show_pose(clip.joints[i])
+        if i % TRAIL_EVERY == 0 or not self.playing:
+            self.scene.show_trail(clip.joints[: i + 1, PELVIS])
+        self.scene.show_goal(None if clip.goals is None else clip.goals[i])
+        self.slider.value = i
+        text = clip.texts[i] or "(seed frames)"
+        self.status.content = f"frame {i + 1}/{clip.frames} · {i / clip.fps:.2f} s · text: **{text}**"
+        if self.follow.value:
+            self.follower.update(clip.joints[i, PELVIS])
+        else:
+            self.follower.reset()
+
+    def _run(self) -> None:
+        last = time.perf_counter()
+        while not self.stop.wait(TICK_S):
+            now = time.perf_counter()
+            dt, last = now - last, now
+            with self.lock:
+                if not self.playing or self.clip is None:
+                    continue
+                self.frame += dt * self.clip.fps * float(self.speed.value)
+                if self.frame > self.clip.frames - 1:  # loop
+                    self.frame = 0.0
+                with self.server.atomic():
+                    self._draw()

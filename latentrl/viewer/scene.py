@@ -1,0 +1,163 @@
+"""The 3D scene both commands draw in Viser: floor grid, skeleton, contact-coloured feet, pelvis trail, goals.
+
+The geometry (bone segments, colours, contact weights, the camera that frames a motion) is plain
+numpy in functions of this module, tested without a browser; :class:`SkeletonScene` only hands
+those arrays to Viser's scene handles. World frame: latentrl's (metres, z up, floor at z = 0).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from latentrl.motion.skeleton import ANKLE_JOINTS, FOOT_JOINTS, JOINT_NAMES, PARENTS, PELVIS
+
+CONTACT_HEIGHT_M = 0.03
+"""DART's skate threshold: a foot joint counts fully in contact at the floor, not at all 3 cm above it."""
+LEFT, RIGHT, CENTRE = (60, 120, 220), (225, 105, 60), (90, 90, 100)
+CONTACT, AIRBORNE = (40, 190, 80), (150, 150, 150)
+GOAL, WAYPOINT, TRAIL = (220, 40, 60), (250, 180, 40), (70, 70, 200)
+BONES = np.array([(PARENTS[j], j) for j in range(len(PARENTS)) if PARENTS[j] >= 0], dtype=np.int64)
+"""(21, 2) parent, child joint index of every bone."""
+
+
+def side_colour(joint: int) -> tuple[int, int, int]:
+    name = JOINT_NAMES[joint]
+    return LEFT if name.startswith("left") else RIGHT if name.startswith("right") else CENTRE
+
+
+BONE_COLOURS = np.array([[side_colour(c)] * 2 for _, c in BONES], dtype=np.uint8)
+"""(21, 2, 3) colour of each bone end (the child's side: left blue, right orange, spine grey)."""
+
+
+def bone_segments(joints: np.ndarray) -> np.ndarray:
+    """(22, 3) joints of one frame -> (21, 2, 3) line segments parent -> child."""
+    return np.asarray(joints, dtype=np.float32)[BONES]
+
+
+def contact_weights(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """(..., 22, 3) -> (..., 2) how much each foot (left, right) touches the floor, in [0, 1].
+
+    The weight of DART's skate metric, ``2 - 2^clamp(h / 3 cm, 0, 1)`` with h the foot joint's height:
+    1 on the floor, 0 from 3 cm up.
+    """
+    heights = np.asarray(joints, dtype=np.float32)[..., list(FOOT_JOINTS), 2] - floor
+    return 2.0 - np.power(2.0, np.clip(heights / CONTACT_HEIGHT_M, 0.0, 1.0))
+
+
+def joint_colours(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """(22, 3) joints -> (22, 3) uint8 colours: side colours, feet and ankles from grey (air) to green (contact)."""
+    colours = np.array([side_colour(j) for j in range(len(JOINT_NAMES))], dtype=np.float32)
+    weights = contact_weights(joints, floor)
+    for side in range(2):
+        w = float(weights[side])
+        for j in (FOOT_JOINTS[side], ANKLE_JOINTS[side]):
+            colours[j] = w * np.array(CONTACT) + (1 - w) * np.array(AIRBORNE)
+    return colours.round().astype(np.uint8)
+
+
+def trail_segments(pelvis: np.ndarray, height: float = 0.01, stride: int = 2) -> np.ndarray:
+    """(T, 3) pelvis positions -> (K, 2, 3) floor-level segments through every ``stride``-th point (K >= 1)."""
+    pts = np.asarray(pelvis, dtype=np.float32)[::stride, :3].copy()
+    if len(pelvis) and (len(pelvis) - 1) % stride:
+        pts = np.concatenate((pts, np.asarray(pelvis, dtype=np.float32)[-1:, :3]))
+    pts[:, 2] = height
+    if len(pts) < 2:
+        pts = np.concatenate((pts, pts))[:2] if len(pts) else np.zeros((2, 3), np.float32)
+    return np.stack((pts[:-1], pts[1:]), axis=1)
+
+
+def frame_camera(joints: np.ndarray, waypoints: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Camera ``(position, look_at)`` that shows the whole motion (and path) from behind the start, above.
+
+    The body starts facing +y, so the camera sits on the -y side of the bounding box, looking at its
+    centre from about 35 degrees above the floor.
+    """
+    points = np.asarray(joints, dtype=np.float32)[:, PELVIS, :2]
+    if waypoints is not None and len(waypoints):
+        points = np.concatenate((points, np.asarray(waypoints, dtype=np.float32)[:, :2]))
+    lo, hi = points.min(0), points.max(0)
+    centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.8], dtype=np.float32)
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1.5)
+    distance = 1.2 * radius + 1.8
+    position = centre + np.array([0.0, -0.82 * distance, 0.57 * distance], dtype=np.float32)
+    return position, centre
+
+
+def floor_extent(joints: np.ndarray, waypoints: np.ndarray | None = None, margin: float = 3.0) -> tuple:
+    """``(centre_xy, size)`` of a square floor grid under the motion and its waypoints, in whole metres."""
+    points = np.asarray(joints, dtype=np.float32)[:, PELVIS, :2]
+    if waypoints is not None and len(waypoints):
+        points = np.concatenate((points, np.asarray(waypoints, dtype=np.float32)[:, :2]))
+    lo, hi = points.min(0) - margin, points.max(0) + margin
+    size = float(np.ceil(max(hi - lo)))
+    centre = np.round((lo + hi) / 2)
+    return centre, max(size, 2 * margin)
+
+
+class SkeletonScene:
+    """Scene nodes of one character in a Viser server; every update is one property assignment.
+
+    Args:
+        server: a ``viser.ViserServer``.
+    """
+
+    def __init__(self, server: Any):
+        self.server = server
+        scene = server.scene
+        scene.set_up_direction("+z")
+        self.grid = scene.add_grid("/floor", 20.0, 20.0, plane="xy", cell_size=0.5, section_size=1.0,
+                                   shadow_opacity=0.0)
+        zeros = np.zeros((len(JOINT_NAMES), 3), dtype=np.float32)
+        self.body = scene.add_frame("/body", show_axes=False)
+        self.bones = scene.add_line_segments("/body/bones", bone_segments(zeros), BONE_COLOURS, thickness=0.05)
+        self.joints = scene.add_point_cloud("/body/joints", zeros, joint_colours(zeros), point_size=0.07,
+                                            point_shape="circle", precision="float32", point_shading="flat")
+        self.trail = scene.add_line_segments("/trail", trail_segments(zeros[:1]), TRAIL, thickness=0.025)
+        self.path = scene.add_line_segments("/path", trail_segments(zeros[:1]), (200, 200, 210), thickness=0.012,
+                                            visible=False)
+        self.goal = scene.add_icosphere("/goal", radius=0.12, color=GOAL, visible=False)
+        self.waypoints: list[Any] = []
+
+    def set_floor(self, centre_xy: np.ndarray, size: float) -> None:
+        self.grid.width = self.grid.height = float(size)
+        self.grid.position = (float(centre_xy[0]), float(centre_xy[1]), 0.0)
+
+    def set_waypoints(self, waypoints: np.ndarray | None) -> None:
+        """Numbered markers for a path's waypoints (replacing any previous path)."""
+        for handle in self.waypoints:
+            handle.remove()
+        self.waypoints = []
+        if waypoints is None or not len(waypoints):
+            self.path.visible = False
+            return
+        for i, w in enumerate(np.asarray(waypoints, dtype=np.float32)):
+            self.waypoints.append(self.server.scene.add_icosphere(f"/waypoints/{i}", radius=0.08, color=WAYPOINT,
+                                                                  position=(float(w[0]), float(w[1]), 0.08)))
+            self.waypoints.append(self.server.scene.add_label(f"/waypoint_labels/{i}", str(i),
+                                                              position=(float(w[0]), float(w[1]), 0.3)))
+        start = np.zeros((1, 3), dtype=np.float32)
+        self.path.points = trail_segments(np.concatenate((start, waypoints)), height=0.005, stride=1)
+        self.path.visible = True
+
+    def show_pose(self, joints: np.ndarray) -> None:
+        """Draw one frame's (22, 3) joints."""
+        joints = np.asarray(joints, dtype=np.float32)
+        self.bones.points = bone_segments(joints)
+        self.joints.points = joints
+        self.joints.colors = joint_colours(joints)
+
+    def show_trail(self, pelvis: np.ndarray) -> None:
+        """(T, 3) pelvis positions so far (at least one)."""
+        self.trail.points = trail_segments(pelvis)
+
+    def show_goal(self, goal: np.ndarray | None) -> None:
+        if goal is None:
+            self.goal.visible = False
+            return
+        self.goal.position = (float(goal[0]), float(goal[1]), 0.12)
+        self.goal.visible = True
+
+    def set_body_visible(self, visible: bool) -> None:
+        self.body.visible = bool(visible)

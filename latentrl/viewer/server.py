@@ -1,0 +1,94 @@
+"""Starting and stopping the Viser web server: the optional extra, host/port checks, the URL line, Ctrl-C."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import socket
+import threading
+from typing import Any
+
+from latentrl.errors import ConfigError, LatentRLError
+
+EXTRA_HINT = "pip install 'latentrl[viewer]'"
+
+
+class ViewerMissingError(LatentRLError):
+    """The optional viewer dependency (Viser) is not installed."""
+
+
+def require_viser() -> Any:
+    """Import ``viser`` or raise one line naming the extra that provides it."""
+    try:
+        import viser
+    except ImportError:
+        raise ViewerMissingError(f"the viewer needs the optional extra 'viewer' (Viser): {EXTRA_HINT}") from None
+    return viser
+
+
+def check_port(host: str, port: int) -> None:
+    """Refuse a port outside 0..65535, a host that does not resolve, or a port something else listens on.
+
+    Viser would silently move to the next free port; a user who asked for one should hear that it is taken.
+    """
+    if not 0 <= int(port) <= 65535:
+        raise ConfigError(f"--port must be in 0..65535, got {port}")
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ConfigError(f"--host {host}: cannot be resolved ({exc})") from None
+    family, _, _, _, address = infos[0]
+    probe = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        probe.bind(address)
+    except OSError as exc:
+        if exc.errno in (98, 48, 10048):  # EADDRINUSE on Linux, macOS, Windows
+            raise ConfigError(f"--port {port}: already in use on {host}; choose another with --port") from None
+        raise ConfigError(f"--host {host} --port {port}: cannot listen there ({exc.strerror or exc})") from None
+    finally:
+        probe.close()
+
+
+def url_of(host: str, port: int) -> str:
+    shown = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
+    return f"http://{shown}:{port}"
+
+
+def start_server(host: str, port: int, label: str) -> Any:
+    """A running ``viser.ViserServer`` on exactly ``host:port`` (port 0: any free port)."""
+    viser = require_viser()
+    check_port(host, port)
+    with contextlib.redirect_stdout(io.StringIO()):  # Viser's own banner; we print one line of ours
+        server = viser.ViserServer(host=host, port=int(port), label=label, verbose=False)
+    if port and server.get_port() != int(port):  # taken between the check and the bind
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
+        raise ConfigError(f"--port {port}: already in use on {host}; choose another with --port")
+    server.gui.configure_theme(show_share_button=False)
+    return server
+
+
+def announce(command: str, host: str, port: int) -> None:
+    """The one line that tells the user where to look."""
+    print(f"latentrl {command}: open {url_of(host, port)} in a browser (Ctrl-C stops)", flush=True)
+
+
+def serve_until_interrupted(server: Any, command: str, host: str, stop: threading.Event | None = None,
+                            on_stop: Any = None) -> int:
+    """Print the URL, block until Ctrl-C (or ``stop`` is set), then stop the server; returns exit status 0."""
+    stop = stop or threading.Event()
+    try:
+        announce(command, host, server.get_port())  # inside the try: a Ctrl-C right after the line stops cleanly
+        while not stop.wait(0.25):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stop.set()
+        if on_stop is not None:
+            on_stop()
+        with contextlib.redirect_stdout(io.StringIO()):
+            server.stop()
+    print(f"latentrl {command}: stopped", flush=True)
+    return 0

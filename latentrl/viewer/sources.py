@@ -1,0 +1,247 @@
+"""What ``latentrl view PATH`` shows: a motion file, an evaluation folder, a run, or a folder of motions.
+
+:func:`open_source` turns PATH into a :class:`Source` (a title, a summary and a list of
+:class:`Entry`); :meth:`Entry.load` reads one motion as a :class:`Clip`, lazily, so an evaluation
+of hundreds of episodes opens at once. Nothing here needs Viser, so every check runs (and fails
+with one line) before a server starts.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from latentrl.errors import DataError
+
+REPORT_JSON = "report.json"
+RUN_MARKERS = ("config.yaml", "final.pt", "checkpoints")
+"""Files a training run folder holds (``latentrl train`` writes them)."""
+PRIMITIVE_FRAMES = 8
+SEED_FRAMES = 2
+
+
+@dataclass
+class Clip:
+    """One motion, ready to draw.
+
+    Attributes:
+        joints: (T, 22, 3) world joints, metres, z up.
+        fps: frames per second.
+        texts: (T,) the prompt in force at each frame ('' for seed frames).
+        goals: (T, 3) the goal in force at each frame, or None.
+        waypoints: (W, 3) the path the episode follows, or None.
+    """
+
+    joints: np.ndarray
+    fps: float
+    texts: list[str]
+    goals: np.ndarray | None = None
+    waypoints: np.ndarray | None = None
+
+    @property
+    def frames(self) -> int:
+        return len(self.joints)
+
+
+@dataclass
+class Entry:
+    """One motion of a source: a label for the picker, its file and the metrics to show beside it."""
+
+    label: str
+    path: Path
+    metrics: dict[str, Any] = field(default_factory=dict)
+    waypoints: np.ndarray | None = None
+
+    def load(self) -> Clip:
+        return load_clip(self.path, self.waypoints)
+
+
+@dataclass
+class Source:
+    """Everything ``latentrl view`` offers for one PATH."""
+
+    title: str
+    kind: str  # "motion", "evaluation", "run" or "folder"
+    entries: list[Entry]
+    summary: str = ""
+
+
+def per_frame_goals(goals: np.ndarray, frames: int, primitive: np.ndarray | None = None) -> np.ndarray:
+    """(S, 3) per-step goals -> (T, 3) per frame: frame t shows the goal of the step that made it.
+
+    Seed frames (primitive -1) show the first step's goal. Without a ``primitive`` array, frames are
+    assigned by the layout 2 seed frames + 8 per primitive.
+    """
+    goals = np.asarray(goals, dtype=np.float32).reshape(-1, 3)
+    if primitive is None or len(primitive) != frames:
+        primitive = (np.arange(frames) - SEED_FRAMES) // PRIMITIVE_FRAMES
+    step = np.clip(np.asarray(primitive, dtype=np.int64), 0, max(len(goals) - 1, 0))
+    return goals[step]
+
+
+def load_clip(path: str | Path, waypoints: np.ndarray | None = None) -> Clip:
+    """Read a motion ``.npz`` of the shared format (``latentrl.render``) as a :class:`Clip`."""
+    from latentrl.render import load_motion_npz
+
+    data = load_motion_npz(path)
+    joints = np.asarray(data["joints"], dtype=np.float32)
+    if len(joints) == 0 or not np.isfinite(joints).all():
+        raise DataError(f"{path}: 'joints' is empty or holds non-finite values")
+    frames = len(joints)
+    texts = [str(t) for t in data["texts"]] if "texts" in data and len(data["texts"]) == frames else [""] * frames
+    goals = None
+    if "goals" in data and np.asarray(data["goals"]).size:
+        goals = per_frame_goals(data["goals"], frames, data.get("primitive"))
+    if waypoints is None and "waypoints" in data and np.asarray(data["waypoints"]).size:
+        waypoints = np.asarray(data["waypoints"], dtype=np.float32).reshape(-1, 3)
+    return Clip(joints, float(data["fps"]), texts, goals, waypoints)
+
+
+def motion_metrics(clip: Clip) -> dict[str, float]:
+    """DART's skate (cm/s) and floor (cm) metrics of a clip (what an evaluation report holds per episode)."""
+    from latentrl.evaluation.metrics import foot_floor_distance_cm, foot_skate_cm_s
+
+    return {
+        "skate_cm_s": float(foot_skate_cm_s(clip.joints, fps=clip.fps)),
+        "floor_cm": float(foot_floor_distance_cm(clip.joints)),
+    }
+
+
+def _fmt(value: Any, digits: int = 2) -> str:
+    if isinstance(value, dict):  # report aggregates: {"mean", "ci95"}
+        mean, ci = value.get("mean"), value.get("ci95")
+        if mean is None or not math.isfinite(mean):
+            return "–"
+        return f"{mean:.{digits}f} ± {ci:.{digits}f}" if ci is not None else f"{mean:.{digits}f}"
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.{digits}f}" if math.isfinite(value) else "–"
+    return str(value)
+
+
+METRIC_LABELS = (
+    ("success", "success"),
+    ("end", "end"),
+    ("reach_time_s", "reach time (s)"),
+    ("skate_cm_s", "skate (cm/s)"),
+    ("floor_cm", "floor (cm)"),
+    ("steps", "steps"),
+    ("final_dist_m", "final distance (m)"),
+    ("success_rate", "success"),
+)
+
+
+def metrics_table(metrics: dict[str, Any]) -> str:
+    """A two-column markdown table of the metrics an entry carries (known keys, in a fixed order)."""
+    rows = [f"| {label} | {_fmt(metrics[key])} |" for key, label in METRIC_LABELS if key in metrics]
+    return "\n".join(["| metric | value |", "|---|---|", *rows]) if rows else ""
+
+
+# --------------------------------------------------------------------------- opening PATH
+def open_source(path: str | Path) -> Source:
+    """PATH -> :class:`Source`; one-line :class:`~latentrl.errors.DataError` for anything else."""
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: no such file or folder (give a motion .npz, an evaluation folder or a run folder)")
+    if path.is_file():
+        if path.name == REPORT_JSON:
+            return evaluation_source(path.parent)
+        if path.suffix == ".npz":
+            return motion_source(path)
+        if path.suffix == ".pt":
+            raise DataError(f"{path}: a checkpoint, not a motion; to steer a policy live use: latentrl play {path}")
+        raise DataError(f"{path}: expected a motion .npz, an evaluation folder (report.json) or a training run folder")
+    if (path / REPORT_JSON).is_file():
+        return evaluation_source(path)
+    if any((path / marker).exists() for marker in RUN_MARKERS):
+        return run_source(path)
+    if sorted(path.glob("*.npz")):
+        return folder_source(path)
+    raise DataError(f"{path}: holds no report.json, no run files ({', '.join(RUN_MARKERS)}) and no .npz motions")
+
+
+def motion_source(path: Path) -> Source:
+    clip = load_clip(path)  # checks the file now, not when the browser connects
+    scalars = _npz_scalars(path)
+    metrics = {k: scalars[k] for k in ("success", "end", "reach_time_s") if k in scalars}
+    metrics.update(motion_metrics(clip))
+    entry = Entry(path.name, path, metrics, clip.waypoints)
+    seconds = clip.frames / clip.fps
+    texts = ", ".join(dict.fromkeys(t for t in clip.texts if t)) or "–"
+    return Source(f"{path.name}", "motion", [entry], f"{clip.frames} frames ({seconds:.1f} s), texts: {texts}")
+
+
+def _npz_scalars(path: Path) -> dict[str, Any]:
+    """The 0-d fields of a motion file (an evaluation writes success, end, reach_time_s there)."""
+    out = {}
+    with np.load(path, allow_pickle=False) as z:
+        for key in z.files:
+            value = z[key]
+            if value.ndim == 0:
+                out[key] = value.item()
+    return out
+
+
+def folder_source(path: Path) -> Source:
+    files = sorted(path.glob("*.npz"))
+    entries = [Entry(f.name, f) for f in files]
+    return Source(str(path), "folder", entries, f"{len(files)} motion files")
+
+
+def evaluation_source(folder: Path, title: str | None = None) -> Source:
+    """Every episode of an evaluation that has a motion file, with its metrics from report.json."""
+    from latentrl.evaluation.report import load_report
+
+    report = load_report(folder)
+    entries = []
+    for suite, body in report["suites"].items():
+        for path_entry in body.get("paths", []):
+            waypoints = np.asarray(path_entry.get("waypoints") or np.zeros((0, 3)), dtype=np.float32).reshape(-1, 3)
+            for ep in path_entry.get("episodes", []):
+                if not ep.get("motion"):
+                    continue
+                mark = "reached" if ep.get("success") else str(ep.get("end", "failed"))
+                label = f"{suite} path {path_entry.get('index')} ep {ep.get('episode', 0):03d} ({mark})"
+                metrics = {k: ep.get(k) for k in ("success", "end", "reach_time_s", "skate_cm_s", "floor_cm",
+                                                   "steps", "final_dist_m")}
+                entries.append(Entry(label, folder / ep["motion"], metrics, waypoints))
+    if not entries:
+        raise DataError(f"{folder}: the evaluation has no motion files (written with --no-motions?); "
+                        "run latentrl eval again without --no-motions")
+    missing = [e.path for e in entries if not e.path.is_file()]
+    if missing:
+        raise DataError(f"{missing[0]}: motion file named in {folder / REPORT_JSON} is missing "
+                        f"({len(missing)} of {len(entries)} missing)")
+    overall = report["overall"].get("metrics", {})
+    policy = (report.get("policy") or {}).get("path", "?")
+    summary = (f"policy `{policy}`, {len(entries)} episodes; overall success {_fmt(overall.get('success_rate'))}, "
+               f"reach time {_fmt(overall.get('reach_time_s'))} s, skate {_fmt(overall.get('skate_cm_s'))} cm/s, "
+               f"floor {_fmt(overall.get('floor_cm'))} cm")
+    return Source(title or str(folder), "evaluation", entries, summary)
+
+
+def latest_evaluation(run: Path) -> Path | None:
+    """The newest evaluation folder inside a run (``eval/``, ``eval-final/``, ...), by report time."""
+    reports = [p for pattern in (f"*/{REPORT_JSON}", f"*/*/{REPORT_JSON}") for p in run.glob(pattern)]
+    if not reports:
+        return None
+    return max(reports, key=lambda p: (p.stat().st_mtime, str(p))).parent
+
+
+def run_source(run: Path) -> Source:
+    folder = latest_evaluation(run)
+    if folder is None:
+        final = run / "final.pt"
+        policy = final if final.is_file() else run / "checkpoints" / "iter_N.pt"
+        raise DataError(f"{run}: the run has no evaluation yet (no */report.json); "
+                        f"evaluate it first: latentrl eval {policy} --out {run / 'eval'}")
+    source = evaluation_source(folder, title=f"{run} (latest evaluation: {folder.relative_to(run)})")
+    source.kind = "run"
+    return source

@@ -1,0 +1,220 @@
+"""``latentrl view`` and ``latentrl play`` in headless Chromium: the skeleton is drawn, a floor click steers it.
+
+Runs Debian's ``chromium`` + ``chromium-driver`` through Selenium (no browser download) with software
+WebGL (SwiftShader). Skips, naming what is missing, where Chromium, its driver, Selenium or Viser is
+not installed. ``LATENTRL_VIEWER_SHOTS=DIR`` keeps the screenshots (docs/viewer_view.png and
+docs/viewer_play.png are made this way).
+"""
+
+import contextlib
+import io
+import os
+import queue
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.browser
+
+ROOT = Path(__file__).resolve().parents[2]
+POLICY = ROOT / "policies" / "reach_walk_default.pt"
+CHROMIUM = os.environ.get("LATENTRL_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = os.environ.get("LATENTRL_CHROMEDRIVER") or shutil.which("chromedriver")
+SHOTS = os.environ.get("LATENTRL_VIEWER_SHOTS")
+WINDOW = (1200, 720) if SHOTS else (880, 520)  # software WebGL: small is fast
+FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--hide-scrollbars")
+BONE_COLOURS = np.array([(60, 120, 220), (225, 105, 60)])
+
+
+@pytest.fixture(scope="module")
+def browser():
+    pytest.importorskip("viser", reason="the viewer extra is not installed (pip install -e '.[viewer]')")
+    webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install -e '.[dev]')")
+    if not CHROMIUM or not CHROMEDRIVER:
+        pytest.skip("no chromium/chromedriver on PATH (Debian: apt-get install chromium chromium-driver)")
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for flag in FLAGS:
+        options.add_argument(flag)
+    options.add_argument(f"--window-size={WINDOW[0]},{WINDOW[1]}")
+    profile = tempfile.mkdtemp(prefix="latentrl-chromium-")
+    options.add_argument(f"--user-data-dir={profile}")
+    try:
+        driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    except Exception as exc:  # a driver that does not match the browser, a broken install, ...
+        pytest.skip(f"chromium did not start: {str(exc).splitlines()[0][:200]}")
+    driver.set_page_load_timeout(60)
+    driver.set_script_timeout(60)
+    yield driver
+    driver.quit()
+    shutil.rmtree(profile, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def serve(*args):
+    """Run ``latentrl ARGS --port 0``; yield (url, output lines); Ctrl-C it afterwards and require exit 0."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+           "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
+    proc = subprocess.Popen([sys.executable, "-m", "latentrl.cli", *args, "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, env=env)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in proc.stdout], daemon=True).start()
+    try:
+        first = wait_line(lines, "open http", 90)
+        yield re.search(r"http://\S+", first).group(0), lines
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    assert proc.returncode == 0, f"{args[0]} did not stop cleanly on Ctrl-C (exit {proc.returncode})"
+
+
+def wait_line(lines: queue.Queue, needle: str, timeout: float) -> str:
+    end, seen = time.monotonic() + timeout, []
+    while time.monotonic() < end:
+        try:
+            line = lines.get(timeout=0.2)
+        except queue.Empty:
+            continue
+        seen.append(line)
+        if needle in line:
+            return line
+    raise AssertionError(f"no line with {needle!r} within {timeout} s; output:\n{''.join(seen)}")
+
+
+def page_text(driver) -> str:
+    return driver.execute_script("return document.body.innerText")
+
+
+def open_page(driver, url: str, ready: str) -> None:
+    driver.get(url)
+    end = time.monotonic() + 60
+    while ready not in page_text(driver):
+        assert time.monotonic() < end, f"page never showed {ready!r}:\n{page_text(driver)}"
+        time.sleep(0.3)
+    # the "software WebGL" notice: close it, as a user would (it would cover part of the screenshots)
+    driver.execute_script("document.querySelectorAll('[class*=Notification-closeButton]').forEach(b => b.click())")
+
+
+def screenshot(driver) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(driver.get_screenshot_as_png())).convert("RGB")).astype(np.int16)
+
+
+def still_screenshot(driver, timeout: float = 20.0) -> np.ndarray:
+    """A screenshot once two in a row (0.5 s apart) agree: the canvas has faded in and nothing moves."""
+    last, end = screenshot(driver), time.monotonic() + timeout
+    while time.monotonic() < end:
+        time.sleep(0.5)
+        shot = screenshot(driver)
+        if np.abs(shot - last).max(axis=-1).__gt__(40).sum() < 20:
+            return shot
+        last = shot
+    return last
+
+
+def click_control(driver, label: str, kind: str) -> None:
+    """Click the GUI checkbox labelled ``label`` (kind 'checkbox') or the button reading ``label``."""
+    from selenium.webdriver.common.by import By
+
+    if kind == "button":
+        element = driver.find_element(By.XPATH, f"//button[normalize-space()='{label}']")
+    else:
+        element = driver.find_element(
+            By.XPATH, f"//*[normalize-space(text())='{label}']/ancestor::*[.//input[@type='checkbox']][1]"
+                      "//input[@type='checkbox']")
+    driver.execute_script("arguments[0].click()", element)
+
+
+def panel_left(driver) -> int:
+    """x of the GUI panel's left edge in screenshot pixels (the scene is what lies left of it)."""
+    from selenium.webdriver.common.by import By
+
+    label = driver.find_element(By.XPATH, "//*[normalize-space(text())='skeleton']")
+    return int(label.rect["x"] - 20)
+
+
+def assert_skeleton_drawn(driver, name: str) -> np.ndarray:
+    """Screenshot with and without the skeleton: they must differ in the scene, in the bones' colours."""
+    with_body = still_screenshot(driver)
+    click_control(driver, "skeleton", "checkbox")
+    without = still_screenshot(driver)
+    click_control(driver, "skeleton", "checkbox")
+    scene = slice(0, panel_left(driver))
+    changed = np.abs(with_body - without)[:, scene].max(axis=-1) > 40
+    assert changed.sum() > 300, f"{name}: hiding the skeleton changed only {changed.sum()} pixels"
+    ys, xs = np.nonzero(changed)
+    colours = with_body[:, scene][changed]
+    near_bone = (np.abs(colours[:, None, :] - BONE_COLOURS[None]).max(axis=-1) < 45).any(axis=1)
+    assert near_bone.sum() > 50, f"{name}: the changed pixels hold no bone colours ({near_bone.sum()})"
+    print(f"{name}: skeleton covers {changed.sum()} pixels in x {xs.min()}..{xs.max()}, y {ys.min()}..{ys.max()}")
+    return with_body
+
+
+def keep(driver, name: str) -> None:
+    if SHOTS:
+        Path(SHOTS).mkdir(parents=True, exist_ok=True)
+        driver.save_screenshot(str(Path(SHOTS) / name))
+
+
+def test_view_draws_a_sampled_motion(browser, tmp_path):
+    from latentrl.cli import main
+
+    motion = tmp_path / "walk.npz"
+    assert main(["motion", "sample", "--text", "walk", "--text", "turn left", "--seconds", "4", "--out",
+                 str(motion)]) == 0
+    with serve("view", str(motion)) as (url, _):
+        open_page(browser, url, "frame ")
+        click_control(browser, "Pause", "button")
+        assert_skeleton_drawn(browser, "view")
+        still_screenshot(browser)
+        keep(browser, "viewer_view.png")
+
+
+def status(driver) -> dict[str, np.ndarray]:
+    text = page_text(driver)
+    found = {k: re.search(rf"{k}: \(([-\d.]+), ([-\d.]+)\)", text) for k in ("pelvis", "goal")}
+    return {k: np.array([float(m.group(1)), float(m.group(2))]) for k, m in found.items() if m}
+
+
+def test_play_walks_to_a_floor_click(browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    with serve("play", str(POLICY)) as (url, lines):
+        open_page(browser, url, "click on the floor to set a goal")
+        assert_skeleton_drawn(browser, "play")
+        start = status(browser)["pelvis"]
+        canvas = browser.find_element(By.TAG_NAME, "canvas")
+        w, h = canvas.size["width"], canvas.size["height"]
+        ActionChains(browser).move_to_element_with_offset(canvas, int(-0.12 * w), int(0.1 * h)).click().perform()
+        line = wait_line(lines, "latentrl play: goal", 20)
+        goal = np.array([float(v) for v in re.search(r"goal \(([-\d.]+), ([-\d.]+)\)", line).groups()])
+        before = np.linalg.norm(goal - start)
+        assert 0.8 < before < 10, f"the click landed {before:.2f} m from the body: {line}"
+        try:
+            wait_line(lines, "latentrl play: reached", 40)
+        except AssertionError:
+            pass  # a slow machine: judge by how far it got
+        now = status(browser)
+        assert np.allclose(now["goal"], goal, atol=0.01), (now, goal)
+        after = np.linalg.norm(goal - now["pelvis"])
+        assert after < before - 0.5, f"pelvis {now['pelvis']} did not approach the goal {goal} ({before:.2f} m before)"
+        still_screenshot(browser)
+        keep(browser, "viewer_play.png")

@@ -1,0 +1,110 @@
+"""What ``latentrl view PATH`` opens (no browser, no Viser): motions, evaluations, runs, folders, bad paths."""
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from latentrl.errors import DataError
+from latentrl.viewer.scene import bone_segments, contact_weights, floor_extent, frame_camera, joint_colours
+from latentrl.viewer.sources import load_clip, metrics_table, open_source, per_frame_goals
+from tests.viewer.conftest import walking, write_eval
+
+
+def test_motion_file(motion_file):
+    source = open_source(motion_file)
+    assert source.kind == "motion" and len(source.entries) == 1
+    assert "50 frames" in source.summary and "walk" in source.summary
+    metrics = source.entries[0].metrics
+    assert metrics["floor_cm"] == pytest.approx(0.0, abs=0.6) and metrics["skate_cm_s"] >= 0
+    clip = source.entries[0].load()
+    assert clip.joints.shape == (50, 22, 3) and clip.goals is None and clip.texts[0] == "walk"
+
+
+def test_evaluation_folder(eval_folder):
+    source = open_source(eval_folder)
+    assert source.kind == "evaluation" and len(source.entries) == 2
+    assert source.entries[0].label == "demo path 0 ep 000 (reached)"
+    assert source.entries[1].label == "demo path 0 ep 001 (timeout)"
+    assert "success 0.50 ± 0.10" in source.summary
+    assert open_source(eval_folder / "report.json").kind == "evaluation"
+    clip = source.entries[1].load()
+    assert clip.waypoints.shape == (2, 3)
+    # goals per frame: seed frames and the first 3 primitives show waypoint 0, the rest waypoint 1
+    assert (clip.goals[:26] == [0, 1, 0]).all() and (clip.goals[26:] == [1, 2, 0]).all()
+    table = metrics_table(source.entries[1].metrics)
+    assert "| success | no |" in table and "| end | timeout |" in table and "| reach time (s) | 1.70 |" in table
+
+
+def test_run_shows_its_latest_evaluation(tmp_path):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "final.pt").write_bytes(b"")
+    with pytest.raises(DataError, match="no evaluation yet.*latentrl eval .*final.pt"):
+        open_source(run)
+    old = write_eval(run / "eval", episodes=1)
+    write_eval(run / "eval-final", episodes=2)
+    past = time.time() - 100
+    os.utime(old / "report.json", (past, past))
+    source = open_source(run)
+    assert source.kind == "run" and len(source.entries) == 2 and "eval-final" in source.title
+
+
+def test_folder_of_motions(tmp_path, motion_file):
+    source = open_source(motion_file.parent)
+    assert source.kind == "folder" and [e.label for e in source.entries] == ["walk.npz"]
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "missing.npz", "no such file or folder"),
+    (lambda d: (d / "notes.txt").write_text("x") and d / "notes.txt", "expected a motion .npz"),
+    (lambda d: (d / "p.pt").write_bytes(b"x") and d / "p.pt", "a checkpoint.*latentrl play"),
+    (lambda d: (d / "bad.npz").write_text("no zip") and d / "bad.npz", "not a readable motion"),
+    (lambda d: (d / "empty").mkdir() or d / "empty", "holds no report.json"),
+])
+def test_bad_paths_are_one_line(tmp_path, make, message):
+    with pytest.raises(DataError, match=message) as err:
+        open_source(make(tmp_path))
+    assert "\n" not in str(err.value)
+
+
+def test_evaluation_without_motions(eval_folder):
+    import json
+
+    report = json.loads((eval_folder / "report.json").read_text())
+    for ep in report["suites"]["demo"]["paths"][0]["episodes"]:
+        ep["motion"] = None
+    (eval_folder / "report.json").write_text(json.dumps(report))
+    with pytest.raises(DataError, match="no motion files.*--no-motions"):
+        open_source(eval_folder)
+
+
+def test_geometry():
+    joints = walking(10)
+    assert bone_segments(joints[0]).shape == (21, 2, 3)
+    lifted = joints[0].copy()
+    lifted[11, 2] = 0.05  # right foot 5 cm up
+    w = contact_weights(lifted)
+    assert w[0] == pytest.approx(1.0, abs=0.05) and w[1] == 0.0
+    colours = joint_colours(lifted)
+    assert colours[10, 1] > 150 and colours[11, 1] == 150  # green on the floor, grey in the air
+    position, look_at = frame_camera(joints)
+    assert position[1] < look_at[1] and position[2] > look_at[2]  # behind the start, above
+    centre, size = floor_extent(joints)
+    assert size >= 6 and np.isfinite(centre).all()
+
+
+def test_per_frame_goals_without_primitive():
+    goals = per_frame_goals(np.array([[1, 0, 0], [2, 0, 0]]), 2 + 16)
+    assert goals[:10, 0].tolist() == [1] * 10 and goals[10:, 0].tolist() == [2] * 8
+
+
+def test_load_clip_rejects_nonfinite(tmp_path):
+    from latentrl.render import save_motion_npz
+
+    joints = walking(5)
+    joints[2, 3, 0] = np.nan
+    path = save_motion_npz(tmp_path / "nan.npz", joints)
+    with pytest.raises(DataError, match="non-finite"):
+        load_clip(path)
