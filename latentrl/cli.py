@@ -220,6 +220,25 @@ def _eval_commands(sub) -> None:
     cmp.set_defaults(func=lambda a: _call("latentrl.evaluation.commands", "compare", a))
 
 
+def _export_commands(sub) -> None:
+    export = sub.add_parser("export", help="controllers for game engines (ONNX)")
+    esub = export.add_subparsers(dest="export_command", metavar="FORMAT", parser_class=_Parser)
+    esub.required = True
+    onnx = esub.add_parser("onnx", help="the whole controller step (policy mean, guided sampler, decoder, world "
+                                        "update) as one ONNX graph (needs latentrl[onnx])")
+    onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) written by latentrl train")
+    onnx.add_argument("--out", required=True, metavar="FILE", help="output .onnx file")
+    onnx.add_argument("--batch", type=_pos_int, default=1, help="characters per call, fixed in the graph (default 1)")
+    onnx.add_argument("--text", help="bake this prompt in (default: the graph takes a text_embedding input)")
+    onnx.add_argument("--opset", type=int, default=17, help="ONNX opset version, >= 17 (default 17)")
+    onnx.add_argument("--motion", default="default", help="the motion model the policy was trained on")
+    onnx.add_argument("--allow-motion-mismatch", action="store_true",
+                      help="export with a motion model other than the policy's (experts)")
+    onnx.set_defaults(func=lambda a: _call_plain(
+        "latentrl.export.onnx", "export_command", a.policy, a.out, batch=a.batch, text=a.text, opset=a.opset,
+        motion=a.motion, allow_motion_mismatch=a.allow_motion_mismatch))
+
+
 def build_parser() -> argparse.ArgumentParser:
     from latentrl import __version__
 
@@ -233,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     _train_commands(sub)
     _eval_commands(sub)
     _bench_commands(sub)
+    _export_commands(sub)
     return parser
 
 
@@ -241,6 +261,13 @@ def _call(module: str, name: str, args: argparse.Namespace) -> int:
     import importlib
 
     return int(getattr(importlib.import_module(module), name)(args) or 0)
+
+
+def _call_plain(module: str, name: str, *args, **kwargs) -> int:
+    """Like :func:`_call`, for command functions that take plain arguments instead of the namespace."""
+    import importlib
+
+    return int(getattr(importlib.import_module(module), name)(*args, **kwargs) or 0)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
