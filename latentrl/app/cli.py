@@ -258,9 +258,33 @@ def _viewer_commands(sub) -> None:
 
 
 def _viewer(name: str, *args, **kwargs) -> int:
-    from latentrl import viewer
+    from latentrl import viewer  # optional extra: imported only when a viewer command runs
 
     return int(getattr(viewer, name)(*args, **kwargs) or 0)
+
+
+def _export_commands(sub) -> None:
+    export = sub.add_parser("export", help="controllers for game engines (ONNX)")
+    esub = export.add_subparsers(dest="export_command", metavar="FORMAT", parser_class=_Parser)
+    esub.required = True
+    onnx = esub.add_parser("onnx", help="the whole controller step (policy mean, guided sampler, decoder, world "
+                                        "update) as one ONNX graph (needs latentrl[onnx])")
+    onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) written by latentrl train")
+    onnx.add_argument("--out", required=True, metavar="FILE", help="output .onnx file")
+    onnx.add_argument("--batch", type=_pos_int, default=1, help="characters per call, fixed in the graph (default 1)")
+    onnx.add_argument("--text", help="bake this prompt in (default: the graph takes a text_embedding input)")
+    onnx.add_argument("--opset", type=int, default=17, help="ONNX opset version, >= 17 (default 17)")
+    onnx.add_argument("--motion", default="default", help="the motion model the policy was trained on")
+    onnx.add_argument("--allow-motion-mismatch", action="store_true",
+                      help="export with a motion model other than the policy's (experts)")
+    onnx.set_defaults(func=_export_onnx)
+
+
+def _export_onnx(a: argparse.Namespace) -> int:
+    from latentrl.export.onnx import export_command
+
+    return int(export_command(a.policy, a.out, batch=a.batch, text=a.text, opset=a.opset, motion=a.motion,
+                              allow_motion_mismatch=a.allow_motion_mismatch) or 0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -277,6 +301,7 @@ def build_parser() -> argparse.ArgumentParser:
     _eval_commands(sub)
     _bench_commands(sub)
     _viewer_commands(sub)
+    _export_commands(sub)
     return parser
 
 

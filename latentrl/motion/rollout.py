@@ -288,10 +288,12 @@ class MotionModel(nn.Module):
         the air (a jump or a hop's flight) and keeps its height. DART's ``rollout_mld.py`` has a
         ``fix_floor`` option of the same kind.
         """
-        lowest = joints_world[..., 2].amin(dim=(1, 2))  # (B,)
+        lowest = joints_world[..., 2].flatten(1).min(dim=1).values  # (B,)
         shift = torch.where(lowest <= self.floor_snap, -lowest, torch.zeros_like(lowest))
-        joints_world = joints_world + torch.nn.functional.pad(shift[:, None], (2, 0))[:, None, None, :]
-        translation = world.translation + torch.nn.functional.pad(shift[:, None], (2, 0))
+        up = torch.tensor([0.0, 0.0, 1.0], dtype=shift.dtype, device=shift.device)
+        offset = shift[:, None] * up  # (B, 3), z only
+        joints_world = joints_world + offset[:, None, None, :]
+        translation = world.translation + offset
         return joints_world, WorldTransform(world.rotation, translation)
 
     def rollout(

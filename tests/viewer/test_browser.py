@@ -68,7 +68,7 @@ def serve(*args):
     """Run ``latentrl ARGS --port 0``; yield (url, output lines); Ctrl-C it afterwards and require exit 0."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
            "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
-    proc = subprocess.Popen([sys.executable, "-m", "latentrl.cli", *args, "--port", "0"], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "latentrl.app.cli", *args, "--port", "0"], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=env)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(line) for line in proc.stdout], daemon=True).start()
@@ -174,7 +174,7 @@ def keep(driver, name: str) -> None:
 
 
 def test_view_draws_a_sampled_motion(browser, tmp_path):
-    from latentrl.cli import main
+    from latentrl.app.cli import main
 
     motion = tmp_path / "walk.npz"
     assert main(["motion", "sample", "--text", "walk", "--text", "turn left", "--seconds", "4", "--out",

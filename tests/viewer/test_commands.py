@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from latentrl.cli import main
+from latentrl.app.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 POLICY = ROOT / "policies" / "reach_walk_default.pt"
@@ -68,7 +68,7 @@ def test_nothing_else_imports_the_viewer():
 def test_ctrl_c_stops_cleanly(motion_file):
     pytest.importorskip("viser")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen([sys.executable, "-m", "latentrl.cli", "view", str(motion_file), "--port", "0"],
+    proc = subprocess.Popen([sys.executable, "-m", "latentrl.app.cli", "view", str(motion_file), "--port", "0"],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     try:
         line = proc.stdout.readline()

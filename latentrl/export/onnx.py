@@ -1,0 +1,367 @@
+"""One controller step as one ONNX graph: policy mean, guided DDIM sampler, VAE decode and world update.
+
+``latentrl export onnx POLICY --out controller.onnx`` writes what an env step plus a deterministic
+policy call compute, for a fixed batch B, so that a game engine (onnxruntime, Unreal NNE, Unity
+Sentis) can drive a character with it. The contract (float32; names are the graph's):
+
+========================  ==============  ===================================================
+input                     shape           meaning
+========================  ==============  ===================================================
+history                   (B, 2, 276)     canonical, unnormalized history (the motion state)
+world_rotation            (B, 3, 3)       canonical-to-world rotation: ``p_world = R p + t``
+world_translation         (B, 3)          canonical-to-world translation, metres
+goal                      (B, 3)          goal or current waypoint, world metres, z up (z unused)
+next_goal                 (B, 3)          only for FollowPath policies trained with observe_next
+text_embedding            (B, E)          only when no prompt was baked in (``--text``)
+========================  ==============  ===================================================
+
+========================  ==============  ===================================================
+output                    shape           meaning
+========================  ==============  ===================================================
+action                    (B, D)          the policy's mean, clamped to the env's action bound:
+                                          the latent noise the sampler started from
+joints_world              (B, 8, 22, 3)   the 8 new frames, SMPL-22 joints, world metres, z up, 30 fps
+next_history              (B, 2, 276)     feed back as ``history``
+next_world_rotation       (B, 3, 3)       feed back as ``world_rotation``
+next_world_translation    (B, 3)          feed back as ``world_translation``
+========================  ==============  ===================================================
+
+Inside the graph: the env's observation (DART's goal features, text, history, floor height) ->
+the policy's mean -> :meth:`latentrl.motion.MotionModel.rollout_step` (10 DDIM steps with
+classifier-free guidance unrolled, the scale and the step indices as constants, then the VAE
+decode and the re-canonicalization). :meth:`ControllerStep.post_step` is where a world-space
+correction after the step (such as a floor snap) would go. Initial states (the model's seed
+histories, identity rotation, the translation that puts the lowest joint on the floor), the
+prompt embeddings of the policy's training texts and this contract are stored as JSON in the
+file's metadata (``latentrl.*`` keys). The rest of an env step (goal reached? next waypoint?) is
+the caller's job. docs/export.md shows a loop in Python.
+
+The graph is traced with torch's TorchScript-based exporter (``dynamo=False``): on torch 2.13 it
+exports the default model in seconds, while the torch.export-based exporter needs about three
+minutes (and onnxscript), and its handling of the sampler's inference mode needs ``no_grad``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+import time
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+from latentrl.envs.goal import goal_features
+from latentrl.errors import CheckpointError, ConfigError, TextError
+from latentrl.motion.canonical import WorldTransform
+from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, joints_of
+from latentrl.motion.rollout import MotionModel, RolloutState, StepResult
+from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS, PELVIS
+
+FORMAT = "latentrl.onnx-controller/1"
+MIN_OPSET = 17
+DEFAULT_OPSET = 17
+MAX_DIFF = 1e-3
+"""``export_command`` fails when onnxruntime and torch differ by more than this after one step."""
+EXTRA = "pip install 'latentrl[onnx]' (packages onnx and onnxruntime)"
+OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation")
+_MEANINGS = {
+    "history": "canonical, unnormalized history (2 frames x 276 features); start from a seed in latentrl.seeds",
+    "world_rotation": "canonical-to-world rotation, p_world = R p + t",
+    "world_translation": "canonical-to-world translation, metres",
+    "goal": "goal or current waypoint, world metres, z up (z is not used)",
+    "next_goal": "the waypoint after the current one, world metres (FollowPath observe_next policies)",
+    "text_embedding": "prompt embedding; rows of latentrl.texts",
+    "action": "policy mean clamped to +-action_bound: the latent noise the sampler started from",
+    "joints_world": "8 new frames of SMPL-22 joints (latentrl.joint_names), world metres, z up, 30 fps",
+    "next_history": "feed back as history",
+    "next_world_rotation": "feed back as world_rotation",
+    "next_world_translation": "feed back as world_translation",
+}
+
+
+def _require_extra() -> tuple[Any, Any]:
+    """(onnx, onnxruntime), or a one-line ConfigError naming the extra."""
+    try:
+        import onnx
+        import onnxruntime
+    except ImportError as exc:
+        raise ConfigError(f"ONNX export needs the optional 'onnx' extra ({exc.name} is missing): {EXTRA}") from None
+    return onnx, onnxruntime
+
+
+# --------------------------------------------------------------------------- the traced step
+class ControllerStep(nn.Module):
+    """One controller step for a fixed batch: observation -> policy mean -> motion step (see the module docstring).
+
+    Args:
+        policy: a PPO ``ActorCritic`` (eval mode; its frozen observation normalizer is part of it).
+        model: the motion model the policy was trained on.
+        batch: B, fixed in the exported graph.
+        guidance_scale: classifier-free guidance of the sampler (the training env's, DART 5).
+        action_bound: actions are clamped to +-this, as the env does.
+        observe_next: the policy observes a second goal (FollowPath ``observe_next``): adds ``next_goal``.
+        text_embedding: (E,) or (1, E) prompt embedding baked in as a constant; ``None`` adds the
+            ``text_embedding`` input.
+        goal_angle_clip_deg, goal_dist_clip, floor_height: the env's observation settings.
+    """
+
+    def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, guidance_scale: float = 5.0,
+                 action_bound: float = 4.0, observe_next: bool = False, text_embedding: torch.Tensor | None = None,
+                 goal_angle_clip_deg: float = 60.0, goal_dist_clip: float = 5.0, floor_height: float = 0.0):
+        super().__init__()
+        if int(batch) < 1:
+            raise ConfigError(f"--batch must be >= 1, got {batch}")
+        self.policy, self.model = policy.eval(), model.eval()
+        self.batch = int(batch)
+        self.guidance_scale, self.action_bound = float(guidance_scale), float(action_bound)
+        self.observe_next = bool(observe_next)
+        self.goal_angle_clip_deg, self.goal_dist_clip = float(goal_angle_clip_deg), float(goal_dist_clip)
+        self.floor_height = float(floor_height)
+        self.baked_text = text_embedding is not None
+        if self.baked_text:
+            emb = torch.as_tensor(text_embedding, dtype=torch.float32).reshape(1, model.text_dim)
+            self.register_buffer("text", emb.expand(self.batch, -1).clone().to(model.device))
+        else:
+            self.text = None
+        self.input_names: tuple[str, ...] = ("history", "world_rotation", "world_translation", "goal",
+                                             *(("next_goal",) if self.observe_next else ()),
+                                             *(() if self.baked_text else ("text_embedding",)))
+        self.output_names = OUTPUT_NAMES
+        self.eval()
+
+    def train(self, mode: bool = True) -> ControllerStep:
+        """Always evaluation mode (no dropout): ``torch.onnx.export`` restores the mode it found, recursively."""
+        return super().train(False)
+
+    def input_shapes(self) -> dict[str, tuple[int, ...]]:
+        b = self.batch
+        shapes = {"history": (b, HISTORY_LENGTH, FEATURE_DIM), "world_rotation": (b, 3, 3), "world_translation": (b, 3),
+                  "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim)}
+        return {name: shapes[name] for name in self.input_names}
+
+    def output_shapes(self) -> dict[str, tuple[int, ...]]:
+        b = self.batch
+        return {"action": (b, self.model.latent_dim), "joints_world": (b, FUTURE_LENGTH, NUM_JOINTS, 3),
+                "next_history": (b, HISTORY_LENGTH, FEATURE_DIM), "next_world_rotation": (b, 3, 3),
+                "next_world_translation": (b, 3)}
+
+    def observe(self, state: RolloutState, goals: Sequence[torch.Tensor], text: torch.Tensor) -> torch.Tensor:
+        """(B, obs_dim) the env's observation ``[goal(s) | text | history | scene]``, as the env's ``_observe``."""
+        history_world = state.world.apply(joints_of(state.history))
+        goal_obs = [goal_features(history_world[:, -1], state.world.rotation, g, self.goal_angle_clip_deg,
+                                  self.goal_dist_clip) for g in goals]
+        scene = self.floor_height - history_world[:, 0, PELVIS, 2:3]
+        return torch.cat((*goal_obs, text, state.history.reshape(self.batch, -1), scene), dim=1)
+
+    def post_step(self, step: StepResult) -> StepResult:
+        """World-space correction after the motion step; the identity, so the graph is exactly ``rollout_step``.
+
+        A post-step such as a floor snap returns ``step._replace(joints_world=..., state=RolloutState(history,
+        WorldTransform(rotation, translation)))`` computed with tensor operations only (``torch.where``,
+        no Python branches on values), so that it traces into the graph.
+        """
+        return step
+
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """Tensors in the order of :attr:`input_names` -> tensors in the order of :attr:`output_names`."""
+        named = dict(zip(self.input_names, inputs))
+        state = RolloutState(named["history"], WorldTransform(named["world_rotation"], named["world_translation"]))
+        text = self.text if self.baked_text else named["text_embedding"]
+        goals = [named["goal"], *([named["next_goal"]] if self.observe_next else [])]
+        action = self.policy(self.observe(state, goals, text)).mean.clamp(-self.action_bound, self.action_bound)
+        noise = action.reshape(self.batch, *self.model.latent_shape)
+        step = self.post_step(self.model.rollout_step(state, text, noise, self.guidance_scale))
+        nxt = step.state
+        return action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation
+
+    def initial_state(self, seed_index: torch.Tensor | None = None) -> RolloutState:
+        """Start states from the model's seed histories (row i gets seed ``i % K`` unless ``seed_index`` is given)."""
+        if seed_index is None:
+            seed_index = torch.arange(self.batch) % self.model.seed_history.shape[0]
+        return self.model.initial_state(self.batch, seed_index=seed_index)
+
+    def example_inputs(self, text_embedding: torch.Tensor | None = None) -> tuple[torch.Tensor, ...]:
+        """Inputs for tracing and checks: seed states, goals 1.5-3 m ahead (+y), the given text (zeros if none)."""
+        state = self.initial_state()
+        rows = torch.arange(self.batch, dtype=torch.float32)
+        goal = torch.stack((0.5 * torch.sin(rows), 1.5 + (rows % 3) * 0.75, torch.zeros_like(rows)), dim=-1)
+        values = {"history": state.history, "world_rotation": state.world.rotation,
+                  "world_translation": state.world.translation, "goal": goal,
+                  "next_goal": goal + torch.tensor([1.0, 1.0, 0.0])}
+        if not self.baked_text:
+            emb = torch.zeros(1, self.model.text_dim) if text_embedding is None else text_embedding
+            values["text_embedding"] = emb.reshape(-1, self.model.text_dim).expand(self.batch, -1).contiguous()
+        return tuple(values[n].to(self.model.device) for n in self.input_names)
+
+
+# --------------------------------------------------------------------------- building from a checkpoint
+def load_controller(policy_path: str | Path, motion: str = "default", batch: int = 1, text: str | None = None,
+                    allow_motion_mismatch: bool = False) -> tuple[ControllerStep, dict]:
+    """A :class:`ControllerStep` for a PPO checkpoint (on CPU) and a dict describing where it came from.
+
+    The env settings (guidance scale, action bound, task layout) come from the checkpoint's config,
+    as ``latentrl eval`` builds its env. Returns ``(step, info)`` with ``info`` holding ``policy``
+    and ``motion`` identities, ``trained_texts`` (the training env's prompts) and ``texts``: prompt ->
+    embedding for those and ``text``.
+    """
+    from latentrl.motion.checkpoint import file_sha256, load_motion_model
+    from latentrl.ppo import load_policy
+
+    model = load_motion_model(motion)
+    ident = {"source": model.info.get("source"), "sha256": model.info.get("sha256")}
+    loaded = load_policy(policy_path, "cpu", motion={"path": ident["source"], "sha256": ident["sha256"]},
+                         allow_motion_mismatch=allow_motion_mismatch)
+    policy = loaded.policy
+    if model.seed_history is None or model.pelvis_delta is None:
+        raise CheckpointError(f"motion model {motion} has no seed history/pelvis_delta; a controller cannot start")
+    goal_size = policy.obs_dim - model.text_dim - HISTORY_LENGTH * FEATURE_DIM - 1
+    if policy.action_dim != model.latent_dim or goal_size not in (4, 8):
+        raise CheckpointError(
+            f"{policy_path}: the policy ({policy.obs_dim}-D observations, {policy.action_dim}-D actions) does not fit "
+            f"motion model {motion} ({model.text_dim}-D text, {model.latent_dim}-D latent); export it with the "
+            "motion model it was trained on (--motion)")
+    env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
+    trained = [str(t) for t in env_cfg.get("texts") or []]
+    texts = {}
+    for prompt in dict.fromkeys([*trained, *([text] if text else [])]):
+        try:
+            texts[prompt] = model.encode_text([prompt])[0]
+        except TextError:  # a prompt the model cannot encode is left out of the table (``--text`` re-raises below)
+            continue
+    baked = model.encode_text([text]) if text else None
+    step = ControllerStep(policy, model, batch, guidance_scale=float(env_cfg.get("guidance_scale", 5.0)),
+                          action_bound=float(env_cfg.get("action_bound", 4.0)), observe_next=goal_size == 8,
+                          text_embedding=baked)
+    info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
+                       "iteration": loaded.checkpoint.get("iteration")},
+            "motion": ident, "texts": texts, "text": text, "trained_texts": trained}
+    return step, info
+
+
+# --------------------------------------------------------------------------- writing and running
+def _json_array(values: torch.Tensor) -> dict:
+    """{"shape", "data"}: a tensor as a flat list of float32-exact decimals (9 significant digits)."""
+    flat = values.detach().cpu().float().reshape(-1).tolist()
+    return {"shape": list(values.shape), "data": [float(f"{v:.9g}") for v in flat]}
+
+
+def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = None, opset: int = DEFAULT_OPSET
+                        ) -> dict[str, str]:
+    """The ``latentrl.*`` metadata entries of an exported controller (each value a JSON string)."""
+    info = dict(info or {})
+    k = step.model.seed_history.shape[0]
+    seeds = step.model.initial_state(k, seed_index=torch.arange(k))
+    in_shapes, out_shapes = step.input_shapes(), step.output_shapes()
+    contract = {"inputs": [{"name": n, "shape": list(s), "meaning": _MEANINGS[n]} for n, s in in_shapes.items()],
+                "outputs": [{"name": n, "shape": list(s), "meaning": _MEANINGS[n]} for n, s in out_shapes.items()]}
+    settings = {"batch": step.batch, "opset": opset, "fps": 30, "frames_per_step": FUTURE_LENGTH,
+                "guidance_scale": step.guidance_scale, "sampler": "ddim",
+                "diffusion_steps": step.model.diffusion.num_timesteps,
+                "action_bound": step.action_bound, "goal_angle_clip_deg": step.goal_angle_clip_deg,
+                "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
+                "observe_next": step.observe_next, "text": info.get("text") if step.baked_text else None}
+    meta = {
+        "latentrl.format": FORMAT,
+        "latentrl.contract": contract,
+        "latentrl.settings": settings,
+        "latentrl.joint_names": list(JOINT_NAMES),
+        "latentrl.seeds": {"history": _json_array(seeds.history),
+                           "world_rotation": "identity",
+                           "world_translation": _json_array(seeds.world.translation)},
+        "latentrl.policy": info.get("policy"),
+        "latentrl.motion": info.get("motion"),
+    }
+    if not step.baked_text:
+        meta["latentrl.texts"] = {p: [float(f"{v:.9g}") for v in e.tolist()] for p, e in info.get("texts", {}).items()}
+    return {key: json.dumps(value, separators=(",", ":")) for key, value in meta.items()}
+
+
+def export_onnx(step: ControllerStep, path: str | Path, example: Sequence[torch.Tensor] | None = None,
+                opset: int = DEFAULT_OPSET, metadata: Mapping[str, str] | None = None) -> Path:
+    """Trace ``step`` on ``example`` (default: :meth:`ControllerStep.example_inputs`), check it, write it atomically."""
+    onnx, _ = _require_extra()
+    from latentrl.safe_io import atomic_write_bytes
+
+    example = tuple(example if example is not None else step.example_inputs())
+    buffer = io.BytesIO()
+    with torch.no_grad(), warnings.catch_warnings():
+        # tracing notes about shape-derived constants: the batch is fixed by design
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)
+        warnings.filterwarnings("ignore", message=".*legacy TorchScript-based ONNX export.*")
+        warnings.filterwarnings("ignore", message="The feature will be removed", category=DeprecationWarning)
+        torch.onnx.export(step, example, buffer, input_names=list(step.input_names),
+                          output_names=list(step.output_names), opset_version=int(opset), dynamo=False,
+                          do_constant_folding=True)
+    proto = onnx.load_from_string(buffer.getvalue())
+    proto.doc_string = ("latentrl controller step (policy mean + guided DDIM sampler + VAE decoder + "
+                        "canonical-to-world update); contract in metadata 'latentrl.contract'")
+    for key, value in (metadata or {}).items():
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.checker.check_model(proto)
+    return atomic_write_bytes(path, proto.SerializeToString())
+
+
+def onnx_session(path: str | Path, threads: int = 1):
+    """An onnxruntime CPU session with ``threads`` intra-op threads."""
+    _, ort = _require_extra()
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = int(threads)
+    options.inter_op_num_threads = 1
+    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+
+def run_session(session, inputs: Sequence[torch.Tensor], names: Sequence[str]) -> list[torch.Tensor]:
+    """One ``session.run`` on torch inputs named ``names``; torch outputs in the graph's order."""
+    feeds = {n: t.detach().cpu().numpy() for n, t in zip(names, inputs)}
+    return [torch.from_numpy(a) for a in session.run(None, feeds)]
+
+
+def max_difference(step: ControllerStep, session, inputs: Sequence[torch.Tensor]) -> float:
+    """Largest absolute difference between torch's and onnxruntime's outputs for one step."""
+    with torch.no_grad():
+        expected = step(*inputs)
+    got = run_session(session, inputs, step.input_names)
+    return max(float((e.cpu() - g).abs().max()) for e, g in zip(expected, got))
+
+
+def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: str | None = None,
+                   opset: int = DEFAULT_OPSET, motion: str = "default", allow_motion_mismatch: bool = False) -> int:
+    """``latentrl export onnx``: write the controller, check it (``onnx.checker``, onnxruntime), print one line."""
+    _require_extra()
+    from latentrl.preflight import check_output_file
+
+    try:
+        from torch.onnx._constants import ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET as max_opset
+    except ImportError:  # pragma: no cover - older or newer torch
+        max_opset = 20
+    if not MIN_OPSET <= int(opset) <= max_opset:
+        raise ConfigError(f"--opset must lie in [{MIN_OPSET}, {max_opset}], got {opset}")
+    if int(batch) < 1:
+        raise ConfigError(f"--batch must be >= 1, got {batch}")
+    check_output_file(out)
+    if not Path(policy).is_file():
+        raise CheckpointError(f"policy checkpoint not found: {policy}")
+    step, info = load_controller(policy, motion, batch, text, allow_motion_mismatch)
+    example = step.example_inputs(next(iter(info["texts"].values()), None))
+    t0 = time.perf_counter()
+    path = export_onnx(step, out, example, opset, controller_metadata(step, info, opset))
+    seconds = time.perf_counter() - t0
+    diff = max_difference(step, onnx_session(path), example)
+    how = f"text '{text}' baked in" if text else "text_embedding input"
+    trained = info["trained_texts"]
+    note = ""
+    if text and trained and text not in trained:
+        note = f"; note: the policy was trained on {trained}, not '{text}'"
+    print(f"wrote {path} ({path.stat().st_size / 2**20:.1f} MiB, batch {step.batch}, opset {opset}, {how}) "
+          f"in {seconds:.1f} s; onnxruntime vs torch over one step: max |diff| {diff:.1e}{note}")
+    if not diff <= MAX_DIFF:
+        print(f"latentrl: error: onnxruntime differs from torch by {diff:.2e} (> {MAX_DIFF:g}); the file is not "
+              "usable as is", file=sys.stderr)
+        return 1
+    return 0
