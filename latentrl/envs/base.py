@@ -422,7 +422,7 @@ class LatentMotionVectorEnv(VectorEnv):
             if self._history is not None:
                 feats = None
                 if self._history.record_features:
-                    feats = features_to_world(out.future, state.world, self.motion.pelvis_delta)
+                    feats = features_to_world(out.future, out.placement, self.motion.pelvis_delta)
                 self._history.on_step(future, noise, self._text_idx, goal, feats)
             self._state = self._keep_finite(out.state, state, diverged)
             return self._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)

@@ -53,6 +53,7 @@ class StepResult(NamedTuple):
     joints_world: torch.Tensor  # (B, 8, 22, 3) metres, z up
     latent: torch.Tensor  # (B, 1, D)
     state: RolloutState  # the next state (last 2 future frames, re-canonicalized)
+    placement: WorldTransform  # canonical -> world transform that placed ``future`` (floor snap included)
 
 
 class Rollout(NamedTuple):
@@ -270,12 +271,13 @@ class MotionModel(nn.Module):
             state.history, text_embedding, noise, guidance_scale, sampler, generator=generator
         )
         with torch.inference_mode():
-            joints_world = state.world.apply(joints_of(sample.future))
-            history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
-            world = state.world.compose(rotation, origin)
+            placement = state.world
+            joints_world = placement.apply(joints_of(sample.future))
             if self.floor_snap is not None:
-                joints_world, world = self._snap_to_floor(joints_world, world)
-        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world))
+                joints_world, placement = self._snap_to_floor(joints_world, placement)
+            history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
+            world = placement.compose(rotation, origin)
+        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world), placement)
 
     def _snap_to_floor(self, joints_world: torch.Tensor, world: WorldTransform) -> tuple[torch.Tensor, WorldTransform]:
         """Keep the world floor at z = 0: shift each primitive so its lowest joint touches it.
@@ -332,7 +334,7 @@ class MotionModel(nn.Module):
                 device=generator.device if generator is not None else "cpu").to(self.device)
             out = self.rollout_step(state, emb, x_t, guidance_scale)
             with torch.inference_mode():
-                feats.append(features_to_world(out.future, state.world, self.pelvis_delta))
+                feats.append(features_to_world(out.future, out.placement, self.pelvis_delta))
             joints.append(out.joints_world)
             latents.append(out.latent)
             noises.append(x_t)
