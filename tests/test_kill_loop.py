@@ -145,7 +145,7 @@ def test_sigkill_motion_training_resumes_from_its_last_state(tmp_path):
     run, logs = tmp_path / "run", tmp_path / "logs"
     logs.mkdir()
     fresh = [sys.executable, "-m", "latentrl.app.cli", "motion", "train", str(MTINY), "--run-dir", str(run),
-             "--set", f"vae_train.steps={steps}",
+             "--set", "data.locomotion.num_sequences=3", "--set", f"vae_train.steps={steps}",
              "--set", f"denoiser_train.steps={steps}", "--set", "checkpoint_every=1", "--set", "log_every=1",
              "--no-progress"]
     resume = [sys.executable, "-m", "latentrl.app.cli", "motion", "train", "--resume", str(run), "--no-progress"]

@@ -170,7 +170,7 @@ def test_hop_uses_one_foot_with_small_ballistic_hops(skill, stance, free):
     assert 1.7 <= rate <= 2.3
     takeoffs = np.flatnonzero((feet_z[1:, stance] > TOE_HEIGHT_M + 1e-4) & (feet_z[:-1, stance] <= TOE_HEIGHT_M + 1e-4))
     rises = [joints[a:b, 0, 2].max() - joints[a, 0, 2] for a, b in zip(takeoffs, downs[downs > takeoffs[0]])]
-    assert 0.02 <= np.median(rises) <= 0.10  # low hops (apex 3-7 cm) keep DART's floor distance <= 5 cm
+    assert 0.04 <= np.median(rises) <= 0.16
 
 
 def test_jump_forward_takes_off_with_both_feet():
@@ -179,7 +179,7 @@ def test_jump_forward_takes_off_with_both_feet():
     air = feet_z.min(axis=1) > 0.05
     assert air.any() and np.array_equal(air, feet_z.max(axis=1) > 0.05)  # both feet leave and land together
     standing = np.median(joints[:, 0, 2])
-    assert joints[:, 0, 2].max() - standing > 0.04  # flight apex (5-10 cm: floor distance <= 5 cm)
+    assert joints[:, 0, 2].max() - standing > 0.15  # flight apex
     assert joints[:, 0, 2].min() < standing - 0.12  # crouch and landing absorption
     assert np.linalg.norm(joints[-1, 0, :2] - joints[0, 0, :2]) > 0.5
 
@@ -264,3 +264,19 @@ def test_generate_dataset_writes_readable_files_and_meta(tmp_path):
     assert len(generate_dataset(LocomotionConfig(num_sequences=1, seconds_per_sequence=2.0), tmp_path,
                                 overwrite=True)) == 1
     assert len(list(tmp_path.glob("*.npz"))) == 1
+
+
+def test_v2_data_options_steer_unpredictably_and_keep_flights_low():
+    # steering: random_hold and flights: low (configs/motion/v2.yaml): the data itself meets the v2 targets
+    # for heading variety, floor distance and single support (docs/benchmarks.md, "Default model v2").
+    from latentrl.datasets.locomotion import dataset_statistics
+
+    stats = dataset_statistics(generate_sequences(
+        LocomotionConfig(num_sequences=24, steering="random_hold", flights="low")))["skills"]
+    old = dataset_statistics(generate_sequences(LocomotionConfig(num_sequences=24)))["skills"]
+    for skill in ("walk", "run", "hop_left"):
+        assert stats[skill]["steer_spread_deg"] > max(40.0, 1.2 * old[skill]["steer_spread_deg"]), skill
+    assert stats["hop_left"]["floor_cm"] <= 5.0 and stats["run"]["floor_cm"] <= 3.0
+    assert stats["hop_left"]["left_only"] >= 0.55 and stats["hop_left"]["right_only"] == 0.0
+    with pytest.raises(ConfigError, match="steering"):
+        LocomotionConfig(steering="zigzag").validate()

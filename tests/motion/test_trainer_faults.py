@@ -13,7 +13,7 @@ from latentrl.safe_io import load_torch
 
 ROOT = Path(__file__).resolve().parents[2]
 MTINY = str(ROOT / "configs" / "motion" / "tiny.yaml")
-SMALL = ["--set", "vae_train.steps=6", "--set", "denoiser_train.steps=2",
+SMALL = ["--set", "data.locomotion.num_sequences=3", "--set", "vae_train.steps=6", "--set", "denoiser_train.steps=2",
          "--set", "checkpoint_every=2", "--set", "log_every=1", "--no-progress"]
 
 

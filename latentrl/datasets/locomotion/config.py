@@ -121,6 +121,14 @@ class LocomotionConfig:
     """Body height range in metres; one body per sequence."""
     start_half_size: float = 3.0
     """Sequences start at a uniform point of the square [-s, s]^2 (metres) with a uniform heading."""
+    steering: str = "wander"
+    """Heading changes of walk, run and hop: ``wander`` (smooth sinusoids, the first default model's data)
+    or ``random_hold`` (a yaw rate held 0.25-0.9 s, then switched to a random value: not predictable from
+    a 2-frame history, so the diffusion noise can steer)."""
+    flights: str = "high"
+    """Airborne phases: ``high`` (hop apex 5-15 cm, jump 20-35 cm, the first default model's data) or ``low``
+    (hop 3-7 cm, jump 5-10 cm, longer run stance: DART's floor distance <= 5 cm for hops and jumps and
+    <= 3 cm for runs, in the data itself)."""
     name: str = "latentrl-procedural-locomotion"
     """Dataset name written to ``meta.json``."""
 
@@ -132,6 +140,10 @@ class LocomotionConfig:
                                   f"expected some of {', '.join(SKILLS)}")
         if not self.skills:
             raise ConfigError("LocomotionConfig.skills: empty, expected at least one skill")
+        if self.steering not in ("wander", "random_hold"):
+            raise ConfigError(f"LocomotionConfig.steering: '{self.steering}', expected 'wander' or 'random_hold'")
+        if self.flights not in ("high", "low"):
+            raise ConfigError(f"LocomotionConfig.flights: '{self.flights}', expected 'high' or 'low'")
         if self.num_sequences < 1:
             raise ConfigError(f"LocomotionConfig.num_sequences: {self.num_sequences}, expected >= 1")
         if self.seconds_per_sequence < 1.0:

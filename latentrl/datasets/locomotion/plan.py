@@ -72,7 +72,7 @@ def _plan_blocks(
     blocks: list[_Block] = []
     used = 0  # frames laid out up to the end of the latest block's core
     while True:
-        p = _sample_params(skill, rng, body)
+        p = _sample_params(skill, rng, body, cfg.steering, cfg.flights)
         blend_in = blocks[-1].blend_out if blocks else 0
         blend_out = round(rng.uniform(*cfg.transition_seconds) * FPS)
         if skill == "jump_forward":  # whole jumps between the blend centres, starting and ending in stance

@@ -107,6 +107,15 @@ class _Steering:
         return prev + (self.values[i] - prev) * ease
 
 
+def _wander_params(rng: np.random.Generator, amplitude: float) -> tuple[float, ...]:
+    """Heading wander (``steering: wander``): two random sinusoids of 0.25-0.8 Hz, each up to ``amplitude``.
+
+    The first shipped default model's data. Predictable from a 2-frame history, which is why the
+    trained model hardly let its noise steer (see :class:`_Steering`).
+    """
+    return _drift_params(rng, amplitude, strength=(0.0, 1.0), hz=(0.25, 0.8))
+
+
 def _drift(t: np.ndarray, d) -> np.ndarray:
     if isinstance(d, _Steering):
         return d(t)
@@ -169,8 +178,21 @@ def _cadence_scale(body: Body) -> float:
     return math.sqrt(0.5 * 1.75 / body.rest_joints[1, 2])
 
 
-def _sample_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
-    """Per-block skill parameters (SI units); ``f`` is the gait-cycle frequency in cycles/s."""
+def _heading_change(rng: np.random.Generator, steering: str, max_deg_s: float, wander_deg_s: float):
+    """Yaw-rate process of a straight skill: ``random_hold`` (:class:`_Steering`) or the sinusoid ``wander``."""
+    if steering == "random_hold":
+        return _Steering(rng, math.radians(max_deg_s))
+    return _wander_params(rng, math.radians(wander_deg_s))
+
+
+def _sample_params(skill: str, rng: np.random.Generator, body: Body, steering: str = "wander",
+                   flights: str = "high") -> dict:
+    """Per-block skill parameters (SI units); ``f`` is the gait-cycle frequency in cycles/s.
+
+    ``steering`` and ``flights`` are ``LocomotionConfig``'s (see there); the defaults reproduce the
+    data of the first shipped default model.
+    """
+    low = flights == "low"
     scale = _cadence_scale(body)
     if skill in ("walk", "turn_left", "turn_right"):
         turn = {"walk": 0.0, "turn_left": 1.0, "turn_right": -1.0}[skill]
@@ -178,7 +200,8 @@ def _sample_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
         k = (v - 0.8) / 0.8
         steps = np.clip((1.7 + 0.4 * k) * scale + rng.normal(0, 0.03), 1.7, 2.1)
         yaw = turn * math.radians(rng.uniform(30, 90))
-        drift = _Steering(rng, math.radians(WALK_STEER_DEG_S)) if turn == 0 else _drift_params(rng, math.radians(3))
+        drift = (_heading_change(rng, steering, WALK_STEER_DEG_S, 25) if turn == 0
+                 else _drift_params(rng, math.radians(3)))
         return dict(v_fwd=v, v_side=0.0, k=k, f=steps / 2, yaw_rate=yaw, drift=drift, rocker=0.10,
                     toe_off=0.62 - 0.03 * k, width=0.035 * body.height, shift=-(0.07 + 0.02 * k) * body.height)
     if skill == "walk_backward":
@@ -195,17 +218,21 @@ def _sample_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
         v = rng.uniform(2.5, 4.0)
         k = (v - 2.5) / 1.5
         steps = np.clip((2.6 + 0.4 * k) * scale + rng.normal(0, 0.03), 2.6, 3.0)
-        return dict(v_fwd=v, k=k, f=steps / 2, duty=0.45 - 0.05 * k,
-                    drift=_Steering(rng, math.radians(RUN_STEER_DEG_S)), shift=-0.08 * body.height)
+        duty = 0.45 - 0.05 * k if low else 0.36 - 0.06 * k
+        return dict(v_fwd=v, k=k, f=steps / 2, duty=duty, drift=_heading_change(rng, steering, RUN_STEER_DEG_S, 20),
+                    shift=-0.08 * body.height)
     if skill in ("hop_left", "hop_right"):
         f = rng.uniform(1.8, 2.2)
         t_flight_max = 0.55 / f
-        apex = rng.uniform(0.03, min(0.07, G * t_flight_max**2 / 8))
+        apex = rng.uniform(*((0.03, min(0.07, G * t_flight_max**2 / 8)) if low
+                             else (0.05, min(0.15, G * t_flight_max**2 / 8))))
         t_flight = math.sqrt(8 * apex / G)
         return dict(v_fwd=rng.uniform(0.0, 1.0), f=f, apex=apex, duty=1.0 - t_flight * f,
-                    drift=_Steering(rng, math.radians(HOP_STEER_DEG_S)))
+                    drift=_heading_change(rng, steering, HOP_STEER_DEG_S, 18),
+                    clearance=(0.005 + 0.3 * apex) if low else (0.03 + 1.2 * apex),
+                    heel_rise=math.radians(15 if low else 28), toe_land=math.radians(6 if low else 14))
     if skill == "jump_forward":
-        apex = rng.uniform(0.05, 0.10)
+        apex = rng.uniform(*((0.05, 0.10) if low else (0.2, 0.35)))
         t_flight = math.sqrt(8 * apex / G)
         return dict(f=1.0 / rng.uniform(1.8, 2.1), apex=apex, t_flight=t_flight,
                     v_jump=rng.uniform(0.6, 1.1) / t_flight, jumps=int(rng.integers(1, 3)))
@@ -315,9 +342,9 @@ def _hop(phase: np.ndarray, t: np.ndarray, p: dict, body: Body, side: float) -> 
     ch["elbow_r"][:] = math.radians(35)
     ch["stance_width"][:] = 0.02 * body.height
     ch["toe_out"][:] = math.radians(5)
-    ch["clearance"][:] = 0.005 + 0.3 * p["apex"]
-    ch["heel_rise"][:] = math.radians(15)
-    ch["toe_land"][:] = math.radians(6)
+    ch["clearance"][:] = p["clearance"]
+    ch["heel_rise"][:] = p["heel_rise"]
+    ch["toe_land"][:] = p["toe_land"]
     stance = _window(phase, 0.0, p["duty"])
     never = np.zeros_like(stance)
     contact = np.stack((stance, never) if side < 0 else (never, stance), axis=-1)
