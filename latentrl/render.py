@@ -3,82 +3,21 @@
 BVH (:func:`save_bvh`, :func:`load_bvh`): the SMPL-22 skeleton, Y-up, centimetres, 6 channels per joint
 so that the file reproduces the generated joint positions exactly (docs/evaluation.md, section 6).
 
-Motion ``.npz`` (written by every command that writes motion; load with ``allow_pickle=False``):
-
-=============  ==================  =====================================================
-key            shape, dtype        meaning
-=============  ==================  =====================================================
-``joints``     (T, 22, 3) float32  world joint positions, metres, z up, SMPL-22 order
-``fps``        () float32          frames per second (30)
-``texts``      (T,) unicode        the prompt in force at each frame ('' for seed frames)
-``features``   (T, 276) float32    optional: DART features in world coordinates
-``actions``    (S, D) float32      optional: the latent noise of each primitive (RL action)
-``primitive``  (T,) int32          optional: which primitive produced each frame (-1 = seed)
-=============  ==================  =====================================================
+Motion ``.npz``: :class:`latentrl.motion.clip.MotionClip` holds the shared format and its schema;
+:func:`save_motion_npz` and :func:`load_motion_npz` are re-exported from there.
 """
 
 from __future__ import annotations
 
-import io
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from latentrl.errors import DataError
-from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS, PARENTS
+from latentrl.motion.clip import MotionClip, load_motion_npz, save_motion_npz  # noqa: F401  (the old address)
+from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS, PARENTS, SMPL_REST_OFFSETS, rest_offsets
 from latentrl.safe_io import atomic_write_bytes
-
-
-def save_motion_npz(
-    path: str | Path,
-    joints,
-    fps: float = FPS,
-    texts: Sequence[str] | None = None,
-    features=None,
-    actions=None,
-    primitive=None,
-    **extra,
-) -> Path:
-    """Write one motion in the shared format, atomically."""
-    joints = np.asarray(joints, dtype=np.float32)
-    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
-        raise DataError(f"{path}: joints must be (T, {NUM_JOINTS}, 3), got {joints.shape}")
-    data = {"joints": joints, "fps": np.float32(fps)}
-    t = len(joints)
-    data["texts"] = np.asarray(list(texts) if texts is not None else [""] * t, dtype=str)
-    if len(data["texts"]) != t:
-        raise DataError(f"{path}: texts has {len(data['texts'])} entries for {t} frames")
-    if features is not None:
-        data["features"] = np.asarray(features, dtype=np.float32)
-    if actions is not None:
-        data["actions"] = np.asarray(actions, dtype=np.float32).reshape(len(actions), -1)
-    if primitive is not None:
-        data["primitive"] = np.asarray(primitive, dtype=np.int32)
-    for key, value in extra.items():
-        data[key] = np.asarray(value)
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **data)
-    return atomic_write_bytes(path, buf.getvalue())
-
-
-def load_motion_npz(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a motion ``.npz``; checks the required keys and shapes."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"motion file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except Exception as exc:  # numpy raises several types for broken archives
-        raise DataError(f"{path}: not a readable motion .npz ({str(exc)[:120]})") from None
-    joints = data.get("joints")
-    if joints is None or joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
-        raise DataError(
-            f"{path}: field 'joints' must be (T, {NUM_JOINTS}, 3), got {None if joints is None else joints.shape}"
-        )
-    data.setdefault("fps", np.float32(FPS))
-    return data
 
 
 def render_gif(
@@ -153,18 +92,7 @@ BVH_UNITS_PER_M = 100.0
 BVH_ROTATION_CHANNELS = ("Zrotation", "Xrotation", "Yrotation")
 """Channel order of every joint's rotation: R = Rz(z) Rx(x) Ry(y) (column vectors), degrees."""
 
-# Approximate SMPL neutral T-pose offsets of each joint from its parent (metres, z up, facing +y,
-# +x = body right). Only the directions are used: bone lengths come from the motion itself.
-_SMPL_REST_OFFSETS = np.array([
-    [0.0, 0.0, 0.0],
-    [-0.059, -0.018, -0.082], [0.061, -0.014, -0.091], [0.0, -0.030, 0.109],
-    [-0.043, 0.009, -0.386], [0.043, 0.005, -0.384], [0.0, 0.0, 0.135],
-    [0.015, -0.037, -0.427], [-0.015, -0.035, -0.424], [0.0, 0.025, 0.053],
-    [-0.041, 0.122, -0.060], [0.035, 0.126, -0.062], [0.0, -0.034, 0.212],
-    [-0.072, -0.019, 0.114], [0.083, -0.024, 0.112], [0.0, 0.050, 0.089],
-    [-0.123, -0.019, 0.045], [0.113, -0.008, 0.047], [-0.255, -0.023, -0.016],
-    [0.260, -0.014, -0.013], [-0.266, -0.007, 0.013], [0.269, -0.006, 0.007],
-])
+_SMPL_REST_OFFSETS = SMPL_REST_OFFSETS  # the old address (tests and scripts import it from here)
 # End Site offsets of the leaf joints (toes forward, head up, hands along the arm), metres, z up.
 _END_SITES = {10: (0.0, 0.06, 0.0), 11: (0.0, 0.06, 0.0), 15: (0.0, 0.0, 0.12), 20: (-0.09, 0.0, 0.0),
               21: (0.09, 0.0, 0.0)}
@@ -214,14 +142,7 @@ def _kabsch(rest: np.ndarray, observed: np.ndarray) -> np.ndarray:
     return v @ np.swapaxes(u, 1, 2)
 
 
-def _bone_offsets(joints: np.ndarray) -> np.ndarray:
-    """(22, 3) rest offsets, z-up metres: SMPL T-pose directions times the motion's median bone lengths."""
-    offsets = _SMPL_REST_OFFSETS.copy()
-    for j in range(1, NUM_JOINTS):
-        length = float(np.median(np.linalg.norm(joints[:, j] - joints[:, PARENTS[j]], axis=-1)))
-        if length > 1e-6:
-            offsets[j] = _unit(offsets[j]) * length
-    return offsets
+_bone_offsets = rest_offsets
 
 
 def _global_rotations(joints: np.ndarray, offsets: np.ndarray) -> np.ndarray:

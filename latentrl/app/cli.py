@@ -105,11 +105,12 @@ def _data_commands(sub) -> None:
     data = sub.add_parser("data", help="motion-text datasets: convert AMASS-style sequences")
     dsub = data.add_subparsers(dest="data_command", metavar="SUBCOMMAND", parser_class=_Parser)
     dsub.required = True
-    conv = dsub.add_parser("convert-amass", add_help=False,
+    conv = dsub.add_parser("convert-amass",
                            help="AMASS SMPL(-X/-H) .npz + labels -> motion-text .npz files (see docs/datasets.md)")
-    conv.add_argument("args", nargs=argparse.REMAINDER,
-                      help="arguments of python -m latentrl.datasets.amass (run with --help for the list)")
-    conv.set_defaults(func=lambda a: _convert_amass(a.args))
+    from latentrl.datasets.amass import add_convert_arguments
+
+    add_convert_arguments(conv)
+    conv.set_defaults(func=_convert_amass)
 
 
 def _train_commands(sub) -> None:
@@ -392,17 +393,15 @@ def _compare(args: argparse.Namespace) -> int:
     return compare(request(CompareRequest, args))
 
 
-def _convert_amass(argv: list[str]) -> int:
-    from latentrl.datasets.amass import main as convert_amass_main
+def _convert_amass(args: argparse.Namespace) -> int:
+    from latentrl.datasets.amass import ConvertAmassRequest, run_convert
 
-    return convert_amass_main(argv)
+    return run_convert(request(ConvertAmassRequest, args))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status (argparse's too: 0 after ``--help``, 2 for bad arguments)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:2] == ["data", "convert-amass"]:  # its own parser (also python -m latentrl.datasets.amass)
-        return _convert_amass(argv[2:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -138,20 +138,23 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
 
 def _sink(out_dir: Path, render: int, write_motions: bool):
     """Per-episode writer: the motion ``.npz`` and, for the first ``render`` episodes of a path, GIF + BVH."""
-    from latentrl.render import render_gif, save_bvh, save_motion_npz
+    from latentrl.motion.clip import MotionClip
+    from latentrl.render import render_gif, save_bvh
 
     def sink(ep: EpisodeResult, motion: dict) -> str | None:
         name = f"{ep.suite}_path{ep.path_index}_ep{ep.episode:03d}"
+        clip = MotionClip.from_dict(motion)
         written = None
         if write_motions:
-            save_motion_npz(out_dir / "motions" / f"{name}.npz", **motion, suite=ep.suite, path_index=ep.path_index,
-                            episode=ep.episode, success=ep.success, end=ep.end, reach_time_s=ep.reach_time_s)
+            clip.meta.update(suite=ep.suite, path_index=ep.path_index, episode=ep.episode, success=ep.success,
+                             end=ep.end, reach_time_s=ep.reach_time_s)
+            clip.save(out_dir / "motions" / f"{name}.npz")
             written = f"motions/{name}.npz"
         if ep.episode < render:
             title = f"{ep.suite} path {ep.path_index} ep {ep.episode} ({ep.end})"
-            render_gif(out_dir / "renders" / f"{name}.gif", motion["joints"], texts=motion["texts"], title=title,
-                       stride=GIF_STRIDE, goals=motion["waypoints"])
-            save_bvh(out_dir / "renders" / f"{name}.bvh", motion["joints"], float(motion["fps"]))
+            render_gif(out_dir / "renders" / f"{name}.gif", clip.joints, texts=clip.texts, title=title,
+                       stride=GIF_STRIDE, goals=clip.waypoints)
+            save_bvh(out_dir / "renders" / f"{name}.bvh", clip.joints, clip.fps)
         return written
 
     return sink

@@ -109,7 +109,8 @@ def sample(req: SampleRequest) -> int:
     import torch
 
     from latentrl.motion.checkpoint import load_motion_model
-    from latentrl.render import render_gif, save_motion_npz
+    from latentrl.motion.clip import MotionClip, primitive_layout
+    from latentrl.render import render_gif
 
     texts = req.text or ["walk"]
     _check_sample(req, texts)
@@ -121,20 +122,17 @@ def sample(req: SampleRequest) -> int:
     g = torch.Generator().manual_seed(req.seed)
     roll = model.rollout(per_step, steps, batch=req.batch, generator=g, guidance_scale=req.guidance)
     frame_texts = [""] * 2 + [t for t in per_step for _ in range(8)]
-    primitive = [-1] * 2 + [i for i in range(steps) for _ in range(8)]
     for b in range(req.batch):
         path = req.out if req.batch == 1 else req.out.replace(".npz", f"_{b}.npz")
-        save_motion_npz(
-            path,
-            roll.joints_world[b].cpu(),
+        clip = MotionClip(
+            roll.joints_world[b].cpu().numpy(),
             texts=frame_texts,
-            features=roll.features_world[b].cpu(),
-            actions=roll.noise[:, b, 0].cpu(),
-            primitive=primitive,
-            seed=req.seed,
-            guidance_scale=req.guidance,
-            motion_model=model.info.get("sha256", ""),
+            actions=roll.noise[:, b, 0].cpu().numpy(),
+            features=roll.features_world[b].cpu().numpy(),
+            primitive=primitive_layout(steps),
+            meta={"seed": req.seed, "guidance_scale": req.guidance, "motion_model": model.info.get("sha256", "")},
         )
+        clip.save(path)
         print(f"wrote {path} ({roll.joints_world.shape[1]} frames, {roll.joints_world.shape[1] / 30:.1f} s)")
     if req.render:
         render_gif(req.render, roll.joints_world[0].cpu().numpy(), texts=frame_texts)

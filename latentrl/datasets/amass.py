@@ -30,6 +30,7 @@ import os
 import sys
 import zipfile
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -703,12 +704,29 @@ def _expand_sources(src_files: Any) -> list[Path]:
 # --- command line ----------------------------------------------------------------------------------------------------
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m latentrl.datasets.amass SRC... --labels L --out DIR (--rest-joints F | --smplx-model D)``."""
-    parser = argparse.ArgumentParser(
-        prog="python -m latentrl.datasets.amass",
-        description="Convert AMASS .npz sequences with text labels (BABEL-style JSON) into a latentrl "
-                    "motion-text dataset (30 fps, z up, SMPL-22).")
+@dataclass
+class ConvertAmassRequest:
+    """``latentrl data convert-amass`` (and ``python -m latentrl.datasets.amass``): what to convert, and how."""
+
+    sources: list[str]
+    """AMASS ``.npz`` files or folders (searched recursively)."""
+    labels: str
+    """JSON labels (see :func:`convert_amass`)."""
+    out: str
+    """Output dataset folder."""
+    rest_joints: str | None = None
+    """``.npz``/``.npy`` with the body's 22 rest joints (key ``rest_joints``); this or ``smplx_model``."""
+    smplx_model: str | None = None
+    """Your SMPL-X/SMPL-H/SMPL model folder (needs ``latentrl[amass]``)."""
+    rest_frame: str = "auto"
+    model_type: str = "smplx"
+    floor: str = "keep"
+    uncovered: str = "crop"
+    overwrite: bool = False
+
+
+def add_convert_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The arguments of :class:`ConvertAmassRequest` (shared by ``latentrl data convert-amass`` and ``main``)."""
     parser.add_argument("sources", nargs="+", help="AMASS .npz files or folders (searched recursively)")
     parser.add_argument("--labels", required=True,
                         help="JSON labels: a BABEL file (matched by feat_p), a mapping {file name or stem: "
@@ -726,22 +744,39 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--uncovered", default="crop", choices=("crop", "error"),
                         help="unlabelled frames: crop them (default) or fail")
     parser.add_argument("--overwrite", action="store_true", help="replace .npz files already in --out")
-    args = parser.parse_args(argv)
-    try:
-        if args.smplx_model:
-            model: Any = SmplxBody(args.smplx_model, model_type=args.model_type)
-        else:
-            model = _rest_joints_file(Path(args.rest_joints), frame=args.rest_frame)
-        paths = convert_amass(args.sources, args.labels, args.out, model, floor=args.floor,
-                              uncovered=args.uncovered, overwrite=args.overwrite)
-    except DataError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    print(f"wrote {len(paths)} sequences to {args.out}")
+    return parser
+
+
+def run_convert(req: ConvertAmassRequest) -> int:
+    """Convert as ``req`` says and print where; raises :class:`DataError` on bad input."""
+    if req.smplx_model:
+        model: Any = SmplxBody(req.smplx_model, model_type=req.model_type)
+    elif req.rest_joints:
+        model = _rest_joints_file(Path(req.rest_joints), frame=req.rest_frame)
+    else:
+        raise DataError("give the body: --rest-joints FILE or --smplx-model FOLDER")
+    paths = convert_amass(req.sources, req.labels, req.out, model, floor=req.floor, uncovered=req.uncovered,
+                          overwrite=req.overwrite)
+    print(f"wrote {len(paths)} sequences to {req.out}")
     return 0
 
 
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m latentrl.datasets.amass SRC... --labels L --out DIR (--rest-joints F | --smplx-model D)``."""
+    parser = add_convert_arguments(argparse.ArgumentParser(
+        prog="python -m latentrl.datasets.amass",
+        description="Convert AMASS .npz sequences with text labels (BABEL-style JSON) into a latentrl "
+                    "motion-text dataset (30 fps, z up, SMPL-22)."))
+    args = parser.parse_args(argv)
+    try:
+        return run_convert(ConvertAmassRequest(**vars(args)))
+    except DataError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return exc.exit_code
+
+
 __all__ = [
+    "ConvertAmassRequest",
     "POSE_WIDTHS",
     "SMPL_FROM_LATENTRL",
     "RestJointsBody",
@@ -754,6 +789,8 @@ __all__ = [
     "lerp_resample",
     "load_amass",
     "main",
+    "add_convert_arguments",
+    "run_convert",
     "output_times",
     "parse_labels",
     "resolve_body_model",

@@ -41,6 +41,7 @@ from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder
 from latentrl.errors import ConfigError, NonFiniteError, closest
 from latentrl.motion.canonical import WorldTransform, features_to_world
+from latentrl.motion.clip import MotionClip
 from latentrl.motion.prior import MotionPrior
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
 from latentrl.motion.rollout import RolloutState
@@ -560,13 +561,18 @@ class LatentMotionVectorEnv(VectorEnv):
         ``fps``, ``texts`` (T,) ('' for seed frames), ``actions`` (S, D) as clamped,
         ``primitive`` (T,) (-1 for seed frames), ``goals`` (S, 3), ``features`` (T, 276) when
         recorded, and ``from_reset`` (whether the episode's start was recorded).
-        ``save_motion_npz(path, **env.export_history(i))`` writes it.
+        ``contacts`` (T, 2) and ``floor`` come with them (:class:`~latentrl.motion.clip.MotionClip`).
+        ``save_motion_npz(path, **env.export_history(i))`` or ``env.export_clip(i).save(path)`` writes it.
         """
+        return self.export_clip(env_index, episode).to_dict()
+
+    def export_clip(self, env_index: int, episode: int = -1) -> MotionClip:
+        """:meth:`export_history` as a :class:`~latentrl.motion.clip.MotionClip` (``meta["from_reset"]``)."""
         if self._history is None:
             raise ValueError("this env records no history; build it with record_history=True")
         if not 0 <= env_index < self.num_envs:
             raise IndexError(f"env_index {env_index} out of range for {self.num_envs} envs")
-        return self._history.export(env_index, episode, self.texts)
+        return self._history.export_clip(env_index, episode, self.texts, self.floor_height)
 
     def clear_history(self) -> None:
         """Drop recorded steps (keeps each env's current 2 frames as the start of its episode)."""

@@ -10,11 +10,11 @@ memory); call :meth:`HistoryRecorder.clear` to bound host memory.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import torch
 
+from latentrl.motion.clip import MotionClip, primitive_layout
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS
 
@@ -93,29 +93,34 @@ class HistoryRecorder:
                 out[-1].steps.append(event)
         return out
 
-    def export(self, env: int, episode: int, texts: tuple[str, ...]) -> dict[str, Any]:
-        """Episode ``episode`` (Python indexing, -1 = latest) of env ``env`` as numpy arrays."""
+    def export_clip(self, env: int, episode: int, texts: tuple[str, ...], floor: float = 0.0) -> MotionClip:
+        """Episode ``episode`` (Python indexing, -1 = latest) of env ``env`` as a :class:`MotionClip`.
+
+        Its ``meta`` holds ``from_reset`` (whether the episode's start was recorded).
+        """
         eps = self.episodes(env)
         if not -len(eps) <= episode < len(eps):
             raise IndexError(f"env {env} has {len(eps)} recorded episodes; episode {episode} does not exist")
         ep = eps[episode]
         joints = [ep.start.joints[ep.row]] + [s.joints[env] for s in ep.steps]
         step_text = [texts[int(s.text[env])] for s in ep.steps]
-        out: dict[str, Any] = {
-            "joints": torch.cat(joints).numpy().astype(np.float32),
-            "fps": float(FPS),
-            "texts": [""] * HISTORY_LENGTH + [t for t in step_text for _ in range(FUTURE_LENGTH)],
-            "primitive": np.repeat(
-                np.arange(-1, len(ep.steps), dtype=np.int32), [HISTORY_LENGTH] + [FUTURE_LENGTH] * len(ep.steps)
-            ),
-            "actions": np.zeros((len(ep.steps), self.action_dim), np.float32),
-            "goals": np.zeros((len(ep.steps), 3), np.float32),
-            "from_reset": ep.start.from_reset,
-        }
+        actions = np.zeros((len(ep.steps), self.action_dim), np.float32)
+        goals = np.zeros((len(ep.steps), 3), np.float32)
         for k, s in enumerate(ep.steps):
-            out["actions"][k] = s.actions[env].numpy()
-            out["goals"][k] = s.goals[env].numpy()
+            actions[k] = s.actions[env].numpy()
+            goals[k] = s.goals[env].numpy()
+        features = None
         if self.record_features and ep.start.features is not None:
             feats = [ep.start.features[ep.row]] + [s.features[env] for s in ep.steps]
-            out["features"] = torch.cat(feats).numpy().astype(np.float32)
-        return out
+            features = torch.cat(feats).numpy().astype(np.float32)
+        return MotionClip(
+            torch.cat(joints).numpy().astype(np.float32),
+            FPS,
+            [""] * HISTORY_LENGTH + [t for t in step_text for _ in range(FUTURE_LENGTH)],
+            actions=actions,
+            goals=goals,
+            floor=floor,
+            features=features,
+            primitive=primitive_layout(len(ep.steps)),
+            meta={"from_reset": ep.start.from_reset},
+        )

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from latentrl.constants import CONTACT_HEIGHT_M
+from latentrl.motion.contacts import foot_positions, skate_weights, weighted_foot_slide
 from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
 
 SKATE_THRESHOLD_M = CONTACT_HEIGHT_M
@@ -37,15 +38,12 @@ def _t(x) -> torch.Tensor:
 
 def foot_skate_weights(heights: torch.Tensor, threshold: float = SKATE_THRESHOLD_M) -> torch.Tensor:
     """(..., T, 2) foot heights -> (..., T-1, 2) contact weights in [0, 1] (1 = on the floor)."""
-    h = torch.maximum(heights[..., :-1, :], heights[..., 1:, :])
-    return 2.0 - torch.pow(2.0, (h / threshold).clamp(0.0, 1.0))
+    return skate_weights(heights, threshold)
 
 
 def foot_skate_per_transition(joints, floor: float = 0.0, threshold: float = SKATE_THRESHOLD_M) -> torch.Tensor:
     """(..., T, 22, 3) -> (..., T-1, 2) weighted foot displacement in metres per frame."""
-    feet = _t(joints)[..., list(FOOT_JOINTS), :]
-    disp = (feet[..., 1:, :, :] - feet[..., :-1, :, :]).norm(dim=-1)
-    return disp * foot_skate_weights(feet[..., 2] - floor, threshold)
+    return weighted_foot_slide(foot_positions(_t(joints)), floor, threshold)
 
 
 def foot_skate_cm_s(joints, fps: float = 30.0, floor: float = 0.0) -> torch.Tensor:

@@ -40,6 +40,7 @@ from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, frames_after
+from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 
@@ -50,8 +51,9 @@ PolicyFn = Callable[[torch.Tensor], torch.Tensor]
 """The policy seam: observations (N, D) float32 on the env's device -> actions (N, A)."""
 
 EpisodeSink = Callable[["EpisodeResult", dict], "str | None"]
-"""Called once per finished episode with its result and its motion: the shared ``.npz`` fields (``joints``,
-``fps``, ``texts``, ``primitive``, ``actions``, ``goals``) cut at the episode's end, plus the path's
+"""Called once per finished episode with its result and its motion: the fields of its
+:class:`~latentrl.motion.clip.MotionClip` (``MotionClip.to_dict()``: ``joints``, ``fps``, ``texts``,
+``contacts``, ``floor``, ``primitive``, ``actions``, ``goals``) cut at the episode's end, with the path's
 ``waypoints`` (W, 3). Returns the file it wrote (stored in ``EpisodeResult.motion_file``) or None."""
 
 
@@ -165,18 +167,11 @@ def _rollout(env: FollowPathEnv, act: PolicyFn, max_steps: int, seed: int) -> di
     return {"steps": steps.cpu(), "wp_step": wp_step.cpu(), **{k: v.cpu() for k, v in out.items()}}
 
 
-def _episode_motion(env: FollowPathEnv, i: int, steps: int) -> dict[str, Any]:
+def _episode_motion(env: FollowPathEnv, i: int, steps: int) -> MotionClip:
     """Env i's recorded episode cut at its end (steps continue for finished envs in a batch)."""
-    h = env.export_history(i, episode=0)
-    frames = frames_after(steps)
-    return {
-        "joints": h["joints"][:frames],
-        "fps": h["fps"],
-        "texts": list(h["texts"][:frames]),
-        "primitive": h["primitive"][:frames],
-        "actions": h["actions"][:steps],
-        "goals": h["goals"][:steps],
-    }
+    clip = env.export_clip(i, episode=0).cut(steps)
+    clip.meta.pop("from_reset", None)
+    return clip
 
 
 def _end(outcome: dict[str, torch.Tensor], i: int) -> str:
@@ -206,7 +201,7 @@ def run_path(
     for i in range(settings.episodes):
         steps = int(outcome["steps"][i])
         motion_i = _episode_motion(env, i, steps)
-        joints = torch.as_tensor(motion_i["joints"])
+        joints = torch.as_tensor(motion_i.joints)
         success = bool(outcome["success"][i])
         wp_times = [frames_after(int(s)) / FPS if s > 0 else None for s in outcome["wp_step"][i, : len(path.waypoints)]]
         result = EpisodeResult(
@@ -223,7 +218,8 @@ def run_path(
             pelvis_xy=joints[:, 0, :2].numpy().copy(),
         )
         if sink is not None:
-            result.motion_file = sink(result, {**motion_i, "waypoints": np.asarray(path.waypoints, np.float32)})
+            motion_i.waypoints = np.asarray(path.waypoints, np.float32)
+            result.motion_file = sink(result, motion_i.to_dict())
         episodes.append(result)
     env.close()
     return PathResult(suite, index, path, episodes, time.perf_counter() - t0)

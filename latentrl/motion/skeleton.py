@@ -6,6 +6,8 @@ World convention everywhere in latentrl: metres, z up, floor at z = 0, 30 fps.
 
 from __future__ import annotations
 
+import numpy as np
+
 NUM_JOINTS = 22
 
 JOINT_NAMES: tuple[str, ...] = (
@@ -94,3 +96,31 @@ def forward_kinematics(rest_joints, rotations, transl):
         pos.append(pos[p] + (glob[p] @ offset[..., None])[..., 0])
         glob.append(glob[p] @ rotations[..., j, :, :])
     return torch.stack(pos, dim=-2), torch.stack(glob, dim=-3)
+
+# Approximate SMPL neutral T-pose offsets of each joint from its parent (metres, z up, facing +y,
+# +x = body right). Only the directions are used: bone lengths come from the motion itself.
+SMPL_REST_OFFSETS = np.array([
+    [0.0, 0.0, 0.0],
+    [-0.059, -0.018, -0.082], [0.061, -0.014, -0.091], [0.0, -0.030, 0.109],
+    [-0.043, 0.009, -0.386], [0.043, 0.005, -0.384], [0.0, 0.0, 0.135],
+    [0.015, -0.037, -0.427], [-0.015, -0.035, -0.424], [0.0, 0.025, 0.053],
+    [-0.041, 0.122, -0.060], [0.035, 0.126, -0.062], [0.0, -0.034, 0.212],
+    [-0.072, -0.019, 0.114], [0.083, -0.024, 0.112], [0.0, 0.050, 0.089],
+    [-0.123, -0.019, 0.045], [0.113, -0.008, 0.047], [-0.255, -0.023, -0.016],
+    [0.260, -0.014, -0.013], [-0.266, -0.007, 0.013], [0.269, -0.006, 0.007],
+])
+
+
+def rest_offsets(joints: np.ndarray) -> np.ndarray:
+    """(22, 3) rest offsets of a motion (T, 22, 3), z-up metres: SMPL T-pose directions times its median bone lengths.
+
+    The skeleton BVH export writes (with :data:`PARENTS`) and motion files carry (``rest_offsets``).
+    """
+    joints = np.asarray(joints)
+    offsets = SMPL_REST_OFFSETS.copy()
+    for j in range(1, NUM_JOINTS):
+        length = float(np.median(np.linalg.norm(joints[:, j] - joints[:, PARENTS[j]], axis=-1)))
+        if length > 1e-6:
+            direction = offsets[j] / np.linalg.norm(offsets[j])
+            offsets[j] = direction * length
+    return offsets

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,6 +27,7 @@ from latentrl.motion_training.losses import (
     EMA,
     DenoiserTrainConfig,
     ModelShapeConfig,
+    StageConfig,
     VAETrainConfig,
     build_models,
     denoiser_step,
@@ -37,6 +39,24 @@ from latentrl.motion_training.losses import (
     vae_step,
 )
 from latentrl.safe_io import atomic_write_text, load_torch, save_torch_atomic
+
+
+@dataclass
+class _Stage:
+    """What differs between the VAE and the denoiser stage of :meth:`MotionTrainer._run_stage`."""
+
+    name: str
+    """``vae`` or ``denoiser``: the log prefix, the TensorBoard tags (``motion/<name>/*``) and ``state.pt``'s stage."""
+    cfg: StageConfig
+    module: torch.nn.Module
+    optimizer: torch.optim.Optimizer
+    ema: EMA
+    train_step: Callable
+    """(history, gt_history, future, text) -> (loss, terms, prediction or None), all normalized."""
+    rollout: Callable
+    """(prediction, history, text) -> the predicted primitive whose last frames become the next history."""
+    coin_after_last: bool
+    """Whether the rollout coin is drawn after a batch's last primitive too (the VAE does; the denoiser does not)."""
 
 
 @dataclass
@@ -266,45 +286,38 @@ class MotionTrainer:
         self.monitor.close()
         return self.out
 
-    def _train_vae(self, bar, start: float) -> None:
-        cfg = self.cfg.vae_train
-        self.vae.train()
-        h = self.cfg.model.vae.history_length
-        while self.step < cfg.steps:
-            motion, _ = self._batch(cfg.num_primitives, cfg.batch_size)
-            history = motion[:, 0, :h]
-            use_rollout = False
-            for k in range(cfg.num_primitives):
-                if self.step >= cfg.steps:
-                    break
-                if not use_rollout:
-                    history = motion[:, k, :h]
-                lr = set_lr(self.vae_opt, cfg, self.step)
-                loss, terms, pred = vae_step(self.vae, history, motion[:, k, h:], self.normalizer, cfg, self.generator)
-                _optimizer_step(loss, self.vae, self.vae_opt, self.vae_ema, cfg.grad_clip)
-                p = cfg.rollout_probability(self.step)
-                use_rollout = bool(torch.rand((), generator=self.generator) < p)
-                if use_rollout:
-                    history = rollout_history(
-                        pred.detach(), self.normalizer, self.dataset.pelvis_delta.to(self.device), h
-                    )
-                if self.step % self.cfg.log_every == 0:
-                    self._log("vae", self.step, {**terms, "rollout_p": p}, lr, bar)
-                self.step += 1  # steps done: what a checkpoint records, so a resume does not repeat this one
-                bar.update(1)
-                self._maybe_checkpoint(cfg.steps, loss.detach())
-            self.elapsed = time.perf_counter() - start
-        with torch.no_grad():
-            motion, _ = self._batch(1, 2048)
-            std = latent_scale(self.vae_ema.module, motion[:, 0, :h], motion[:, 0, h:], self.generator)
-        self.vae_ema.module.latent_std.fill_(std)
-        self.vae.latent_std.fill_(std)
+    def _stage(self, name: str) -> _Stage:
+        """The parts of stage ``name`` ("vae" or "denoiser") that :meth:`_run_stage` plugs into its one loop."""
+        normalizer, generator = self.normalizer, self.generator
+        if name == "vae":
+            cfg = self.cfg.vae_train
 
-    def _train_denoiser(self, bar, start: float) -> None:
-        cfg = self.cfg.denoiser_train
-        vae = self.vae_ema.module
-        h = self.cfg.model.vae.history_length
-        self.denoiser.train()
+            def vae_train_step(history, gt_history, future, text):
+                return vae_step(self.vae, history, future, normalizer, cfg, generator)
+
+            return _Stage("vae", cfg, self.vae, self.vae_opt, self.vae_ema, vae_train_step,
+                          lambda pred, history, text: pred.detach(), coin_after_last=True)
+        cfg, vae = self.cfg.denoiser_train, self.vae_ema.module
+
+        def denoiser_train_step(history, gt_history, future, text):
+            loss, terms = denoiser_step(self.denoiser, vae, self.diffusion, history, gt_history, future, text,
+                                        normalizer, cfg, generator)
+            return loss, terms, None
+
+        def sample(pred, history, text):
+            return sample_for_rollout(self.denoiser, vae, self.diffusion, history, text, generator)
+
+        return _Stage("denoiser", cfg, self.denoiser, self.den_opt, self.den_ema, denoiser_train_step, sample,
+                      coin_after_last=False)
+
+    def _run_stage(self, stage: _Stage, bar, start: float) -> None:
+        """The one stage loop of both stages: batches of ``num_primitives`` consecutive primitives.
+
+        Each primitive is one optimizer step; with the stage's rollout probability the next primitive's
+        history is the model's own prediction instead of the data's.
+        """
+        cfg, h = stage.cfg, self.cfg.model.vae.history_length
+        stage.module.train()
         while self.step < cfg.steps:
             motion, text = self._batch(cfg.num_primitives, cfg.batch_size)
             use_rollout = False
@@ -314,31 +327,34 @@ class MotionTrainer:
                 gt_history = motion[:, k, :h]
                 if not use_rollout:
                     history = gt_history
-                lr = set_lr(self.den_opt, cfg, self.step)
-                loss, terms = denoiser_step(
-                    self.denoiser,
-                    vae,
-                    self.diffusion,
-                    history,
-                    gt_history,
-                    motion[:, k, h:],
-                    text[:, k],
-                    self.normalizer,
-                    cfg,
-                    self.generator,
-                )
-                _optimizer_step(loss, self.denoiser, self.den_opt, self.den_ema, cfg.grad_clip)
+                lr = set_lr(stage.optimizer, cfg, self.step)
+                loss, terms, pred = stage.train_step(history, gt_history, motion[:, k, h:], text[:, k])
+                _optimizer_step(loss, stage.module, stage.optimizer, stage.ema, cfg.grad_clip)
                 p = cfg.rollout_probability(self.step)
-                use_rollout = k + 1 < cfg.num_primitives and bool(torch.rand((), generator=self.generator) < p)
+                # the VAE draws its coin after the last primitive too (the generator's order is part of a seeded run)
+                coin = stage.coin_after_last or k + 1 < cfg.num_primitives
+                use_rollout = coin and bool(torch.rand((), generator=self.generator) < p)
                 if use_rollout:
-                    pred = sample_for_rollout(self.denoiser, vae, self.diffusion, history, text[:, k], self.generator)
+                    pred = stage.rollout(pred, history, text[:, k])
                     history = rollout_history(pred, self.normalizer, self.dataset.pelvis_delta.to(self.device), h)
                 if self.step % self.cfg.log_every == 0:
-                    self._log("denoiser", self.step, {**terms, "rollout_p": p}, lr, bar)
+                    self._log(stage.name, self.step, {**terms, "rollout_p": p}, lr, bar)
                 self.step += 1  # steps done: what a checkpoint records, so a resume does not repeat this one
                 bar.update(1)
                 self._maybe_checkpoint(cfg.steps, loss.detach())
             self.elapsed = time.perf_counter() - start
+
+    def _train_vae(self, bar, start: float) -> None:
+        self._run_stage(self._stage("vae"), bar, start)
+        h = self.cfg.model.vae.history_length
+        with torch.no_grad():
+            motion, _ = self._batch(1, 2048)
+            std = latent_scale(self.vae_ema.module, motion[:, 0, :h], motion[:, 0, h:], self.generator)
+        self.vae_ema.module.latent_std.fill_(std)
+        self.vae.latent_std.fill_(std)
+
+    def _train_denoiser(self, bar, start: float) -> None:
+        self._run_stage(self._stage("denoiser"), bar, start)
 
     def build_model(self):
         """The trained model: EMA weights, normalization, text table, seeds, pelvis_delta."""

@@ -22,7 +22,9 @@ import torch
 import torch.nn.functional as F
 
 from latentrl.constants import CONTACT_HEIGHT_M
-from latentrl.motion.skeleton import FOOT_JOINTS, LEFT_HIP, RIGHT_HIP
+from latentrl.motion.contacts import foot_positions as _foot_positions
+from latentrl.motion.contacts import weighted_foot_slide
+from latentrl.motion.skeleton import LEFT_HIP, RIGHT_HIP
 
 __all__ = [
     "foot_floor",
@@ -117,11 +119,7 @@ def foot_skate(
     Returns:
         (N,) <= 0.
     """
-    step = torch.linalg.vector_norm(foot_positions[:, 1:] - foot_positions[:, :-1], dim=-1)  # (N, T-1, 2)
-    height = foot_positions[..., 2] - floor_height  # (N, T, 2)
-    highest = torch.maximum(height[:, 1:], height[:, :-1])
-    weight = 2.0 - torch.pow(2.0, (highest / threshold).clamp(0.0, 1.0))
-    return -(step * weight).mean(dim=(1, 2))
+    return -weighted_foot_slide(foot_positions, floor_height, threshold).mean(dim=(1, 2))
 
 
 def moving_orientation(pelvis_before: torch.Tensor, pelvis_after: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
@@ -179,4 +177,4 @@ def jerk(joints: torch.Tensor) -> torch.Tensor:
 
 def foot_joints(joints: torch.Tensor) -> torch.Tensor:
     """(..., 22, 3) joints -> (..., 2, 3) the left and right foot joints DART uses for contact."""
-    return joints[..., list(FOOT_JOINTS), :]
+    return _foot_positions(joints)

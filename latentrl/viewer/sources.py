@@ -85,20 +85,19 @@ def per_frame_goals(goals: np.ndarray, frames: int, primitive: np.ndarray | None
 
 def load_clip(path: str | Path, waypoints: np.ndarray | None = None) -> Clip:
     """Read a motion ``.npz`` of the shared format (``latentrl.render``) as a :class:`Clip`."""
-    from latentrl.render import load_motion_npz
+    from latentrl.motion.clip import MotionClip
 
-    data = load_motion_npz(path)
-    joints = np.asarray(data["joints"], dtype=np.float32)
+    motion = MotionClip.load(path)
+    joints = motion.joints
     if len(joints) == 0 or not np.isfinite(joints).all():
         raise DataError(f"{path}: 'joints' is empty or holds non-finite values")
     frames = len(joints)
-    texts = [str(t) for t in data["texts"]] if "texts" in data and len(data["texts"]) == frames else [""] * frames
     goals = None
-    if "goals" in data and np.asarray(data["goals"]).size:
-        goals = per_frame_goals(data["goals"], frames, data.get("primitive"))
-    if waypoints is None and "waypoints" in data and np.asarray(data["waypoints"]).size:
-        waypoints = np.asarray(data["waypoints"], dtype=np.float32).reshape(-1, 3)
-    return Clip(joints, float(data["fps"]), texts, goals, waypoints)
+    if motion.goals is not None and np.asarray(motion.goals).size:
+        goals = per_frame_goals(motion.goals, frames, motion.primitive)
+    if waypoints is None and motion.waypoints is not None and np.asarray(motion.waypoints).size:
+        waypoints = np.asarray(motion.waypoints, dtype=np.float32).reshape(-1, 3)
+    return Clip(joints, motion.fps, motion.texts, goals, waypoints)
 
 
 def motion_metrics(clip: Clip) -> dict[str, float]:

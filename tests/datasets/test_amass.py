@@ -248,3 +248,18 @@ def test_smplx_body_with_a_fake_model(tmp_path):
     src = write_amass(tmp_path / "s.npz", 60.0, seconds=1.0)
     [seq] = amass.amass_to_sequences(src, WHOLE, body)
     assert np.abs(seq["joints"] - expected_joints(31)).max() < 1e-4
+
+
+def test_cli_and_module_main_share_one_request(tmp_path):
+    from latentrl.app.cli import main as cli_main
+
+    src = write_amass(tmp_path / "walk_turn_poses.npz", 60.0)
+    (tmp_path / "labels.json").write_text(json.dumps(LABELS))
+    np.save(tmp_path / "rest.npy", REST)
+    common = [str(src), "--labels", str(tmp_path / "labels.json"), "--rest-joints", str(tmp_path / "rest.npy"),
+              "--rest-frame", "latentrl"]
+    assert cli_main(["data", "convert-amass", *common, "--out", str(tmp_path / "cli")]) == 0
+    assert amass.main([*common, "--out", str(tmp_path / "module")]) == 0
+    a, b = (read_sequence(tmp_path / d / "walk_turn_poses.npz") for d in ("cli", "module"))
+    np.testing.assert_array_equal(a["joints"], b["joints"])
+    assert cli_main(["data", "convert-amass", *common[:3], "--out", str(tmp_path / "x")]) == 2  # no body given

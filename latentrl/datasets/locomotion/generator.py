@@ -9,6 +9,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from latentrl.datasets.body import (
     Body,
@@ -29,6 +30,7 @@ from latentrl.datasets.locomotion.plan import (
     _weights,
 )
 from latentrl.datasets.motion_text import make_sequence, write_meta, write_sequence
+from latentrl.motion.contacts import foot_positions, weighted_foot_slide
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS
 
 # --- one sequence -----------------------------------------------------------------------------------------
@@ -143,11 +145,8 @@ def foot_skate(joints: np.ndarray, horizontal: bool = False) -> np.ndarray:
     ``2 - 2**clamp(max(h_t, h_t-1) / 0.03, 0, 1)`` (h = its height above the floor); the two feet are averaged.
     ``horizontal`` measures only the xy displacement (sliding), leaving out lift-off and touch-down.
     """
-    feet = joints[:, list(FOOT_JOINTS)]
-    delta = np.diff(feet[..., :2] if horizontal else feet, axis=0)
-    height = np.maximum(feet[1:, :, 2], feet[:-1, :, 2])
-    weight = 2.0 - 2.0 ** np.clip(height / 0.03, 0.0, 1.0)
-    return (np.linalg.norm(delta, axis=-1) * weight).mean(axis=-1)
+    feet = foot_positions(torch.from_numpy(np.asarray(joints)))
+    return weighted_foot_slide(feet, horizontal=horizontal).mean(dim=-1).numpy()
 
 
 _STAT_KEYS = ("frames", "pure", "pairs", "speed", "skate", "skate_xy", "floor", "left_only", "right_only")

@@ -1,0 +1,218 @@
+"""One motion clip and its ``.npz`` file: what envs export, ``motion sample`` and evaluation write, the viewer reads.
+
+:class:`MotionClip` holds one motion in world coordinates; :meth:`MotionClip.save` writes it and
+:meth:`MotionClip.load` reads it (older files without the newer keys load too: contacts are then
+computed from the joints, rest offsets from the bone lengths). Load with ``allow_pickle=False``.
+
+Motion ``.npz`` schema (docs/evaluation.md, section 6):
+
+================  ==================  ==========================================================
+key               shape, dtype        meaning
+================  ==================  ==========================================================
+``joints``        (T, 22, 3) float32  world joint positions, metres, z up, SMPL-22 order
+``fps``           () float32          frames per second (30)
+``texts``         (T,) unicode        the prompt in force at each frame ('' for seed frames)
+``contacts``      (T, 2) bool         left, right foot joint (10, 11) lower than 3 cm above ``floor``
+``floor``         () float32          the floor height the contacts refer to, metres
+``rest_offsets``  (22, 3) float32     each joint's rest offset from its parent, metres, z up
+``parents``       (22,) int32         each joint's parent (-1 for the pelvis), as BVH export uses
+``features``      (T, 276) float32    optional: DART features in world coordinates
+``actions``       (S, D) float32      optional: the latent noise of each primitive (RL action)
+``goals``         (S, 3) float32      optional: the goal in force during each primitive, world metres
+``primitive``     (T,) int32          optional: which primitive produced each frame (-1 = seed)
+``waypoints``     (W, 3) float32      optional: the path an evaluation episode follows
+================  ==================  ==========================================================
+
+Any other key is a 0-d (or small) value kept in :attr:`MotionClip.meta` (an evaluation writes
+``suite``, ``path_index``, ``episode``, ``success``, ``end``, ``reach_time_s``; ``motion sample``
+writes ``seed``, ``guidance_scale``, ``motion_model``).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from latentrl.constants import CONTACT_HEIGHT_M
+from latentrl.errors import DataError
+from latentrl.motion.contacts import foot_contacts
+from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
+from latentrl.motion.skeleton import FPS, NUM_JOINTS, PARENTS, rest_offsets
+from latentrl.safe_io import atomic_write_bytes
+
+ARRAYS = ("features", "actions", "goals", "primitive", "waypoints")
+"""The optional array fields, in the order they are written."""
+_DERIVED = ("contacts", "floor", "rest_offsets", "parents")
+
+
+def contacts_of(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """(T, 22, 3) world joints -> (T, 2) bool foot contacts (:func:`latentrl.motion.contacts.foot_contacts`)."""
+    return foot_contacts(torch.as_tensor(np.asarray(joints)), floor, CONTACT_HEIGHT_M).numpy()
+
+
+def primitive_layout(steps: int) -> np.ndarray:
+    """(2 + 8 * steps,) int32: -1 for the seed frames, then the primitive of each frame."""
+    return np.repeat(np.arange(-1, steps, dtype=np.int32), [HISTORY_LENGTH] + [FUTURE_LENGTH] * steps)
+
+
+@dataclass
+class MotionClip:
+    """One motion, world metres, z up (the shared motion format; see the module docstring for the file).
+
+    Attributes:
+        joints: (T, 22, 3) float32 world joints.
+        fps: frames per second.
+        texts: (T,) prompt per frame ('' for seed frames).
+        actions: (S, D) latent noise per primitive, or None.
+        goals: (S, 3) goal per primitive, or None.
+        contacts: (T, 2) bool left/right foot contacts; computed from ``joints`` and ``floor`` when None.
+        floor: floor height, metres.
+        features: (T, 276) world DART features, or None.
+        primitive: (T,) primitive per frame (-1 = seed), or None.
+        waypoints: (W, 3) path of an evaluation episode, or None.
+        meta: other values written beside (scalars: seed, success, ...).
+    """
+
+    joints: np.ndarray
+    fps: float = float(FPS)
+    texts: list[str] | None = None
+    actions: np.ndarray | None = None
+    goals: np.ndarray | None = None
+    contacts: np.ndarray | None = None
+    floor: float = 0.0
+    features: np.ndarray | None = None
+    primitive: np.ndarray | None = None
+    waypoints: np.ndarray | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.joints = np.asarray(self.joints, dtype=np.float32)
+        if self.joints.ndim != 3 or self.joints.shape[1:] != (NUM_JOINTS, 3):
+            raise DataError(f"joints must be (T, {NUM_JOINTS}, 3), got {self.joints.shape}")
+        self.fps = float(self.fps)
+        t = len(self.joints)
+        self.texts = [str(x) for x in self.texts] if self.texts is not None else [""] * t
+        if len(self.texts) != t:
+            raise DataError(f"texts has {len(self.texts)} entries for {t} frames")
+        if self.contacts is None:
+            self.contacts = contacts_of(self.joints, self.floor)
+        self.contacts = np.asarray(self.contacts, dtype=bool).reshape(t, 2)
+
+    @property
+    def frames(self) -> int:
+        return len(self.joints)
+
+    @property
+    def rest_offsets(self) -> np.ndarray:
+        """(22, 3) rest offsets: SMPL T-pose directions times the motion's median bone lengths."""
+        return rest_offsets(self.joints).astype(np.float32)
+
+    def cut(self, steps: int) -> MotionClip:
+        """The first ``steps`` primitives (2 seed frames + 8 per primitive) of a clip in the primitive layout."""
+        frames = HISTORY_LENGTH + FUTURE_LENGTH * int(steps)
+
+        def head(x, n):
+            return None if x is None else x[:n]
+
+        return MotionClip(self.joints[:frames], self.fps, self.texts[:frames], head(self.actions, steps),
+                          head(self.goals, steps), self.contacts[:frames], self.floor, head(self.features, frames),
+                          head(self.primitive, frames), self.waypoints, dict(self.meta))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as a flat dict (``joints``, ``fps``, ``texts``, ``contacts``, present optional arrays, meta)."""
+        out: dict[str, Any] = {"joints": self.joints, "fps": self.fps, "texts": list(self.texts),
+                               "contacts": self.contacts, "floor": self.floor}
+        out.update({k: getattr(self, k) for k in ARRAYS if getattr(self, k) is not None})
+        out.update(self.meta)
+        return out
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """What :meth:`save` writes: every key of the schema with its dtype."""
+        data = {"joints": self.joints, "fps": np.float32(self.fps), "texts": np.asarray(self.texts, dtype=str),
+                "contacts": self.contacts, "floor": np.float32(self.floor), "rest_offsets": self.rest_offsets,
+                "parents": np.asarray(PARENTS, dtype=np.int32)}
+        if self.features is not None:
+            data["features"] = np.asarray(self.features, dtype=np.float32)
+        if self.actions is not None:
+            data["actions"] = np.asarray(self.actions, dtype=np.float32).reshape(len(self.actions), -1)
+        if self.goals is not None:
+            data["goals"] = np.asarray(self.goals, dtype=np.float32)
+        if self.primitive is not None:
+            data["primitive"] = np.asarray(self.primitive, dtype=np.int32)
+        if self.waypoints is not None:
+            data["waypoints"] = np.asarray(self.waypoints, dtype=np.float32)
+        for key, value in self.meta.items():
+            data[key] = np.asarray(value)
+        return data
+
+    def save(self, path: str | Path) -> Path:
+        """Write the clip as a motion ``.npz``, atomically."""
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **self.arrays())
+        return atomic_write_bytes(path, buf.getvalue())
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> MotionClip:
+        """A clip from the schema's keys; unknown keys go to ``meta`` (``rest_offsets``, ``parents`` are derived)."""
+        known = {"joints", "fps", "texts", "contacts", "floor", *ARRAYS}
+        kwargs = {k: data[k] for k in known if k in data}
+        if "fps" in kwargs:
+            kwargs["fps"] = float(kwargs["fps"])
+        if "floor" in kwargs:
+            kwargs["floor"] = float(kwargs["floor"])
+        meta = {k: v for k, v in data.items() if k not in known and k not in _DERIVED}
+        return cls(**kwargs, meta=meta)
+
+    @classmethod
+    def load(cls, path: str | Path) -> MotionClip:
+        """Read a motion ``.npz`` (one-line :class:`DataError` on a missing, broken or malformed file)."""
+        data = read_motion_arrays(path)
+        meta = {k: (v.item() if v.ndim == 0 else v) for k, v in data.items()}
+        try:
+            return cls.from_dict(meta)
+        except DataError as exc:
+            raise DataError(f"{path}: {exc}") from None
+
+
+def read_motion_arrays(path: str | Path) -> dict[str, np.ndarray]:
+    """The raw arrays of a motion ``.npz``; checks ``joints`` and fills ``fps`` (30) for old files."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"motion file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except Exception as exc:  # numpy raises several types for broken archives
+        raise DataError(f"{path}: not a readable motion .npz ({str(exc)[:120]})") from None
+    joints = data.get("joints")
+    if joints is None or joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
+        raise DataError(
+            f"{path}: field 'joints' must be (T, {NUM_JOINTS}, 3), got {None if joints is None else joints.shape}"
+        )
+    data.setdefault("fps", np.float32(FPS))
+    return data
+
+
+def save_motion_npz(path: str | Path, joints, fps: float = FPS, texts: Sequence[str] | None = None, **fields) -> Path:
+    """Write one motion in the shared format, atomically: ``MotionClip(joints, fps, texts, **fields).save(path)``.
+
+    Keyword arguments other than the clip's fields are written as extra values (``meta``).
+    """
+    try:
+        return MotionClip.from_dict({"joints": joints, "fps": fps, "texts": texts, **fields}).save(path)
+    except DataError as exc:
+        raise DataError(f"{path}: {exc}") from None
+
+
+def load_motion_npz(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a motion ``.npz`` as its arrays (``joints`` checked, ``fps`` and ``contacts`` filled for old files)."""
+    data = read_motion_arrays(path)
+    if "contacts" not in data:
+        data["contacts"] = contacts_of(data["joints"], float(data.get("floor", 0.0)))
+    return data
