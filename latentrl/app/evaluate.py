@@ -119,7 +119,7 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     settings' guidance and action bound, so the eval env steps the motion as training did.
     """
     from latentrl.envs.config import stored_env_config
-    from latentrl.motion.checkpoint import file_sha256, load_motion_model
+    from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
     from latentrl.ppo import load_policy
 
     model = load_motion_model(req.motion, device=settings.device)
@@ -133,6 +133,8 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     env = stored_env_config(meta.get("config"))
     if env is not None:
         settings.guidance_scale, settings.action_bound = env.guidance_scale, env.action_bound
+        if env.seed_history:  # episodes start from the seeds the policy was trained on
+            attach_seed_history(model, env.seed_history)
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 
