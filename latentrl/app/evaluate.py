@@ -173,12 +173,15 @@ def evaluate(req: EvalRequest) -> int:
     from latentrl.evaluation import plots, report
     from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
     from latentrl.preflight import NewOutput, check_writable
+    from latentrl.resources import is_packaged, policy_file
     from latentrl.timing import hardware
 
     settings = _settings(req)
     files = resolve_path_files(req.paths)
     first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
-    out_dir = Path(req.out) if req.out else Path(req.policy).resolve().parent / f"eval-{Path(req.policy).stem}"
+    req.policy = str(policy_file(req.policy))  # a file, or a shipped policy by name (reach_walk_default)
+    beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
+    out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"
     check_writable(out_dir, "--out")
     model, policy, motion, policy_info, observe_next = _load(req, settings)
     observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings, observe_next)
