@@ -2,8 +2,10 @@
 
 ``latentrl/configs/`` holds the training configs (``configs/motion/`` the motion-training ones,
 ``configs/policies/`` those of the shipped policies) and ``latentrl/tasks/paths/`` the waypoint-path
-suites. A checkout also has ``configs`` and ``tasks`` links at its root, so ``latentrl train
-configs/quick.yaml`` works there as well as ``latentrl train quick`` anywhere.
+suites, ``latentrl/policies/`` the shipped policies (``<name>.pt`` and its card ``<name>.md``). A
+checkout also has ``configs``, ``tasks`` and ``policies`` links at its root, so ``latentrl train
+configs/quick.yaml`` works there as well as ``latentrl train quick`` anywhere, and ``latentrl eval
+policies/reach_walk_default.pt`` as well as ``latentrl eval reach_walk_default``.
 
 A file argument is looked up, in order: as given (relative to the working directory), then
 relative to the package (``configs/quick.yaml``, ``tasks/paths/dart_walk_long.json``), then as a
@@ -16,6 +18,7 @@ from importlib import resources
 from pathlib import Path
 
 CONFIGS = "configs"
+POLICIES = "policies"
 PATH_SUITES = ("tasks", "paths")
 
 
@@ -44,6 +47,23 @@ def task_file(spec: str | Path) -> Path | None:
     """A path file by path, by path inside the package, or by suite name; None if there is none."""
     found = find_file(spec, (packaged(), suites_folder()), ".json")
     return found if found.is_file() else None
+
+
+def policy_file(spec: str | Path) -> Path:
+    """A policy checkpoint by path, by path inside the package, or by shipped name (``reach_walk_default``).
+
+    Returns ``spec`` itself when nothing matches, so the caller's "not found" message names what was given.
+    """
+    return find_file(spec, (packaged(), packaged(POLICIES)), ".pt")
+
+
+def is_packaged(path: str | Path) -> bool:
+    """Whether ``path`` lies inside the installed package (where outputs must not go)."""
+    try:
+        Path(path).resolve().relative_to(packaged().resolve())
+    except ValueError:
+        return False
+    return True
 
 
 def find_file(spec: str | Path, roots: tuple[Path, ...], suffix: str) -> Path:

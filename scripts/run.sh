@@ -5,25 +5,38 @@
 #   bash scripts/run.sh test         # set up .venv, then run the test suite
 #   bash scripts/run.sh setup        # only create/refresh .venv
 #
-# The CPU build of torch is installed first and pinned (torch==2.13.0): a bare `torch`
-# requirement would pull a multi-GB CUDA build. The package itself asks for a range (torch>=2.3).
+# torch: a torch that the environment already has (e.g. a CUDA build you installed) is kept as it
+# is. Otherwise the CPU build is installed first and pinned (torch==2.13.0 from PyTorch's CPU index):
+# a bare `torch` requirement would pull a multi-GB CUDA build. The package itself asks for a range
+# (torch>=2.3). GPU users: create the venv, install the CUDA build of torch into it
+# (https://pytorch.org/get-started/locally/), then run this script; LATENTRL_TORCH and
+# LATENTRL_TORCH_INDEX change what is installed when no torch is there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PYTHON=${PYTHON:-python3}
 VENV=${LATENTRL_VENV:-.venv}
 TORCH_SPEC=${LATENTRL_TORCH:-torch==2.13.0}
+TORCH_INDEX=${LATENTRL_TORCH_INDEX:-https://download.pytorch.org/whl/cpu}
 
 setup() {
     if [ ! -x "$VENV/bin/python" ]; then
         echo "[latentrl] creating virtual environment $VENV"
         "$PYTHON" -m venv "$VENV"
     fi
-    if ! "$VENV/bin/python" -c "import torch" >/dev/null 2>&1; then
-        echo "[latentrl] installing $TORCH_SPEC (CPU build) first"
-        "$VENV/bin/python" -m pip install -q "$TORCH_SPEC"
+    if have=$("$VENV/bin/python" -c "import torch; print(torch.__version__, 'CUDA' if torch.version.cuda else 'CPU')" \
+            2>/dev/null); then
+        echo "[latentrl] keeping the installed torch $have"
+    else
+        echo "[latentrl] no torch in $VENV: installing $TORCH_SPEC, CPU build, from $TORCH_INDEX"
+        if ! "$VENV/bin/python" -m pip install -q "$TORCH_SPEC" --index-url "$TORCH_INDEX"; then
+            echo "[latentrl] $TORCH_INDEX unreachable: installing $TORCH_SPEC from pip's default index" \
+                 "(on Linux that is the CUDA build, a few GB)"
+            "$VENV/bin/python" -m pip install -q "$TORCH_SPEC"
+        fi
     fi
-    echo "[latentrl] installing latentrl and its dependencies"
+    echo "[latentrl] installing latentrl (editable) with numpy, gymnasium, stable-baselines3, tensorboard,"
+    echo "[latentrl] pyyaml, omegaconf, tqdm, matplotlib and the test tools (.[dev]); torch is left as it is"
     if ! "$VENV/bin/python" -m pip install -q -e ".[dev]" >"$VENV/pip-install.log" 2>&1; then
         grep -v "^WARNING: Location" "$VENV/pip-install.log" >&2
         exit 1

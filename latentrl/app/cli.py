@@ -199,7 +199,8 @@ def _bench_commands(sub) -> None:
 
 def _eval_commands(sub) -> None:
     ev = sub.add_parser("eval", help="evaluate a policy over waypoint paths (DART's protocol); report, plots, motions")
-    ev.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) written by latentrl train")
+    ev.add_argument("policy", metavar="POLICY",
+                    help="PPO checkpoint (.pt) from latentrl train, or a shipped policy by name (reach_walk_default)")
     ev.add_argument("--paths", nargs="+", metavar="FILE",
                     help="DART-format path files or suite names in tasks/paths (default: dart_walk_long "
                          "dart_run_long dart_hop_long)")

@@ -119,7 +119,7 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     settings' guidance and action bound, so the eval env steps the motion as training did.
     """
     from latentrl.envs.config import stored_env_config
-    from latentrl.motion.checkpoint import file_sha256, load_motion_model
+    from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
     from latentrl.ppo import load_policy
 
     model = load_motion_model(req.motion, device=settings.device)
@@ -133,6 +133,8 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     env = stored_env_config(meta.get("config"))
     if env is not None:
         settings.guidance_scale, settings.action_bound = env.guidance_scale, env.action_bound
+        if env.seed_history:  # episodes start from the seeds the policy was trained on
+            attach_seed_history(model, env.seed_history)
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 
@@ -174,12 +176,15 @@ def evaluate(req: EvalRequest) -> int:
     from latentrl.evaluation import plots, report
     from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
     from latentrl.preflight import NewOutput, check_writable
+    from latentrl.resources import is_packaged, policy_file
     from latentrl.timing import hardware
 
     settings = _settings(req)
     files = resolve_path_files(req.paths)
     first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
-    out_dir = Path(req.out) if req.out else Path(req.policy).resolve().parent / f"eval-{Path(req.policy).stem}"
+    req.policy = str(policy_file(req.policy))  # a file, or a shipped policy by name (reach_walk_default)
+    beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
+    out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"
     check_writable(out_dir, "--out")
     model, policy, motion, policy_info, observe_next = _load(req, settings)
     observe_next = fit_policy(policy.obs_dim, policy.action_dim, model, settings, observe_next)

@@ -77,7 +77,8 @@ def info(req: InfoRequest) -> int:
     if prompts:
         print(f"prompts:     {', '.join(prompts)}")
     seeds = None if model.seed_history is None else model.seed_history.shape[0]
-    print(f"seeds:       {seeds}")
+    source = model.info.get("seed")
+    print(f"seeds:       {seeds}" + (f" ({source})" if source and seeds else ""))
     return 0
 
 

@@ -87,7 +87,7 @@ QUICK_EVAL_PATHS = ("dart_demo_walk", "random_smooth")
 def load_motion(cfg: EnvConfig, device: str):
     from latentrl.motion import load_motion_model
 
-    return load_motion_model(cfg.motion, device=device)
+    return load_motion_model(cfg.motion, device=device, seed_history=cfg.seed_history)
 
 
 def motion_info(model) -> dict:

@@ -553,6 +553,44 @@ class LatentMotionVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step() (or before reading the env state)")
         return self._state
 
+    def observation(self) -> torch.Tensor:
+        """(N, obs_dim) observation of the current state (what the last reset or step returned)."""
+        self._require_state()
+        with torch.no_grad():
+            return self._observe()
+
+    # ------------------------------------------------------------------ resume
+    def get_rng_state(self) -> dict[str, Any]:
+        """The env generator and every episode tensor (motion state, goals, texts, counters).
+
+        Training checkpoints store it, so a resumed run continues the episodes it was in with the
+        same random stream, and matches a run that was never interrupted.
+        """
+        state: dict[str, Any] = {"generator": self._generator.get_state()}
+        if self._state is not None:
+            tensors = {name: value.clone() for name, value in vars(self).items() if torch.is_tensor(value)}
+            tensors.update({"state.history": self._state.history.clone(),
+                            "state.world.rotation": self._state.world.rotation.clone(),
+                            "state.world.translation": self._state.world.translation.clone()})
+            state["episode"] = tensors
+        return state
+
+    def set_rng_state(self, state: Mapping[str, Any]) -> None:
+        """Inverse of :meth:`get_rng_state`; episode tensors are restored only if their shapes still fit."""
+        self._generator.set_state(state["generator"].cpu())
+        tensors = state.get("episode")
+        if not tensors or tensors["state.history"].shape[0] != self.num_envs:
+            return
+        for name, value in tensors.items():
+            current = getattr(self, name, None) if not name.startswith("state.") else None
+            if torch.is_tensor(current) and current.shape == value.shape:
+                setattr(self, name, value.to(current.device, current.dtype))
+        self._state = RolloutState(
+            tensors["state.history"].to(self.device),
+            WorldTransform(tensors["state.world.rotation"].to(self.device),
+                           tensors["state.world.translation"].to(self.device)),
+        )
+
     # ------------------------------------------------------------------ history
     def export_history(self, env_index: int, episode: int = -1) -> dict[str, Any]:
         """One recorded episode of one env in the shared motion format (see ``latentrl.render``).

@@ -100,6 +100,8 @@ class EnvConfig:
     """Environments stepped together (DART: 256)."""
     motion: str = "default"
     """Motion model: 'default', a latentrl model file, or a DART denoiser checkpoint."""
+    seed_history: str | None = None
+    """Episode seed histories (.npz, docs/motion.md); default: the model's own (DART download: its mean pose)."""
     texts: list[str] = field(default_factory=lambda: ["walk"])
     """Prompts; each episode draws one (DART: walk, run, hop on left leg; one policy per text)."""
     text_weights: list[float] | None = None

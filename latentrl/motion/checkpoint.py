@@ -7,7 +7,8 @@ root, which is the *layout root*: two folders above the checkpoint's folder)::
     <root>/mvae/<exp>/checkpoint_<N>.pt + args.yaml            VAE named by denoiser_args.mvae_path
     <root>/data/seq_data_zero_male/mean_std_h2_f8.pkl          named by the VAE's data_args.data_dir
     <root>/data/seq_data_zero_male/train_text_embedding_dict.pkl   optional CLIP table
-    <root>/seed_history.npz                                    optional, ours: (K, 2, 276) canonical seeds
+    <root>/seed_history.npz                                    optional, ours: (K, 2, 276) canonical seeds;
+                                                               without it: the normalizer's mean pose (motion/seed.py)
 
 latentrl format: one ``.pt`` file (or a folder holding ``motion_model.pt``) with configs, weights,
 normalization, latent_std, text-encoder id and table, seed histories and ``pelvis_delta``; plain
@@ -18,7 +19,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import zipfile
 from dataclasses import asdict, fields
 from importlib import resources
 from pathlib import Path
@@ -31,6 +31,7 @@ from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
 from latentrl.motion.diffusion import DiffusionConfig
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, SLICES, Normalizer
 from latentrl.motion.rollout import MotionModel
+from latentrl.motion.seed import load_seed_file, mean_pose_seed
 from latentrl.motion.text import (
     SentenceTextEncoder,
     TableTextEncoder,
@@ -111,7 +112,7 @@ def load_motion_model(
             "checkpoint with args.yaml beside it)"
         )
     if seed_history is not None:
-        _attach_seed(model, _load_seed(seed_history))
+        attach_seed_history(model, seed_history)
     return model.to(device)
 
 
@@ -172,24 +173,21 @@ def _load_seed(seed) -> torch.Tensor:
     else:
         path = Path(seed)
         if path.suffix == ".npz":
-            if not path.is_file():
-                raise CheckpointError(f"seed history file not found: {path}")
-            try:
-                with np.load(path, allow_pickle=False) as z:
-                    if "seed_history" not in z:
-                        raise CheckpointError(f"{path}: no 'seed_history' array (expected (K, 2, 276))")
-                    arr = torch.from_numpy(z["seed_history"]).float()
-            except (ValueError, OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile) as exc:  # pickles, junk
-                raise CheckpointError(f"{path}: not a readable seed-history .npz (numeric arrays only): "
-                                      f"{str(exc)[:160]}") from None
-        else:
-            obj = load_torch(path, what="seed history")
-            arr = torch.as_tensor(obj["seed_history"] if isinstance(obj, dict) else obj, dtype=torch.float32)
+            return load_seed_file(path)
+        obj = load_torch(path, what="seed history")
+        arr = torch.as_tensor(obj["seed_history"] if isinstance(obj, dict) else obj, dtype=torch.float32)
     if arr.dim() == 2:
         arr = arr[None]
     if arr.shape[1:] != (HISTORY_LENGTH, FEATURE_DIM):
         raise CheckpointError(f"seed history must be (K, {HISTORY_LENGTH}, {FEATURE_DIM}), got {tuple(arr.shape)}")
     return arr
+
+
+def attach_seed_history(model: MotionModel, seed: str | os.PathLike | torch.Tensor) -> MotionModel:
+    """Give ``model`` the seed histories of ``seed`` (a tensor or file, see :func:`load_seed_file`)."""
+    _attach_seed(model, _load_seed(seed))
+    model.info["seed"] = str(seed) if not torch.is_tensor(seed) else "tensor"
+    return model
 
 
 def _attach_seed(model: MotionModel, seed: torch.Tensor) -> None:
@@ -298,6 +296,10 @@ def _from_dart(path: Path, data: dict, vae_override, mean_std_override, text_tab
     seed_file = root / "seed_history.npz"
     if seed_file.is_file():
         _attach_seed(model, _load_seed(seed_file))
+        model.info["seed"] = str(seed_file)
+    else:  # no SMPL-X here to build DART's stand.pkl seed: the normalizer's mean pose (motion/seed.py)
+        model.seed_history, model.pelvis_delta = mean_pose_seed(normalizer.mean)
+        model.info["seed"] = "mean-pose"
     return model
 
 

@@ -42,6 +42,8 @@ from latentrl.safe_io import load_torch, save_torch_atomic
 FORMAT = "latentrl.ppo/1"
 CHECKPOINT_DIR = "checkpoints"
 FINAL = "final.pt"
+TOTAL_STEPS = "ppo.total_steps"
+"""The training budget: ``--resume RUN --total-steps N`` may raise it (see :func:`check_resumable`)."""
 RESUME_MAY_DIFFER = ("ppo.device", "ppo.log_every", "ppo.checkpoint_every", "ppo.keep_checkpoints", "ppo.eval_every")
 """Dotted config keys that may change between a run and its ``--resume`` (they do not change the result)."""
 
@@ -234,19 +236,53 @@ def check_motion(state: Mapping[str, Any], path: Path, motion: Mapping[str, Any]
             "Pass allow_motion_mismatch=True (--allow-motion-mismatch) only if you know they are compatible")
 
 
+def normalized_config(saved: Mapping[str, Any], current: Any) -> Any:
+    """A run's saved config in today's layout, when ``current`` is a config dataclass.
+
+    Renamed keys move as its class's ``ALIASES`` say (as for old YAML files) and keys added since
+    take their defaults, so runs written by earlier versions still resume. A saved config that no
+    longer loads is returned unchanged (its differences are then reported key by key).
+    """
+    import dataclasses
+
+    from latentrl.errors import ConfigError
+
+    if not dataclasses.is_dataclass(current) or not isinstance(saved, Mapping):
+        return saved
+    from latentrl.config import apply_aliases, from_dict
+
+    cls = type(current)
+    try:
+        return from_dict(cls, apply_aliases(dict(saved), getattr(cls, "ALIASES", {})), "saved run config")
+    except ConfigError:
+        return saved
+
+
 def check_resumable(state: Mapping[str, Any], path: Path, *, trainer: str, config: Any,
                     motion: Mapping[str, Any] | None, allow_motion_mismatch: bool = False,
-                    may_differ: Iterable[str] = RESUME_MAY_DIFFER) -> None:
-    """Refuse to resume with another trainer, another config or another motion model."""
+                    may_differ: Iterable[str] = RESUME_MAY_DIFFER) -> int | None:
+    """Refuse to resume with another trainer, another config or another motion model.
+
+    ``ppo.total_steps`` may grow (``--total-steps N`` extends a run); returns the run's former
+    budget when it does, else None. A smaller budget than the run's is refused.
+    """
     if state.get("trainer") != trainer:
         raise CheckpointError(f"{path}: written by the '{state.get('trainer')}' trainer; resume it with "
                               f"--trainer {state.get('trainer')} (not '{trainer}')")
-    diffs = config_differences(state["config"], config, may_differ)
+    saved = normalized_config(state["config"], config)
+    diffs = config_differences(saved, config, (*may_differ, TOTAL_STEPS))
     if diffs:
         shown = "; ".join(diffs[:5]) + (f"; ... ({len(diffs)} in all)" if len(diffs) > 5 else "")
         raise CheckpointError(f"{path}: config differs from the run's: {shown}. Resume with the run's own "
                               "config.yaml, or start a new run")
     check_motion(state, path, motion, allow_motion_mismatch)
+    before, after = flatten(plain_config(saved)).get(TOTAL_STEPS), flatten(plain_config(config)).get(TOTAL_STEPS)
+    if before == after or before is None or after is None:
+        return None
+    if after < before:
+        raise CheckpointError(f"{path}: {TOTAL_STEPS} {after} is below the run's budget {before}; "
+                              "--total-steps can only extend a run")
+    return int(before)
 
 
 def check_shapes(state: Mapping[str, Any], path: Path, obs_dim: int, action_dim: int) -> None:

@@ -117,8 +117,8 @@ def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *
         run_dir.mkdir(parents=True, exist_ok=True)
         if resume:
             ckpt.remove_temporaries(run_dir)
-        if not resume or not (run_dir / CONFIG_FILE).is_file():
-            write_config(run_dir, config)
+        if not resume or not (run_dir / CONFIG_FILE).is_file() or runner.extended_from is not None:
+            write_config(run_dir, config)  # an extended run's config.yaml holds its new budget
         output.keep()
     return runner.train()
 

@@ -189,6 +189,8 @@ class Runner:
         self.times: list[IterationTime] = []
         self.stop_requested = False
         self.last_checkpoint: Path | None = None
+        self.extended_from: int | None = None
+        """The run's former ``ppo.total_steps`` when this resume extends it (``--total-steps``), else None."""
         """The newest checkpoint this run wrote or resumed from (named by non-finite errors)."""
         self.policy: ActorCritic
         self.optimizer: torch.optim.Optimizer
@@ -234,8 +236,8 @@ class Runner:
             warnings.warn(f"{self.run_dir}: no checkpoint to resume from; starting at step 0", stacklevel=2)
             return None
         path, state = found
-        ckpt.check_resumable(state, path, trainer=self.name, config=self.config, motion=self.motion,
-                             allow_motion_mismatch=allow_motion_mismatch)
+        self.extended_from = ckpt.check_resumable(state, path, trainer=self.name, config=self.config,
+                                                  motion=self.motion, allow_motion_mismatch=allow_motion_mismatch)
         ckpt.check_shapes(state, path, self.policy.obs_dim, self.policy.action_dim)
         self.policy.load_state_dict(state["policy"])
         self.optimizer.load_state_dict(state["optimizer"])
@@ -249,11 +251,13 @@ class Runner:
     def policy_device(self) -> torch.device:
         return next(self.policy.parameters()).device
 
-    def restore_pending_rng(self) -> None:
-        """After the env was reset: put back the random streams a resumed run saved."""
-        if self._pending_rng is not None:
-            ckpt.restore_rng(self._pending_rng, self.env)
-            self._pending_rng = None
+    def restore_pending_rng(self) -> bool:
+        """After the env was reset: put back the random streams (and env state) a resumed run saved; True if any."""
+        if self._pending_rng is None:
+            return False
+        ckpt.restore_rng(self._pending_rng, self.env)
+        self._pending_rng = None
+        return True
 
     # ------------------------------------------------------------------ loop
     def train(self) -> TrainResult:

@@ -125,7 +125,9 @@ class IterationLinearSchedule:
 def sb3_ppo_kwargs(ppo: PPOConfig, policy: PolicyConfig, plan: BatchPlan,
                    layout: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Keyword arguments for ``stable_baselines3.PPO(LatentActorCriticPolicy, venv, **kwargs)``."""
-    lr = (IterationLinearSchedule(ppo.learning_rate, ppo.total_steps, plan.batch_size, plan.num_iterations)
+    # SB3's progress counts to num_iterations * batch (learn() asks for whole iterations), on resume too
+    lr = (IterationLinearSchedule(ppo.learning_rate, plan.num_iterations * plan.batch_size, plan.batch_size,
+                                  plan.num_iterations)
           if ppo.anneal_lr else ppo.learning_rate)
     return dict(
         learning_rate=lr, n_steps=ppo.num_steps, batch_size=plan.minibatch_size, n_epochs=ppo.update_epochs,

@@ -60,9 +60,14 @@ class NativeTrainer(Runner):
         return self.episodes.stats()
 
     def _reset_env(self) -> torch.Tensor:
-        """Fresh runs reset with ``seed``; resumed runs with ``seed + iteration``, then restore the saved RNGs."""
+        """Fresh runs reset with ``seed``; resumed runs with ``seed + iteration``, then restore the saved RNGs.
+
+        An env whose saved state covers its episodes (latentrl's envs) continues them: its
+        ``observation()`` after the restore is where the interrupted run stood.
+        """
         obs, _ = self.env.reset(seed=self.cfg.seed + self.iteration)
-        self.restore_pending_rng()
+        if self.restore_pending_rng() and callable(getattr(self.env, "observation", None)):
+            obs = self.env.observation()
         return torch.as_tensor(obs)
 
     @torch.no_grad()
