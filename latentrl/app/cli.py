@@ -133,6 +133,8 @@ def _train_commands(sub) -> None:
     train.add_argument("--allow-motion-mismatch", action="store_true",
                        help="resume onto a different motion model than the run was trained on (experts)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    train.add_argument("--nproc", type=_pos_int,
+                       help="ranks on this machine (launches torchrun; env.num_envs is per rank; docs/training.md)")
     train.set_defaults(func=_train)
 
 
