@@ -354,8 +354,8 @@ class Runner:
         """After the backend logged iteration k: evaluate and checkpoint when due, flush, move the bar."""
         cfg, k, step = self.cfg, self.iteration, self.env_steps
         last = k == self.plan.num_iterations
-        if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
-            if self.dist.is_main:  # rank 0 evaluates; its stop decision holds for every rank
+        if cfg.eval_every and (k % cfg.eval_every == 0 or last):
+            if self.evaluate is not None and self.dist.is_main:  # rank 0 evaluates; its stop holds for every rank
                 self.last_eval = run_evaluation(self.evaluate, self.policy)
                 self.stop_requested = bool(self.last_eval.stop)
                 self.monitor.log_eval(step, self.last_eval)

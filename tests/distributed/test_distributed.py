@@ -63,8 +63,9 @@ def test_rank0_alone_writes_and_logs_the_summed_step_count(fresh):
 
     assert [p.name for p in ckpt.iteration_checkpoints(fresh)] == ["iter_1.pt"]
     assert len(list(fresh.glob("events.out.tfevents.*"))) == 1
-    fps = scalars(fresh)["time/fps"]
-    assert [step for step, _ in fps] == [64, 128]
+    logged = scalars(fresh)
+    assert [step for step, _ in logged["time/fps"]] == [64, 128]
+    assert [step for step, _ in logged["eval/probe"]] == [64, 128]  # rank 0's evaluation, every iteration
     assert len((fresh / "train.log").read_text().splitlines()) >= 2
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import torch
 
+from latentrl.monitor import EvalReport
 from latentrl.ppo import distributed
 from latentrl.ppo.run import register_trainer, train
 from latentrl.ppo.trainer import NativeTrainer
@@ -47,9 +48,10 @@ def main(mode: str, run_dir: Path) -> None:
     torch.set_num_threads(1)
     register_trainer("probe", lambda env: ProbeTrainer)
     env = (FailingEnv if mode == "fail" else ReachVecEnv)(num_envs=4, max_episode_steps=4)
-    ppo = tiny_ppo(total_steps=128)  # 4 envs x 8 steps = 32 per rank; on 2 ranks 2 iterations of 64
+    ppo = tiny_ppo(total_steps=128, eval_every=1)  # 4 envs x 8 steps = 32 per rank; on 2 ranks 2 iterations of 64
+    hook = (lambda policy: EvalReport({"probe": 1.0})) if collective.is_main else None  # as app/train.py does
     result = train(env, run_dir, ppo, tiny_policy(obs_norm=True), trainer="probe", resume=mode == "resume",
-                   progress=False)
+                   evaluate=hook, progress=False)
     policy = ProbeTrainer.built[-1].policy
     torch.save({"state": {k: v.clone() for k, v in policy.state_dict().items()}, "env_steps": result.env_steps,
                 "iterations": result.iterations, "rollout": tuple(result.rollout), "world_size": collective.world_size},
