@@ -132,7 +132,8 @@ def launch(req: TrainRequest) -> int:
         raise ConfigError(SB3_SINGLE)
     if not req.resume and not req.config:
         raise ConfigError("give a CONFIG file (e.g. configs/quick.yaml) or --resume RUN_DIR")
-    if not req.resume:  # one run directory for all ranks, checked before any rank starts
+    if not req.resume:  # config and one run directory for all ranks, checked before any rank starts
+        load_train_config(req.config, request_overrides(req)).validate()
         req = dataclasses.replace(req, run_dir=str(default_run_dir(req)))
         check_new_run(Path(req.run_dir))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
@@ -156,6 +157,18 @@ def default_run_dir(req: TrainRequest) -> Path:
     return Path("runs") / f"{Path(req.config).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
+def request_overrides(req: TrainRequest) -> list[str]:
+    """``--set`` items plus what ``--seed``, ``--device`` and ``--total-steps`` set."""
+    overrides = list(req.overrides)
+    if req.seed is not None:
+        overrides.append(f"ppo.seed={req.seed}")
+    if req.device is not None:
+        overrides.append(f"ppo.device={req.device}")
+    if req.total_steps is not None:
+        overrides.append(f"ppo.total_steps={req.total_steps}")
+    return overrides
+
+
 def train(req: TrainRequest) -> int:
     """Body of ``latentrl train`` (one rank of it under torchrun; ``--nproc N`` launches torchrun)."""
     from latentrl.ppo import distributed
@@ -164,13 +177,7 @@ def train(req: TrainRequest) -> int:
         return launch(req)
     if distributed.launched() and req.trainer == "sb3":
         raise ConfigError(SB3_SINGLE)
-    overrides = list(req.overrides)
-    if req.seed is not None:
-        overrides.append(f"ppo.seed={req.seed}")
-    if req.device is not None:
-        overrides.append(f"ppo.device={req.device}")
-    if req.total_steps is not None:
-        overrides.append(f"ppo.total_steps={req.total_steps}")
+    overrides = request_overrides(req)
     if req.resume:
         run_dir = Path(req.resume)
         cfg_path = run_dir / "config.yaml"
