@@ -14,7 +14,8 @@ trainers run one code path. What is synchronized (rsl_rl's scheme):
 - rank 0 alone logs, evaluates and checkpoints; the stop flag of its evaluation is broadcast.
 
 A rank that fails makes ``torchrun`` stop the others; the process-group timeout
-(``LATENTRL_DIST_TIMEOUT`` seconds, default 300) bounds every collective in case a rank hangs.
+(``LATENTRL_DIST_TIMEOUT`` seconds, default 1800, since the other ranks wait while rank 0 evaluates)
+bounds every collective in case a rank hangs.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import torch
 from torch import nn
 
 TIMEOUT_VAR = "LATENTRL_DIST_TIMEOUT"
-DEFAULT_TIMEOUT_S = 300.0
+DEFAULT_TIMEOUT_S = 1800.0
 
 
 def launched() -> bool:
