@@ -28,6 +28,8 @@ from typing import Any
 import torch
 from torch import nn
 
+from latentrl.errors import ConfigError
+
 TIMEOUT_VAR = "LATENTRL_DIST_TIMEOUT"
 DEFAULT_TIMEOUT_S = 1800.0
 
@@ -44,6 +46,9 @@ def local_rank() -> int:
 def rank_device(device: str) -> str:
     """The device of this rank: ``cuda`` (any index) becomes ``cuda:LOCAL_RANK`` under torchrun; CPU stays."""
     if launched() and torch.device(device).type == "cuda":
+        if local_rank() >= torch.cuda.device_count():
+            raise ConfigError(f"rank with LOCAL_RANK {local_rank()} needs GPU {local_rank()}, but this node has "
+                              f"{torch.cuda.device_count()}; start at most one rank per GPU (--nproc-per-node)")
         return f"cuda:{local_rank()}"
     return device
 
