@@ -23,7 +23,7 @@ FLOORS = (
     ("motion_training", "envs", "ppo"),
     ("evaluation",),
     ("viewer", "export"),
-    ("app", "cli"),
+    ("app", "cli", "__main__"),
 )
 """Ground floor first; a unit is a top-level module or subpackage of ``latentrl``."""
 

@@ -134,6 +134,8 @@ def _train_commands(sub) -> None:
     train.add_argument("--allow-motion-mismatch", action="store_true",
                        help="resume onto a different motion model than the run was trained on (experts)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    train.add_argument("--nproc", type=_pos_int,
+                       help="ranks on this machine (launches torchrun; env.num_envs is per rank; docs/training.md)")
     train.set_defaults(func=_train)
 
 
@@ -183,6 +185,8 @@ def _bench_commands(sub) -> None:
     tr.add_argument("--run-dir", help="where the benchmark's runs go (default: a temporary folder)")
     tr.add_argument("--no-progress", action="store_true")
     tr.add_argument("--json", help="write all figures to this JSON file")
+    tr.add_argument("--nproc", type=_pos_int, nargs="+",
+                    help="instead: env steps/s with this many ranks each (latentrl train --nproc N), e.g. 1 2")
     tr.set_defaults(func=_bench_train)
 
     motion = bsub.add_parser("motion", help="stability and text control of a motion model vs. its training data")

@@ -14,6 +14,9 @@ A YAML config holds values only::
 
 from __future__ import annotations
 
+import dataclasses
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,6 +70,19 @@ class TrainRequest:
     resume: str | None = None
     allow_motion_mismatch: bool = False
     progress: bool = True
+    nproc: int | None = None
+    """Ranks on this machine: ``--nproc N`` (N > 1) relaunches the command under torchrun."""
+
+    def argv(self) -> list[str]:
+        """The ``latentrl train`` arguments of this request, without ``--nproc`` (what each rank runs)."""
+        args = ["train"] + ([self.config] if self.config else [])
+        for item in self.overrides:
+            args += ["--set", item]
+        options = (("--trainer", self.trainer), ("--device", self.device), ("--seed", self.seed),
+                   ("--total-steps", self.total_steps), ("--run-dir", self.run_dir), ("--resume", self.resume))
+        args += [str(x) for flag, value in options if value is not None for x in (flag, value)]
+        args += ["--allow-motion-mismatch"] * self.allow_motion_mismatch + ["--no-progress"] * (not self.progress)
+        return args
 
 
 @dataclass
@@ -110,8 +126,39 @@ def load_train_config(config: str | Path, overrides: list[str] | tuple[str, ...]
     return load_config(TrainConfig, config_file(config), list(overrides))
 
 
-def train(req: TrainRequest) -> int:
-    """Body of ``latentrl train``."""
+def launch(req: TrainRequest) -> int:
+    """``latentrl train --nproc N``: run this request on N ranks of this machine with torchrun (standalone)."""
+    if req.trainer == "sb3":
+        raise ConfigError(SB3_SINGLE)
+    if not req.resume and not req.config:
+        raise ConfigError("give a CONFIG file (e.g. configs/quick.yaml) or --resume RUN_DIR")
+    if not req.resume:  # config and one run directory for all ranks, checked before any rank starts
+        load_train_config(req.config, request_overrides(req)).validate()
+        req = dataclasses.replace(req, run_dir=str(default_run_dir(req)))
+        check_new_run(Path(req.run_dir))
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
+           "-m", "latentrl", *req.argv()]
+    print(f"launching {req.nproc} ranks: {' '.join(cmd[1:])}", flush=True)
+    code = subprocess.call(cmd)
+    if code:
+        print(f"latentrl: error: a rank failed (torchrun exit {code}); every rank was stopped, see its message above",
+              file=sys.stderr)
+    return code
+
+
+SB3_SINGLE = ("trainer 'sb3' runs in one process only; use --trainer native for torchrun / --nproc, "
+              "or run sb3 without them")
+
+
+def default_run_dir(req: TrainRequest) -> Path:
+    """``--run-dir``, else ``runs/<config name>-<time>``."""
+    if req.run_dir:
+        return Path(req.run_dir)
+    return Path("runs") / f"{Path(req.config).stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def request_overrides(req: TrainRequest) -> list[str]:
+    """``--set`` items plus what ``--seed``, ``--device`` and ``--total-steps`` set."""
     overrides = list(req.overrides)
     if req.seed is not None:
         overrides.append(f"ppo.seed={req.seed}")
@@ -119,6 +166,18 @@ def train(req: TrainRequest) -> int:
         overrides.append(f"ppo.device={req.device}")
     if req.total_steps is not None:
         overrides.append(f"ppo.total_steps={req.total_steps}")
+    return overrides
+
+
+def train(req: TrainRequest) -> int:
+    """Body of ``latentrl train`` (one rank of it under torchrun; ``--nproc N`` launches torchrun)."""
+    from latentrl.ppo import distributed
+
+    if req.nproc and req.nproc > 1 and not distributed.launched():
+        return launch(req)
+    if distributed.launched() and req.trainer == "sb3":
+        raise ConfigError(SB3_SINGLE)
+    overrides = request_overrides(req)
     if req.resume:
         run_dir = Path(req.resume)
         cfg_path = run_dir / "config.yaml"
@@ -129,13 +188,16 @@ def train(req: TrainRequest) -> int:
         if not req.config:
             raise ConfigError("give a CONFIG file (e.g. configs/quick.yaml) or --resume RUN_DIR")
         cfg = load_train_config(req.config, overrides)
-        name = Path(req.config).stem
-        run_dir = Path(req.run_dir) if req.run_dir else Path("runs") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
-        check_new_run(run_dir)
+        collective = distributed.init(distributed.rank_device(str(check_device(cfg.ppo.device, "ppo.device"))))
+        run_dir = collective.broadcast_object(default_run_dir(req))  # rank 0's clock names the run
+        if collective.is_main:  # before any rank writes into it
+            check_new_run(run_dir)
     result = run_training(cfg, run_dir, trainer=req.trainer, resume=bool(req.resume),
                           allow_motion_mismatch=req.allow_motion_mismatch, progress=req.progress)
-    print(f"trained {result.iterations} iterations ({result.env_steps} env steps) in {result.elapsed_s:.0f} s; "
-          f"final policy: {result.final_checkpoint}")
+    if distributed.current().is_main:
+        print(f"trained {result.iterations} iterations ({result.env_steps} env steps) in {result.elapsed_s:.0f} s; "
+              f"final policy: {result.final_checkpoint}")
+    distributed.shutdown()
     return 0
 
 
@@ -155,12 +217,16 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     Every input is checked (device, batch sizes, run directory, motion model, path files) before
     anything is written; :func:`latentrl.ppo.run.train` then checks the free disk space.
     """
+    from latentrl.ppo import distributed
     from latentrl.ppo.run import TRAINERS
     from latentrl.ppo.run import train as train_ppo
 
     if trainer not in TRAINERS:
         raise ConfigError(f"--trainer must be {' or '.join(repr(t) for t in TRAINERS)}, got '{trainer}'")
-    device = str(check_device(cfg.ppo.device, "ppo.device"))
+    if trainer == "sb3" and distributed.launched():
+        raise ConfigError(SB3_SINGLE)
+    device = distributed.rank_device(str(check_device(cfg.ppo.device, "ppo.device")))  # cuda:LOCAL_RANK per rank
+    collective = distributed.init(device)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
@@ -173,8 +239,9 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
         from latentrl.envs import Sb3VecEnv
 
         venv = Sb3VecEnv(env)
-    hook = make_eval_hook(cfg, motion, device)
-    return train_ppo(venv, run_dir, cfg.ppo, cfg.policy, trainer=trainer, config=cfg, resume=resume,
+    hook = make_eval_hook(cfg, motion, device) if collective.is_main else None  # rank 0 evaluates
+    ppo = dataclasses.replace(cfg.ppo, device=device)  # the checkpoints keep the config's device
+    return train_ppo(venv, run_dir, ppo, cfg.policy, trainer=trainer, config=cfg, resume=resume,
                      motion=motion_info(motion), evaluate=hook, allow_motion_mismatch=allow_motion_mismatch,
                      progress=progress)
 

@@ -13,6 +13,7 @@ from typing import Any
 import torch
 
 from latentrl.ppo.config import BatchPlan, PPOConfig
+from latentrl.ppo.distributed import SINGLE, Collective
 from latentrl.ppo.policy import ActorCritic, PolicyStep
 from latentrl.ppo.storage import RolloutBuffer
 from latentrl.ppo.update import ppo_update
@@ -29,8 +30,9 @@ def adam_kwargs(ppo: PPOConfig) -> dict[str, Any]:
 class PPO:
     """The policy, its optimizer and the rollout buffer of ``plan.num_steps`` x ``num_envs`` transitions."""
 
-    def __init__(self, policy: ActorCritic, cfg: PPOConfig, plan: BatchPlan, num_envs: int, device: torch.device):
-        self.policy, self.cfg, self.plan = policy, cfg, plan
+    def __init__(self, policy: ActorCritic, cfg: PPOConfig, plan: BatchPlan, num_envs: int, device: torch.device,
+                 collective: Collective = SINGLE):
+        self.policy, self.cfg, self.plan, self.collective = policy, cfg, plan, collective
         self.optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.learning_rate, **adam_kwargs(cfg))
         self.buffer = RolloutBuffer(cfg.num_steps, num_envs, policy.obs_dim, policy.action_dim, device)
 
@@ -65,9 +67,10 @@ class PPO:
         return lr
 
     def update(self) -> dict[str, float]:
-        """PPO epochs on the filled buffer, then fold this rollout into the observation normalizer."""
+        """PPO epochs on the filled buffer, then fold this rollout (every rank's) into the observation normalizer."""
         self.policy.train()
-        stats = ppo_update(self.policy, self.optimizer, self.buffer, self.cfg, self.plan.minibatch_size)
-        self.policy.update_normalizer(self.buffer.obs)
+        stats = ppo_update(self.policy, self.optimizer, self.buffer, self.cfg, self.plan.minibatch_size,
+                           self.collective)
+        self.collective.fold_moments(self.policy.obs_normalizer, self.buffer.obs)
         self.policy.eval()
         return stats

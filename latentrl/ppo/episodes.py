@@ -19,6 +19,7 @@ import torch
 
 from latentrl.monitor import REWARD_PREFIX, RolloutStats
 from latentrl.ppo.contract import DIVERGED, EPISODE, IS_SUCCESS
+from latentrl.ppo.distributed import SINGLE, Collective
 
 
 class RolloutSummary(NamedTuple):
@@ -71,21 +72,33 @@ class EpisodeRecorder:
                 value = torch.as_tensor(value, device=self.device).float().sum()
                 self.term_sums[key] = self.term_sums[key] + value if key in self.term_sums else value
 
-    def summarize(self) -> RolloutSummary:
-        """One host transfer: extend the rolling window, average the reward terms, reset the sums."""
+    def summarize(self, collective: Collective = SINGLE) -> RolloutSummary:
+        """One host transfer: extend the rolling window, average the reward terms, reset the sums.
+
+        With several ranks every rank's finished episodes join the window (in rank order), reward-term
+        means are averaged over ranks and diverged steps summed (one ``all_gather_object``).
+        """
         ended = self.ended
-        self.window_returns.extend(self.returns[ended].tolist())
-        self.window_lengths.extend(self.lengths[ended].tolist())
-        if self.has_success:
-            self.window_success.extend(self.success[ended].float().tolist())
         names = list(self.term_sums)
-        means = (torch.stack([self.term_sums[k] for k in names]) / ended.numel()).tolist() if names else []
-        self.term_sums = {}
-        episodes = int(ended.sum())
-        diverged = None if self.diverged is None else int(self.diverged)
-        self.diverged = None
-        return RolloutSummary(self.stats(), {k.removeprefix(REWARD_PREFIX): v for k, v in zip(names, means)}, episodes,
-                              diverged)
+        sums = torch.stack([self.term_sums[k] for k in names]).tolist() if names else []
+        local = (self.returns[ended].tolist(), self.lengths[ended].tolist(),
+                 self.success[ended].float().tolist() if self.has_success else [], dict(zip(names, sums)),
+                 ended.numel(), None if self.diverged is None else int(self.diverged))
+        self.term_sums, self.diverged = {}, None
+        ranks = collective.gather(local)
+        term_sums: dict[str, float] = {}
+        steps, episodes, diverged = 0, 0, None
+        for returns, lengths, success, terms, numel, div in ranks:
+            self.window_returns.extend(returns)
+            self.window_lengths.extend(lengths)
+            self.window_success.extend(success)
+            for k, v in terms.items():
+                term_sums[k] = term_sums.get(k, 0.0) + v
+            steps, episodes = steps + numel, episodes + len(returns)
+            if div is not None:
+                diverged = (diverged or 0) + div
+        means = {k.removeprefix(REWARD_PREFIX): v / steps for k, v in term_sums.items()}
+        return RolloutSummary(self.stats(), means, episodes, diverged)
 
     def stats(self) -> RolloutStats:
         def mean(values: deque[float]) -> float | None:

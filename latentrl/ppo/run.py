@@ -19,6 +19,7 @@ from typing import Any
 
 from latentrl.errors import ConfigError
 from latentrl.ppo import checkpoint as ckpt
+from latentrl.ppo import distributed
 from latentrl.ppo.checkpoint import plain_config
 from latentrl.ppo.config import PolicyConfig, PPOConfig
 from latentrl.ppo.runner import Evaluator, Runner, TrainResult
@@ -53,6 +54,8 @@ def _sb3(env: Any) -> type:
 
     from latentrl.ppo.sb3 import Sb3Trainer
 
+    if distributed.launched():
+        raise ConfigError("trainer 'sb3' runs in one process only; use trainer 'native' under torchrun")
     if not isinstance(env, VecEnv):
         raise ConfigError(f"trainer 'sb3' needs an SB3 VecEnv (wrap the env: latentrl.envs.Sb3VecEnv(env)), "
                           f"got {type(env).__name__}")
@@ -113,6 +116,8 @@ def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *
     if resume:
         runner.resume(allow_motion_mismatch=allow_motion_mismatch)
     check_free_space(run_dir, disk_estimate(runner), "run directory")
+    if not distributed.current().is_main:  # under torchrun rank 0 sets up the run directory
+        return runner.train()
     with NewOutput(run_dir) as output:  # nothing is written before this point
         run_dir.mkdir(parents=True, exist_ok=True)
         if resume:

@@ -28,7 +28,8 @@ import torch
 from latentrl.errors import NonFiniteError
 from latentrl.monitor import EvalReport, Monitor, RolloutStats
 from latentrl.ppo import checkpoint as ckpt
-from latentrl.ppo.config import PolicyConfig, PPOConfig
+from latentrl.ppo import distributed
+from latentrl.ppo.config import BatchPlan, PolicyConfig, PPOConfig
 from latentrl.ppo.policy import ActorCritic
 from latentrl.ppo.progress import RunProgress
 from latentrl.ppo.storage import RolloutBuffer
@@ -148,6 +149,26 @@ def stop_if_nonfinite(trainer: Any, bar: RunProgress, problem: str | None, hint:
     raise NonFiniteError(message)
 
 
+# --------------------------------------------------------------------------- ranks
+WORLD_SIZE_KEY = "world_size"
+"""Checkpoint field: the number of ranks that wrote it (absent in older checkpoints: 1)."""
+
+
+def distributed_plan(ppo: PPOConfig, num_envs: int, world_size: int) -> BatchPlan:
+    """``ppo.plan(num_envs)`` of one rank, with ``num_iterations`` counting steps of all ``world_size`` ranks."""
+    plan = ppo.plan(num_envs)
+    if world_size == 1:
+        return plan
+    return plan._replace(num_iterations=-(-ppo.total_steps // (plan.batch_size * world_size)))
+
+
+class _Silent:
+    """Monitor and progress bar of ranks other than 0: every call does nothing."""
+
+    def __getattr__(self, name: str) -> Callable[..., None]:
+        return lambda *args, **kwargs: None
+
+
 # --------------------------------------------------------------------------- runner
 class Runner:
     """One training run in ``run_dir``; subclasses supply the PPO implementation.
@@ -180,8 +201,11 @@ class Runner:
         self.env, self.run_dir, self.cfg = env, Path(run_dir), ppo
         self.config = config if config is not None else {"ppo": ppo, "policy": policy_cfg}
         self.motion, self.evaluate, self.progress = motion, evaluate, progress
-        self.plan = ppo.plan(env.num_envs)
-        seed_everything(ppo.seed, ppo.torch_deterministic)
+        self.dist = distributed.current()
+        self.plan = distributed_plan(ppo, env.num_envs, self.dist.world_size)
+        self.rank_seed = ppo.seed + self.dist.rank
+        """The seed of this rank: ``ppo.seed + rank`` (torchrun); ``ppo.seed`` in one process."""
+        seed_everything(self.rank_seed, ppo.torch_deterministic)
         self.iteration, self.env_steps, self.elapsed_s = 0, 0, 0.0
         self._pending_rng: dict | None = None
         self.last_train: dict[str, float] = {}
@@ -195,6 +219,7 @@ class Runner:
         self.policy: ActorCritic
         self.optimizer: torch.optim.Optimizer
         self.build(policy_cfg, layout)
+        self.dist.broadcast_module(self.policy)
 
     # ------------------------------------------------------------------ backend
     def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
@@ -218,14 +243,19 @@ class Runner:
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict:
-        return ckpt.make_checkpoint(trainer=self.name, iteration=self.iteration, env_steps=self.env_steps,
-                                    elapsed_s=self.elapsed_s, policy=self.policy, optimizer=self.optimizer,
-                                    config=self.config, motion=self.motion, env=self.env,
-                                    extra=self.checkpoint_extra())
+        state = ckpt.make_checkpoint(trainer=self.name, iteration=self.iteration, env_steps=self.env_steps,
+                                     elapsed_s=self.elapsed_s, policy=self.policy, optimizer=self.optimizer,
+                                     config=self.config, motion=self.motion, env=self.env,
+                                     extra=self.checkpoint_extra())
+        state[WORLD_SIZE_KEY] = self.dist.world_size
+        return state
 
     def save(self, path: str | Path) -> Path:
-        path = ckpt.save_checkpoint(self.checkpoint(), path)
-        self.after_save(path)
+        """Write a checkpoint (atomically); under torchrun only rank 0 writes, the others just note the path."""
+        path = Path(path)
+        if self.dist.is_main:
+            path = ckpt.save_checkpoint(self.checkpoint(), path)
+            self.after_save(path)
         self.last_checkpoint = path
         return path
 
@@ -242,8 +272,16 @@ class Runner:
         self.policy.load_state_dict(state["policy"])
         self.optimizer.load_state_dict(state["optimizer"])
         self.iteration, self.env_steps, self.elapsed_s = state["iteration"], state["env_steps"], state["elapsed_s"]
+        saved_world = int(state.get(WORLD_SIZE_KEY, 1))
+        if saved_world != self.dist.world_size:  # the schedule follows env steps, not iterations
+            self.iteration = self.env_steps // (self.plan.batch_size * self.dist.world_size)
+            warnings.warn(f"{path}: written by {saved_world} rank(s), resumed on {self.dist.world_size}: weights, "
+                          f"optimizer, normalizer and {self.env_steps} env steps carry over; iteration counted "
+                          f"as {self.iteration}; random streams start afresh", stacklevel=2)
         self.load_extra(state["extra"])
-        self._pending_rng = state["rng"]
+        # rank 0 continues the saved random streams; other ranks (and other world sizes) start from their seed
+        self._pending_rng = state["rng"] if self.dist.is_main and saved_world == self.dist.world_size else None
+        self.dist.broadcast_module(self.policy)
         self.last_checkpoint = path
         return path
 
@@ -262,13 +300,17 @@ class Runner:
     # ------------------------------------------------------------------ loop
     def train(self) -> TrainResult:
         """Run :meth:`learn` between the monitor's and the progress bar's set-up and close; write ``final.pt``."""
-        self.monitor = Monitor(self.run_dir, resume_step=self.env_steps if self.iteration else None)
-        self.bar = RunProgress(self.run_dir, self.plan.num_iterations * self.plan.batch_size, self.env_steps,
-                               self.progress)
+        if self.dist.is_main:
+            self.monitor = Monitor(self.run_dir, resume_step=self.env_steps if self.iteration else None)
+            self.bar = RunProgress(self.run_dir, self.plan.num_iterations * self.global_batch_size, self.env_steps,
+                                   self.progress)
+        else:  # rank 0 alone writes TensorBoard and train.log
+            self.monitor, self.bar = _Silent(), _Silent()
         if self.iteration == 0:
             self.monitor.log_hparams(ckpt.plain_config(self.config))
         self.bar.write(f"{self.name} trainer: start at iteration {self.iteration}, {self.env_steps} env steps, "
-                       f"{self.plan.num_iterations} iterations of {self.plan.batch_size} steps")
+                       f"{self.plan.num_iterations} iterations of {self.global_batch_size} steps"
+                       + (f" ({self.dist.world_size} ranks)" if self.dist.enabled else ""))
         start_iteration = self.iteration
         self._start, self._steps_at_start, self._elapsed_at_start = time.perf_counter(), self.env_steps, self.elapsed_s
         try:
@@ -277,10 +319,23 @@ class Runner:
             self.monitor.close()
             self.bar.close()
         final = self.run_dir / ckpt.FINAL
+        self.check_ranks_agree()
         if self.iteration > start_iteration or not final.is_file():
             self.save(final)
+        self.dist.barrier()  # final.pt exists for every rank that returns
         return TrainResult(self.run_dir, final, self.iteration, self.env_steps, self.elapsed_s, self.rollout_stats(),
                            self.last_train, self.last_eval, self.times, self.stop_requested)
+
+    @property
+    def global_batch_size(self) -> int:
+        """Env steps of one iteration summed over ranks (``plan.batch_size`` per rank x world size)."""
+        return self.plan.batch_size * self.dist.world_size
+
+    def check_ranks_agree(self) -> None:
+        """Under torchrun: stop if the ranks' weights drifted apart (a bug, never expected); collective."""
+        problem = self.dist.check_identical(self.policy)
+        if problem is not None:
+            raise RuntimeError(f"iteration {self.iteration}: {problem}; distributed training is out of sync")
 
     def restart_clock(self) -> None:
         """Start the throughput and elapsed-time clocks now (after set-up work such as the first reset)."""
@@ -303,14 +358,18 @@ class Runner:
         """After the backend logged iteration k: evaluate and checkpoint when due, flush, move the bar."""
         cfg, k, step = self.cfg, self.iteration, self.env_steps
         last = k == self.plan.num_iterations
-        if self.evaluate is not None and cfg.eval_every and (k % cfg.eval_every == 0 or last):
-            self.last_eval = run_evaluation(self.evaluate, self.policy)
-            self.stop_requested = bool(self.last_eval.stop)
-            self.monitor.log_eval(step, self.last_eval)
-            self.bar.write(f"eval iter {k} steps {step}: "
-                           + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
+        if cfg.eval_every and (k % cfg.eval_every == 0 or last):
+            if self.evaluate is not None and self.dist.is_main:  # rank 0 evaluates; its stop holds for every rank
+                self.last_eval = run_evaluation(self.evaluate, self.policy)
+                self.stop_requested = bool(self.last_eval.stop)
+                self.monitor.log_eval(step, self.last_eval)
+                self.bar.write(f"eval iter {k} steps {step}: "
+                               + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
+            self.stop_requested = self.dist.broadcast_object(self.stop_requested)
         if cfg.checkpoint_every and k % cfg.checkpoint_every == 0 and not (last or self.stop_requested):
+            self.check_ranks_agree()
             self.save(ckpt.iteration_path(self.run_dir, k))
-            ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints, suffixes=self.checkpoint_suffixes)
+            if self.dist.is_main:
+                ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints, suffixes=self.checkpoint_suffixes)
         self.monitor.flush()
         self.bar.update(step, fps, rollout)

@@ -49,7 +49,7 @@ class NativeTrainer(Runner):
         obs_dim = int(np.prod(env.single_observation_space.shape))
         action_dim = int(np.prod(env.single_action_space.shape))
         self.policy = ActorCritic(obs_dim, action_dim, policy_cfg, observation_layout(env, layout)).to(self.device)
-        self.algorithm = PPO(self.policy, ppo, self.plan, env.num_envs, self.device)
+        self.algorithm = PPO(self.policy, ppo, self.plan, env.num_envs, self.device, self.dist)
         self.optimizer, self.buffer = self.algorithm.optimizer, self.algorithm.buffer
         self.episodes = EpisodeRecorder(ppo.num_steps, env.num_envs, self.device, ppo.stats_window)
         space = env.single_action_space
@@ -63,9 +63,10 @@ class NativeTrainer(Runner):
         """Fresh runs reset with ``seed``; resumed runs with ``seed + iteration``, then restore the saved RNGs.
 
         An env whose saved state covers its episodes (latentrl's envs) continues them: its
-        ``observation()`` after the restore is where the interrupted run stood.
+        ``observation()`` after the restore is where the interrupted run stood. Under torchrun rank r
+        resets with ``seed + r + iteration * world_size`` (distinct on every rank).
         """
-        obs, _ = self.env.reset(seed=self.cfg.seed + self.iteration)
+        obs, _ = self.env.reset(seed=self.rank_seed + self.iteration * self.dist.world_size)
         if self.restore_pending_rng() and callable(getattr(self.env, "observation", None)):
             obs = self.env.observation()
         return torch.as_tensor(obs)
@@ -96,12 +97,12 @@ class NativeTrainer(Runner):
             t0 = _now(self.device)
             obs = self.collect(obs)
             stop_if_nonfinite(self, self.bar, nonfinite_rollout(self.buffer), ROLLOUT_HINT)
-            summary = self.episodes.summarize()
+            summary = self.episodes.summarize(self.dist)
             t1 = _now(self.device)
             self.last_train = {**self.update(), "learning_rate": lr}
             stop_if_nonfinite(self, self.bar, nonfinite_update(self.last_train, self.policy))
             t2 = _now(self.device)
-            fps = self.count_iteration(self.env_steps + self.plan.batch_size, t1 - t0, t2 - t1)
+            fps = self.count_iteration(self.env_steps + self.global_batch_size, t1 - t0, t2 - t1)
             if self.logging_now:
                 step, monitor = self.env_steps, self.monitor
                 monitor.log_rollout(step, summary.stats, summary.diverged)

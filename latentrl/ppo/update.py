@@ -19,6 +19,7 @@ import torch
 from torch import nn
 
 from latentrl.ppo.config import PPOConfig
+from latentrl.ppo.distributed import SINGLE, Collective
 from latentrl.ppo.policy import ActorCritic
 from latentrl.ppo.storage import Batch, RolloutBuffer
 
@@ -66,12 +67,15 @@ def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> torch.Ten
 
 
 def ppo_update(policy: ActorCritic, optimizer: torch.optim.Optimizer, buffer: RolloutBuffer, cfg: PPOConfig,
-               minibatch_size: int) -> dict[str, float]:
+               minibatch_size: int, collective: Collective = SINGLE) -> dict[str, float]:
     """Run ``cfg.update_epochs`` epochs of minibatch steps on a filled buffer; return SB3-named stats.
 
     Each step clips the global gradient norm to ``cfg.max_grad_norm``. With ``cfg.target_kl`` set, the
     update stops before the step of the first minibatch whose approx-KL exceeds ``1.5 * target_kl``
     (SB3's rule; this costs one host sync per minibatch, none otherwise).
+
+    Under ``torchrun`` (``collective`` of several ranks) the gradients are averaged over ranks before
+    clipping, and the KL early stop reads the mean approx-KL over ranks, so every rank steps alike.
     """
     dev = buffer.device
     totals = torch.zeros(5, device=dev)  # policy, value, entropy, clip fraction, grad norm
@@ -82,11 +86,12 @@ def ppo_update(policy: ActorCritic, optimizer: torch.optim.Optimizer, buffer: Ro
             terms = ppo_loss(policy, batch, cfg)
             totals[:4] += torch.stack((terms.policy_loss, terms.value_loss, terms.entropy, terms.clip_fraction))
             kl_sum, kl_count, minibatches = kl_sum + terms.approx_kl, kl_count + 1, minibatches + 1
-            if cfg.target_kl is not None and float(terms.approx_kl) > 1.5 * cfg.target_kl:
+            if cfg.target_kl is not None and float(collective.mean(terms.approx_kl)) > 1.5 * cfg.target_kl:
                 stopped = True
                 break
             optimizer.zero_grad(set_to_none=True)
             terms.loss.backward()
+            collective.average_gradients(policy.parameters())
             totals[4] += nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm).detach()
             optimizer.step()
             grad_steps += 1

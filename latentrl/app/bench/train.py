@@ -1,8 +1,15 @@
-"""``latentrl bench train``: time to eval success on the quick config; native vs SB3 iteration time."""
+"""``latentrl bench train``: time to eval success on the quick config; native vs SB3 iteration time.
+
+With ``--nproc 1 2 ...`` it instead times the same config on 1, 2, ... ranks of this machine
+(``latentrl train --nproc N`` in a fresh process each; ``env.num_envs`` per rank).
+"""
 
 from __future__ import annotations
 
+import re
 import statistics
+import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +35,50 @@ class TrainBenchRequest:
     run_dir: str | None = None
     progress: bool = True
     json: str | None = None
+    nproc: list[int] | None = None
+    """Rank counts to compare (``--nproc 1 2``); replaces the other two measurements."""
+
+
+_LOG_LINE = re.compile(r"iter (\d+) \| steps (\d+) \| fps \S+ \| collect_s (\S+) \| update_s (\S+)")
+
+
+def _ranks_run(req: TrainBenchRequest, base: Path, work: Path, nproc: int) -> dict:
+    """Train ``req.iterations`` iterations on ``nproc`` ranks in a fresh process; rank 0's ``train.log`` timings."""
+    from latentrl.app.train import load_train_config
+
+    cfg = load_train_config(base, req.overrides)
+    plan = cfg.ppo.plan(cfg.env.num_envs)
+    run_dir = work / f"ranks_{nproc}"
+    sets = [*req.overrides, f"ppo.total_steps={plan.batch_size * nproc * req.iterations}", "ppo.eval_every=0",
+            f"ppo.checkpoint_every={10**6}"] + ([f"threads={req.threads}"] if req.threads else [])
+    cmd = [sys.executable, "-m", "latentrl", "train", str(base), "--run-dir", str(run_dir), "--no-progress",
+           "--nproc", str(nproc)] + [x for item in sets for x in ("--set", item)]
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True)
+    wall = time.perf_counter() - t0
+    rows = [m.groups() for m in map(_LOG_LINE.search, (run_dir / "train.log").read_text().splitlines()) if m]
+    times = [_Time(float(c), float(u)) for _, _, c, u in rows]
+    summary = _iteration_summary(times)
+    step = plan.batch_size * nproc
+    return {"ranks": nproc, "envs_per_rank": cfg.env.num_envs, "steps_per_iteration": step, "wall_s": wall,
+            **summary, "env_steps_per_s": step / summary["iteration_s"]}
+
+
+class _Time:
+    def __init__(self, collection_s: float, update_s: float):
+        self.collection_s, self.update_s = collection_s, update_s
+
+
+def bench_ranks(req: TrainBenchRequest, base: Path, work: Path) -> dict:
+    """Env steps/s and seconds per iteration on each rank count of ``req.nproc``, and the ratio to the first."""
+    runs = [_ranks_run(req, base, work, n) for n in req.nproc]
+    first = runs[0]
+    for run in runs:
+        run["throughput_ratio"] = run["env_steps_per_s"] / first["env_steps_per_s"]
+        print(f"{run['ranks']} rank(s) x {run['envs_per_rank']} envs: {run['env_steps_per_s']:.0f} env steps/s, "
+              f"{run['iteration_s']:.2f} s/iteration (collect {run['collection_s']:.2f}, update "
+              f"{run['update_s']:.2f}); throughput x{run['throughput_ratio']:.2f} of {first['ranks']} rank(s)")
+    return {"runs": runs}
 
 
 def _iteration_summary(times) -> dict:
@@ -51,6 +102,10 @@ def bench_train(req: TrainBenchRequest) -> int:
     base = config_file(req.config or QUICK_CONFIG)
     out = {"benchmark": "train", "hardware": hardware(), "config": str(base)}
     work = Path(req.run_dir) if req.run_dir else Path(tempfile.mkdtemp(prefix="latentrl-bench-train-"))
+    if req.nproc:
+        out["ranks"] = bench_ranks(req, base, work)
+        write_json(req.json, out)
+        return 0
     if not req.skip_success:
         cfg = load_train_config(base, req.overrides)
         cfg.eval.success_target = req.target

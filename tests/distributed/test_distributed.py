@@ -1,0 +1,113 @@
+"""Data-parallel PPO with 2 CPU ranks (gloo) under torchrun, on the small reach env of the PPO tests.
+
+Each launch is a real ``torch.distributed.run`` of ``worker.py`` with a subprocess timeout, so a hang
+fails the test instead of blocking CI. One fresh run is shared by the checks that read it.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from latentrl.ppo import checkpoint as ckpt
+
+ROOT = Path(__file__).resolve().parents[2]
+WORKER = Path(__file__).with_name("worker.py")
+LAUNCH_TIMEOUT_S = 120
+
+
+def launch(nproc: int, mode: str, run_dir: Path) -> subprocess.CompletedProcess:
+    """Run ``worker.py MODE RUN_DIR`` on ``nproc`` ranks (torchrun for 2 or more), bounded in time."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+           "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
+    launcher = ["-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(nproc)] if nproc > 1 else []
+    cmd = [sys.executable, *launcher, str(WORKER), mode, str(run_dir)]  # 1: a plain process, no process group
+    return subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=LAUNCH_TIMEOUT_S)
+
+
+def ok(proc: subprocess.CompletedProcess) -> None:
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+
+
+@pytest.fixture(scope="module")
+def fresh(tmp_path_factory) -> Path:
+    run_dir = tmp_path_factory.mktemp("dist") / "run"
+    ok(launch(2, "fresh", run_dir))
+    return run_dir
+
+
+def test_ranks_end_with_identical_weights_and_summed_steps(fresh):
+    r0, r1 = (torch.load(fresh / f"rank{r}.pt", weights_only=False) for r in (0, 1))
+    assert r0["world_size"] == r1["world_size"] == 2
+    assert r0["state"].keys() == r1["state"].keys()
+    for name in r0["state"]:  # parameters, and the normalizer's buffers
+        assert torch.equal(r0["state"][name], r1["state"][name]), name
+    # 2 ranks x 4 envs x 8 steps = 64 env steps per iteration; 2 iterations
+    assert r0["env_steps"] == r1["env_steps"] == 128 and r0["iterations"] == 2
+    assert float(r0["state"]["obs_normalizer.count"]) == 128  # both ranks' observations were folded in
+    assert r0["rollout"] == r1["rollout"]  # episode statistics gathered from both ranks
+    final = ckpt.read_checkpoint(fresh / ckpt.FINAL)
+    assert final["env_steps"] == 128 and final["world_size"] == 2
+    for name, value in final["policy"].items():
+        assert torch.equal(value, r0["state"][name]), name
+
+
+def test_rank0_alone_writes_and_logs_the_summed_step_count(fresh):
+    from tests.ppo.helpers import scalars
+
+    assert [p.name for p in ckpt.iteration_checkpoints(fresh)] == ["iter_1.pt"]
+    assert len(list(fresh.glob("events.out.tfevents.*"))) == 1
+    logged = scalars(fresh)
+    assert [step for step, _ in logged["time/fps"]] == [64, 128]
+    assert [step for step, _ in logged["eval/probe"]] == [64, 128]  # rank 0's evaluation, every iteration
+    assert len((fresh / "train.log").read_text().splitlines()) >= 2
+
+
+@pytest.mark.parametrize("nproc", [1, 2])
+def test_a_checkpoint_of_two_ranks_resumes_on_one_or_two(fresh, tmp_path, nproc):
+    run_dir = tmp_path / "run"
+    shutil.copytree(fresh, run_dir)
+    (run_dir / ckpt.FINAL).unlink()
+    for r in (0, 1):
+        (run_dir / f"rank{r}.pt").unlink()
+    ok(launch(nproc, "resume", run_dir))
+    r0 = torch.load(run_dir / "rank0.pt", weights_only=False)
+    assert r0["world_size"] == nproc
+    assert r0["env_steps"] == 128  # 64 steps from iter_1.pt, then 64 more on nproc ranks
+    assert r0["iterations"] == 128 // (32 * nproc)
+    assert ckpt.read_checkpoint(run_dir / ckpt.FINAL)["world_size"] == nproc
+
+
+def test_a_failing_rank_stops_every_rank(tmp_path):
+    from tests.distributed.worker import FAIL_MESSAGE
+
+    proc = launch(2, "fail", tmp_path / "run")  # bounded by LAUNCH_TIMEOUT_S: a hang fails the test
+    assert proc.returncode != 0
+    assert FAIL_MESSAGE in proc.stdout + proc.stderr
+    assert not (tmp_path / "run" / "rank0.pt").exists()  # rank 0 did not finish either
+    assert not (tmp_path / "run" / ckpt.FINAL).exists()
+
+
+def test_the_sb3_trainer_is_refused_under_torchrun(monkeypatch, capsys):
+    from latentrl.app.cli import main
+
+    monkeypatch.setenv("RANK", "0")
+    monkeypatch.setenv("WORLD_SIZE", "2")
+    assert main(["train", "configs/tiny.yaml", "--trainer", "sb3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "trainer 'sb3' runs in one process only" in err
+
+
+def test_nproc_relaunches_the_same_command_on_every_rank():
+    from latentrl.app.train import TrainRequest
+
+    req = TrainRequest(config="configs/tiny.yaml", overrides=["ppo.seed=4"], seed=2, run_dir="runs/x", nproc=2,
+                       progress=False)
+    assert req.argv() == ["train", "configs/tiny.yaml", "--set", "ppo.seed=4", "--trainer", "native", "--seed", "2",
+                          "--run-dir", "runs/x", "--no-progress"]

@@ -1,0 +1,63 @@
+"""One rank of the distributed PPO tests, run by torchrun: ``worker.py MODE RUN_DIR``.
+
+MODE: ``fresh`` (a new run), ``resume`` (continue RUN_DIR), ``fail`` (rank 1's env raises during the
+second iteration). Every rank that finishes writes ``RUN_DIR/rank<r>.pt``: its weights, buffers and counters.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import torch
+
+from latentrl.monitor import EvalReport
+from latentrl.ppo import distributed
+from latentrl.ppo.run import register_trainer, train
+from latentrl.ppo.trainer import NativeTrainer
+from tests.ppo.conftest import tiny_policy, tiny_ppo
+from tests.ppo.envs import ReachVecEnv
+
+FAIL_MESSAGE = "injected env failure on rank 1"
+
+
+class FailingEnv(ReachVecEnv):
+    """Raises on rank 1 at its 12th step (inside the second 8-step rollout)."""
+
+    calls = 0
+
+    def step(self, actions):
+        self.calls += 1
+        if distributed.current().rank == 1 and self.calls == 12:
+            raise RuntimeError(FAIL_MESSAGE)
+        return super().step(actions)
+
+
+class ProbeTrainer(NativeTrainer):
+    """The native trainer, remembered so that each rank can report its own weights."""
+
+    built: list[NativeTrainer] = []
+
+    def build(self, policy_cfg, layout) -> None:
+        super().build(policy_cfg, layout)
+        ProbeTrainer.built.append(self)
+
+
+def main(mode: str, run_dir: Path) -> None:
+    collective = distributed.init("cpu")
+    torch.set_num_threads(1)
+    register_trainer("probe", lambda env: ProbeTrainer)
+    env = (FailingEnv if mode == "fail" else ReachVecEnv)(num_envs=4, max_episode_steps=4)
+    ppo = tiny_ppo(total_steps=128, eval_every=1)  # 4 envs x 8 steps = 32 per rank; on 2 ranks 2 iterations of 64
+    hook = (lambda policy: EvalReport({"probe": 1.0})) if collective.is_main else None  # as app/train.py does
+    result = train(env, run_dir, ppo, tiny_policy(obs_norm=True), trainer="probe", resume=mode == "resume",
+                   evaluate=hook, progress=False)
+    policy = ProbeTrainer.built[-1].policy
+    torch.save({"state": {k: v.clone() for k, v in policy.state_dict().items()}, "env_steps": result.env_steps,
+                "iterations": result.iterations, "rollout": tuple(result.rollout), "world_size": collective.world_size},
+               run_dir / f"rank{collective.rank}.pt")
+    distributed.shutdown()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], Path(sys.argv[2]))
