@@ -30,6 +30,37 @@ from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS, PARENTS
 from latentrl.safe_io import atomic_write_bytes
 
 
+MAX_FPS = 1000.0
+"""Frame rates outside (0, MAX_FPS] are refused."""
+MAX_COORD_M = 10_000.0
+"""Joint coordinates beyond +/- this many metres are no human motion (a diverged rollout or a broken file)."""
+
+
+def check_motion(joints, fps, source: str) -> tuple[np.ndarray, float]:
+    """The one check of a motion's arrays: real floating joints (T>0, 22, 3), finite and within
+    +/- :data:`MAX_COORD_M`; ``fps`` one finite number in (0, :data:`MAX_FPS`]. Returns (float64 joints, fps)."""
+    joints = np.asarray(joints)
+    if joints.dtype.kind != "f":  # integers, complex, strings, objects: not positions in metres
+        raise DataError(f"{source}: field 'joints' must hold real floating-point numbers, got dtype {joints.dtype}")
+    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3) or len(joints) == 0:
+        raise DataError(f"{source}: field 'joints' must be (T, {NUM_JOINTS}, 3) with T > 0, got {joints.shape}")
+    joints = joints.astype(np.float64)
+    if not np.isfinite(joints).all():
+        bad = int((~np.isfinite(joints)).any(axis=(1, 2)).sum())
+        raise DataError(f"{source}: field 'joints' holds NaN or inf in {bad} of {len(joints)} frames")
+    peak = float(np.abs(joints).max())
+    if peak > MAX_COORD_M:
+        raise DataError(f"{source}: field 'joints' reaches {peak:.3g} m, beyond the +/-{MAX_COORD_M:g} m "
+                        f"a motion may span")
+    fps_arr = np.asarray(fps)
+    if fps_arr.shape != () or fps_arr.dtype.kind not in "iuf":
+        raise DataError(f"{source}: field 'fps' must be one real number, got {fps_arr.dtype} of shape {fps_arr.shape}")
+    fps = float(fps_arr)
+    if not 0 < fps <= MAX_FPS:  # also refuses nan
+        raise DataError(f"{source}: field 'fps' must lie in (0, {MAX_FPS:g}], got {fps:g}")
+    return joints, fps
+
+
 def save_motion_npz(
     path: str | Path,
     joints,
@@ -40,10 +71,9 @@ def save_motion_npz(
     primitive=None,
     **extra,
 ) -> Path:
-    """Write one motion in the shared format, atomically."""
-    joints = np.asarray(joints, dtype=np.float32)
-    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
-        raise DataError(f"{path}: joints must be (T, {NUM_JOINTS}, 3), got {joints.shape}")
+    """Write one motion in the shared format, atomically (refuses what :func:`check_motion` refuses)."""
+    joints, fps = check_motion(np.asarray(joints, dtype=np.float32), fps, str(path))
+    joints = joints.astype(np.float32)
     data = {"joints": joints, "fps": np.float32(fps)}
     t = len(joints)
     data["texts"] = np.asarray(list(texts) if texts is not None else [""] * t, dtype=str)
@@ -73,11 +103,10 @@ def load_motion_npz(path: str | Path) -> dict[str, np.ndarray]:
     except Exception as exc:  # numpy raises several types for broken archives
         raise DataError(f"{path}: not a readable motion .npz ({str(exc)[:120]})") from None
     joints = data.get("joints")
-    if joints is None or joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
-        raise DataError(
-            f"{path}: field 'joints' must be (T, {NUM_JOINTS}, 3), got {None if joints is None else joints.shape}"
-        )
-    data.setdefault("fps", np.float32(FPS))
+    if joints is None:
+        raise DataError(f"{path}: no field 'joints' (expected (T, {NUM_JOINTS}, 3) positions in metres)")
+    joints, fps = check_motion(joints, data.get("fps", np.float32(FPS)), str(path))
+    data["joints"], data["fps"] = joints.astype(np.float32), np.float32(fps)
     return data
 
 
@@ -328,11 +357,7 @@ def save_bvh(path: str | Path, joints, fps: float = FPS) -> Path:
     input positions to well under 1 mm. BVH has no comment syntax, so these conventions are
     documented here and in docs/evaluation.md, not inside the file.
     """
-    joints = np.asarray(joints, dtype=np.float64)
-    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3) or len(joints) == 0:
-        raise DataError(f"{path}: joints must be (T>0, {NUM_JOINTS}, 3), got {joints.shape}")
-    if not np.isfinite(joints).all():
-        raise DataError(f"{path}: joints hold NaN or inf; cannot write a BVH")
+    joints, fps = check_motion(joints, fps, str(path))
     offsets = _bone_offsets(joints)
     leg = offsets[1] + offsets[4] + offsets[7] + offsets[10]  # rest pelvis height: the rest pose stands on the floor
     root_offset = ZUP_TO_YUP @ np.array([0.0, 0.0, max(-leg[2], 0.0)]) * BVH_UNITS_PER_M

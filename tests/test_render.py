@@ -101,7 +101,7 @@ Frame Time: 0.5
 
 
 def test_bvh_errors(tmp_path):
-    with pytest.raises(DataError, match=r"joints must be \(T>0, 22, 3\)"):
+    with pytest.raises(DataError, match=r"joints. must be \(T, 22, 3\) with T > 0"):
         save_bvh(tmp_path / "x.bvh", np.zeros((3, 21, 3)))
     with pytest.raises(DataError, match="NaN"):
         save_bvh(tmp_path / "x.bvh", np.full((3, 22, 3), np.nan))

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from latentrl.config import require
+from latentrl.config import require, require_seed
 
 ARCHITECTURES = ("dart", "mlp")
 
@@ -161,23 +161,42 @@ class PPOConfig:
         require(self.checkpoint_every >= 0, "checkpoint_every", f"must be >= 0, got {self.checkpoint_every}")
         require(self.keep_checkpoints >= 0, "keep_checkpoints", f"must be >= 0, got {self.keep_checkpoints}")
         require(self.eval_every >= 0, "eval_every", f"must be >= 0, got {self.eval_every}")
+        require(self.num_steps <= MAX_NUM_STEPS, "num_steps", f"must be <= {MAX_NUM_STEPS}, got {self.num_steps}")
+        require_seed(self.seed)
 
     def plan(self, num_envs: int) -> BatchPlan:
         """Batch, minibatch and iteration counts for ``num_envs`` envs; raises ``ConfigError`` if they don't fit."""
         require(num_envs > 0, "num_envs", f"must be > 0, got {num_envs}")
         batch = self.num_steps * num_envs
+        require(batch <= MAX_BATCH, "num_steps", f"the batch num_steps * num_envs = {self.num_steps} * {num_envs} = "
+                f"{batch} exceeds {MAX_BATCH} transitions; lower ppo.num_steps or env.num_envs")
         if self.minibatch_size is not None:
             mb = self.minibatch_size
-            require(batch % mb == 0, "minibatch_size", f"{mb} does not divide the batch num_steps * num_envs = "
-                    f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, mb)}")
+            if batch % mb:  # the hint is computed only on failure (it factors the batch)
+                require(False, "minibatch_size", f"{mb} does not divide the batch num_steps * num_envs = "
+                        f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, mb)}")
         else:
             n = self.num_minibatches
-            require(batch % n == 0, "num_minibatches", f"{n} does not divide the batch num_steps * num_envs = "
-                    f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, n)}")
+            if batch % n:
+                require(False, "num_minibatches", f"{n} does not divide the batch num_steps * num_envs = "
+                        f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, n)}")
             mb = batch // n
         iterations = -(-self.total_steps // batch)
         return BatchPlan(num_envs, batch, mb, batch // mb, iterations)
 
 
+MAX_NUM_STEPS = 100_000
+"""Rollout steps per env per iteration, at most."""
+MAX_BATCH = 2**26
+"""Transitions per PPO batch (num_steps * num_envs), at most: 64 Mi already needs tens of GB."""
+
+
 def _nearest_divisor(n: int, near: int) -> int:
-    return min((d for d in range(1, n + 1) if n % d == 0), key=lambda d: (abs(d - near), d))
+    """The divisor of ``n`` closest to ``near``, found through the pairs (d, n // d) with d <= sqrt(n)."""
+    divisors = set()
+    d = 1
+    while d * d <= n:
+        if n % d == 0:
+            divisors.update((d, n // d))
+        d += 1
+    return min(divisors, key=lambda x: (abs(x - near), x))
