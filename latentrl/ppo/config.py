@@ -25,6 +25,12 @@ from latentrl.config import require, require_seed
 ARCHITECTURES = ("dart", "mlp")
 
 
+MAX_WIDTH = 16_384
+"""Layer widths of the policy, at most (a 16k x 16k layer is already 1 GiB of weights)."""
+MAX_BLOCKS = 64
+"""Residual blocks or MLP layers, at most."""
+
+
 @dataclass
 class PolicyConfig:
     """The actor-critic network (see :class:`latentrl.ppo.policy.ActorCritic`)."""
@@ -55,9 +61,10 @@ class PolicyConfig:
     def validate(self) -> None:
         require(self.architecture in ARCHITECTURES, "architecture",
                 f"expected one of {ARCHITECTURES}, got '{self.architecture}'")
-        require(self.latent_dim > 0, "latent_dim", f"must be > 0, got {self.latent_dim}")
-        require(self.n_blocks >= 0, "n_blocks", f"must be >= 0, got {self.n_blocks}")
-        require(all(w > 0 for w in self.mlp_hidden), "mlp_hidden", f"widths must be > 0, got {self.mlp_hidden}")
+        require(0 < self.latent_dim <= MAX_WIDTH, "latent_dim", f"must lie in [1, {MAX_WIDTH}], got {self.latent_dim}")
+        require(0 <= self.n_blocks <= MAX_BLOCKS, "n_blocks", f"must lie in [0, {MAX_BLOCKS}], got {self.n_blocks}")
+        require(all(0 < w <= MAX_WIDTH for w in self.mlp_hidden) and len(self.mlp_hidden) <= MAX_BLOCKS,
+                "mlp_hidden", f"at most {MAX_BLOCKS} widths, each in [1, {MAX_WIDTH}], got {self.mlp_hidden}")
         require(self.action_scale > 0, "action_scale", f"must be > 0, got {self.action_scale}")
         low, high = self.log_std_bounds
         require(low <= high, "log_std_bounds",
