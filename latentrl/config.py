@@ -36,10 +36,9 @@ def _first_line(exc: BaseException) -> str:
 
 def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequence[str] = ()) -> T:
     """Build a ``cls`` instance from defaults, an optional YAML file and dotted overrides."""
+    import yaml
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
-
-    import yaml
 
     aliases = getattr(cls, "ALIASES", {})
     merged = OmegaConf.structured(cls)

@@ -29,7 +29,6 @@ from latentrl.errors import DataError
 from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS, PARENTS
 from latentrl.safe_io import atomic_write_bytes
 
-
 MAX_FPS = 1000.0
 """Frame rates outside (0, MAX_FPS] are refused."""
 MAX_COORD_M = 10_000.0
@@ -37,8 +36,11 @@ MAX_COORD_M = 10_000.0
 
 
 def check_motion(joints, fps, source: str) -> tuple[np.ndarray, float]:
-    """The one check of a motion's arrays: real floating joints (T>0, 22, 3), finite and within
-    +/- :data:`MAX_COORD_M`; ``fps`` one finite number in (0, :data:`MAX_FPS`]. Returns (float64 joints, fps)."""
+    """The one check of a motion's arrays; returns (float64 joints, fps).
+
+    Joints: real floating point (T>0, 22, 3), finite and within +/- :data:`MAX_COORD_M`;
+    ``fps``: one finite number in (0, :data:`MAX_FPS`].
+    """
     joints = np.asarray(joints)
     if joints.dtype.kind != "f":  # integers, complex, strings, objects: not positions in metres
         raise DataError(f"{source}: field 'joints' must hold real floating-point numbers, got dtype {joints.dtype}")

@@ -268,8 +268,10 @@ def _expanded_size(obj: Any, memo: dict[int, int]) -> int:
 
 
 def load_strict_yaml(text: str) -> Any:
-    """``yaml.safe_load`` that also refuses duplicate keys and alias bombs (raises ``yaml.YAMLError``):
-    at most :data:`MAX_ALIASES` aliases and :data:`MAX_YAML_VALUES` values once they are expanded."""
+    """``yaml.safe_load`` that also refuses duplicate keys and alias bombs (raises ``yaml.YAMLError``).
+
+    At most :data:`MAX_ALIASES` aliases and :data:`MAX_YAML_VALUES` values once they are expanded.
+    """
     data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
     size = _expanded_size(data, {})
     if size > MAX_YAML_VALUES:

@@ -29,7 +29,6 @@ from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import TERM_NAMES, RewardConfig
 
-
 MAX_NUM_ENVS = 1 << 20
 """Parallel envs, at most (each holds a motion-model history on the device)."""
 

@@ -211,7 +211,37 @@ def load_report(path: str | Path) -> dict[str, Any]:
     for key in ("suites", "overall", "settings"):
         if key not in report:
             raise DataError(f"{path}: report lacks field '{key}'")
+    _check_report(report, path)
     return report
+
+
+def _check_report(report: dict, path: Path) -> None:
+    """The types ``compare`` and ``report.md`` rely on; one line naming the field."""
+
+    def need(ok: bool, field: str, expected: str, got: Any) -> None:
+        if not ok:
+            shown = type(got).__name__ if isinstance(got, (dict, list)) else repr(got)[:60]
+            raise DataError(f"{path}: field '{field}' must be {expected}, got {shown}")
+
+    def metrics(block: Any, field: str) -> None:
+        need(isinstance(block, dict), field, "an object", block)
+        need(isinstance(block.get("metrics"), dict), f"{field}.metrics", "an object of metrics", block.get("metrics"))
+        for key, m in block["metrics"].items():
+            need(isinstance(m, dict), f"{field}.metrics.{key}", "an object {mean, ci95}", m)
+            for part in ("mean", "ci95"):
+                v = m.get(part)
+                need(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
+                     f"{field}.metrics.{key}.{part}", "a number or null", v)
+
+    need(isinstance(report["settings"], dict), "settings", "an object", report["settings"])
+    need(isinstance(report["suites"], dict), "suites", "an object of suites", report["suites"])
+    metrics(report["overall"], "overall")
+    for name, suite in report["suites"].items():
+        metrics(suite, f"suites.{name}")
+        paths = suite.get("paths", [])
+        need(isinstance(paths, list), f"suites.{name}.paths", "a list", paths)
+        for i, p in enumerate(paths):
+            metrics(p, f"suites.{name}.paths.{i}")
 
 
 # --------------------------------------------------------------------------- report.md
