@@ -159,6 +159,7 @@ def train(req: MotionTrainRequest) -> int:
     from latentrl.motion_training.trainer import MotionTrainConfig, MotionTrainer
     from latentrl.preflight import NewOutput, check_device, check_free_space, check_output_file, check_writable
     from latentrl.resources import config_file
+    from latentrl.runlock import RunLock
 
     if req.resume:
         run_dir = Path(req.resume)
@@ -184,14 +185,25 @@ def train(req: MotionTrainRequest) -> int:
     check_writable(run_dir, "run directory")
     if req.out:
         check_output_file(req.out)
+    lock = RunLock(run_dir)
     with NewOutput(run_dir) as output:  # a failure before training starts removes the folder it created
-        trainer = MotionTrainer(cfg, run_dir, out=req.out, progress=req.progress)
-        ckpt = run_dir / "checkpoints" / "state.pt"
-        if req.resume and ckpt.is_file():
-            trainer.load_checkpoint(ckpt)
-        check_free_space(run_dir, trainer.disk_estimate(), "run directory")
+        try:
+            lock.acquire()  # one writer per run directory; a second fails here at once
+        except ConfigError:
+            output.keep()
+            raise
+        try:
+            trainer = MotionTrainer(cfg, run_dir, out=req.out, progress=req.progress)
+            ckpt = run_dir / "checkpoints" / "state.pt"
+            if req.resume and ckpt.is_file():
+                trainer.load_checkpoint(ckpt)
+            check_free_space(run_dir, trainer.disk_estimate(), "run directory")
+        except BaseException:
+            lock.release()
+            raise
         output.keep()
-    out = trainer.run()
+    with lock:
+        out = trainer.run()
     print(f"motion model written to {out} ({trainer.elapsed:.0f} s of training)")
     return 0
 
