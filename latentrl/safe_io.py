@@ -201,7 +201,7 @@ def load_tyro_yaml(path: str | Path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"args file not found: {path}")
-    outer = load_plain_yaml(path.read_text(encoding="utf-8"), str(path))
+    outer = load_plain_yaml(read_text_file(path, "DART args file"), str(path))
     data = load_plain_yaml(outer, str(path)) if isinstance(outer, str) else outer
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a mapping of DART arguments, got {type(data).__name__}")
