@@ -149,6 +149,9 @@ def to_dict(obj: Any) -> dict:
     return OmegaConf.to_container(OmegaConf.structured(obj))
 
 
+MAX_THREADS = 1024
+"""CPU threads a config may ask torch for (more only thrashes; 100,000 would take minutes to start)."""
+
 MAX_SEED = 2**32 - 1
 """Seeds lie in [0, 2**32 - 1]: numpy's ``np.random.seed`` and torch generators accept no more."""
 

@@ -179,7 +179,7 @@ ROWS = [
      r"env\.texts: .*has 1001 characters, more than the 1000"),
     ("train-unknown-reward", [*TRAIN, "--set", "env.reward_weights.skatee=1"],
      r"env\.reward_weights: unknown reward term 'skatee' \(did you mean 'skate'\?\)"),
-    ("train-negative-threads", [*TRAIN, "--set", "threads=-1"], r"threads: must be >= 0"),
+    ("train-negative-threads", [*TRAIN, "--set", "threads=-1"], r"threads: must lie in \[0, 1024\] \(0: torch.s default\), got -1"),
     ("train-zero-steps", [*TRAIN, "--total-steps", "0"], r"ppo\.total_steps: must be > 0, got 0"),
     ("train-bad-seed", [*TRAIN, "--seed", "abc"],
      r"latentrl train: error: argument --seed: expected an integer seed, got 'abc'"),
@@ -441,6 +441,19 @@ ROUND2 = [  # issue 17: tracebacks, hangs and silent nonsense found by a careles
     ("sample-device-cpu9", [*SAMPLE, "--device", "cpu:9"], r"'cpu:9' does not exist"),
     ("bench-rollout-missing-model", ["bench", "rollout", "--models", "nope.pt"], r"motion model not found: nope\.pt"),
     ("bench-env-missing-model", ["bench", "env", "--models", "tiny", "nope.pt"], r"motion model not found: nope\.pt"),
+]
+ROUND2 += [
+    # ------------------------------------------------ misleading messages: outputs and tools checked before work
+    ("train-threads-100000", [*TRAIN, "--set", "threads=100000"], r"threads: must lie in \[0, 1024\]"),
+    ("motion-train-threads", ["motion", "train", "{MTINY}", "--set", "threads=100000"], r"threads: must lie in"),
+    ("bench-motion-json-under-file", ["bench", "motion", "--json", "{fx}/afile/out.json"],
+     r"--json folder .*afile exists and is not a directory"),
+    ("bench-rollout-json-is-folder", ["bench", "rollout", "--json", "{fx}"], r"--json .* is a directory"),
+    ("bench-env-json-under-file", ["bench", "env", "--json", "{fx}/afile/x.json"], r"--json folder"),
+    ("bench-train-json-is-folder", ["bench", "train", "--json", "{fx}"], r"--json .* is a directory"),
+    ("bench-rollout-dart-python", ["bench", "rollout", "--dart-python", "/nonexistent/python"],
+     r"--dart-python /nonexistent/python: no such program"),
+    ("bench-rollout-dart-src", ["bench", "rollout", "--dart-src", "/nonexistent/DART"], r"--dart-src .*: not found"),
 ]
 ROWS += ROUND2
 SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS}

@@ -14,6 +14,7 @@ import argparse
 import dataclasses
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
@@ -372,25 +373,48 @@ def _train(args: argparse.Namespace) -> int:
     return train(request(TrainRequest, args))
 
 
+def _bench_preflight(args: argparse.Namespace) -> None:
+    """Before any benchmark runs: its --json must be writable and the tools it names must exist."""
+    import shutil
+
+    from latentrl.errors import ConfigError
+    from latentrl.preflight import check_output_file
+
+    if getattr(args, "json", None):
+        check_output_file(args.json, "--json")
+    python = getattr(args, "dart_python", None)
+    if python and not (Path(python).is_file() or shutil.which(python)):
+        raise ConfigError(f"--dart-python {python}: no such program (give the python of an environment "
+                          "that can import DART)")
+    for flag in ("dart_src", "dart_bench"):
+        value = getattr(args, flag, None)
+        if value and not Path(value).exists():
+            raise ConfigError(f"--{flag.replace('_', '-')} {value}: not found")
+
+
 def _bench_rollout(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.rollout import RolloutBenchRequest, bench_rollout
 
     return bench_rollout(request(RolloutBenchRequest, args))
 
 
 def _bench_env(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.env import EnvBenchRequest, bench_env
 
     return bench_env(request(EnvBenchRequest, args))
 
 
 def _bench_train(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.train import TrainBenchRequest, bench_train
 
     return bench_train(request(TrainBenchRequest, args))
 
 
 def _bench_motion(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.motion import MotionBenchRequest, bench_motion
 
     return bench_motion(request(MotionBenchRequest, args))

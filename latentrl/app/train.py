@@ -21,7 +21,7 @@ from typing import ClassVar
 
 import torch
 
-from latentrl.config import load_config, require
+from latentrl.config import MAX_THREADS, load_config, require
 from latentrl.envs.config import ALIASES as ENV_ALIASES
 from latentrl.envs.config import EnvConfig, build, resolve_task_file
 from latentrl.errors import ConfigError
@@ -46,7 +46,8 @@ class TrainConfig:
     """Keys of earlier versions (the flat ``env:`` section) -> where they live now."""
 
     def validate(self) -> None:
-        require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")
+        require(0 <= self.threads <= MAX_THREADS, "threads",
+                f"must lie in [0, {MAX_THREADS}] (0: torch's default), got {self.threads}")
         try:  # the batch must split into minibatches for this many envs
             self.ppo.plan(self.env.num_envs)
         except ConfigError as exc:
