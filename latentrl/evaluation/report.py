@@ -275,10 +275,12 @@ def _dart_row(name: str, keys: Sequence[str]) -> str | None:
 def results_table(report: dict[str, Any]) -> list[str]:
     """One row per path, one DART-aggregated row per suite (+ DART's published row), then ``overall``."""
     keys = list(METRICS)
-    lines = _header(keys, ["suite", "path"])
+    from latentrl.evaluation.results import prompts_label
+
+    lines = _header(keys, ["suite", "path (prompts)"])
     for name, suite in report["suites"].items():
         for p in suite["paths"]:
-            lines.append(_row([name, str(p["index"])], p["metrics"], keys))
+            lines.append(_row([name, f"{p['index']} ({prompts_label(p.get('texts', []))})"], p["metrics"], keys))
         lines.append(_row([f"**{name}**", "all"], suite["metrics"], keys))
         dart = _dart_row(name, keys)
         if dart:
