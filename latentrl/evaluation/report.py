@@ -310,6 +310,11 @@ def _speed_lines(report: dict[str, Any]) -> list[str]:
     lines.append("")
     lines.append(f"Hardware: {hw.get('gpu') or hw.get('cpu', '?')} ({hw.get('cpu_count', '?')} CPU cores, "
                  f"{hw.get('torch_threads', '?')} torch threads, torch {hw.get('torch', '?')}).")
+    lines.append("")
+    lines.append("A quick sample, not a benchmark: the median of a few steps after one warm-up step, taken while "
+                 "this evaluation ran, so other load on the machine shows up in it (runs on a shared 2-core CPU "
+                 "have differed tenfold). For figures to compare, run `latentrl bench rollout` or "
+                 "`latentrl bench env` on an idle machine.")
     return lines
 
 
@@ -356,7 +361,7 @@ def report_markdown(report: dict[str, Any]) -> str:
         "",
         *_waypoint_table(report),
         "",
-        "## Generation speed (policy + motion model)",
+        "## Generation speed (policy + motion model; a quick sample, see the note below the table)",
         "",
         *_speed_lines(report),
         "",
