@@ -394,7 +394,7 @@ ROUND2 = [  # issue 17: tracebacks, hangs and silent nonsense found by a careles
     # ------------------------------------------------ compare with wrong types
     ("compare-suites-list", ["compare", "{fx}/rep_suites_list.json"], r"field 'suites' must be an object of suites"),
     ("compare-metrics-string", ["compare", "{fx}/rep_metrics_str.json"],
-     r"field 'suites\.a\.metrics' must be an object of metrics, got 'x'"),
+     r"field 'suites\.a\.metrics' must be an object of metrics or null, got 'x'"),
     ("compare-mean-string", ["compare", "{fx}/rep_mean_str.json"],
      r"field 'suites\.a\.metrics\.success\.mean' must be a number or null, got 'high'"),
     ("compare-overall-list", ["compare", "{fx}/rep_overall_list.json"], r"field 'overall' must be an object"),

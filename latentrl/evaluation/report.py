@@ -225,8 +225,9 @@ def _check_report(report: dict, path: Path) -> None:
 
     def metrics(block: Any, field: str) -> None:
         need(isinstance(block, dict), field, "an object", block)
-        need(isinstance(block.get("metrics"), dict), f"{field}.metrics", "an object of metrics", block.get("metrics"))
-        for key, m in block["metrics"].items():
+        found = block.get("metrics")
+        need(found is None or isinstance(found, dict), f"{field}.metrics", "an object of metrics or null", found)
+        for key, m in (found or {}).items():
             need(isinstance(m, dict), f"{field}.metrics.{key}", "an object {mean, ci95}", m)
             for part in ("mean", "ci95"):
                 v = m.get(part)
@@ -280,12 +281,13 @@ def results_table(report: dict[str, Any]) -> list[str]:
     lines = _header(keys, ["suite", "path (prompts)"])
     for name, suite in report["suites"].items():
         for p in suite["paths"]:
-            lines.append(_row([name, f"{p['index']} ({prompts_label(p.get('texts', []))})"], p["metrics"], keys))
-        lines.append(_row([f"**{name}**", "all"], suite["metrics"], keys))
+            lines.append(_row([name, f"{p['index']} ({prompts_label(p.get('texts', []))})"], p.get("metrics") or {},
+                              keys))
+        lines.append(_row([f"**{name}**", "all"], suite.get("metrics") or {}, keys))
         dart = _dart_row(name, keys)
         if dart:
             lines.append(dart)
-    lines.append(_row(["**overall**", "all"], report["overall"]["metrics"], keys))
+    lines.append(_row(["**overall**", "all"], report["overall"].get("metrics") or {}, keys))
     return lines
 
 
@@ -386,7 +388,7 @@ def compare_markdown(reports: Sequence[tuple[str, dict[str, Any]]], keys: Sequen
         for label, report in reports:
             block = report["overall"] if name == "overall" else report["suites"].get(name)
             if block is not None:
-                lines.append(_row([name, label], block["metrics"], keys))
+                lines.append(_row([name, label], block.get("metrics") or {}, keys))
     notes = _setting_notes(reports)
     return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
 
