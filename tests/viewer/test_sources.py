@@ -101,7 +101,6 @@ def test_per_frame_goals_without_primitive():
 
 
 def test_load_clip_rejects_nonfinite(tmp_path):
-
     joints = walking(5)
     joints[2, 3, 0] = np.nan
     path = tmp_path / "nan.npz"  # written by hand: save_motion_npz itself refuses NaN joints
