@@ -498,3 +498,21 @@ def test_debug_shows_the_traceback_instead(fx, tmp_path, monkeypatch):
 
     with pytest.raises(ConfigError, match="config file not found"):
         main(["--debug", "train", "missing.yaml"])
+
+
+def test_sample_never_writes_a_diverged_rollout(fx, tmp_path, monkeypatch, capsys):
+    from latentrl.motion.rollout import MotionModel
+
+    real = MotionModel.rollout
+
+    def diverging(self, *args, **kwargs):
+        roll = real(self, *args, **kwargs)
+        roll.joints_world[:, 3:] = float("nan")
+        return roll
+
+    monkeypatch.setattr(MotionModel, "rollout", diverging)
+    monkeypatch.chdir(tmp_path)
+    code = main(["motion", "sample", "--motion", str(fx / "motion.pt"), "--seconds", "1", "--out", "m.npz"])
+    err = capsys.readouterr().err
+    assert code == 3 and "the rollout diverged" in err and "nothing written" in err
+    assert not (tmp_path / "m.npz").exists()
