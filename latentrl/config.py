@@ -29,8 +29,14 @@ def _error(source: str, exc: Exception) -> ConfigError:
     return ConfigError(where + msg)
 
 
+def _first_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split("\n")[:1]).strip() or type(exc).__name__
+    return text[:200]
+
+
 def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequence[str] = ()) -> T:
     """Build a ``cls`` instance from defaults, an optional YAML file and dotted overrides."""
+    import yaml
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
@@ -40,14 +46,16 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequenc
         path = Path(path)
         if not path.is_file():
             raise ConfigError(f"config file not found: {path}")
-        import yaml
+        from latentrl.safe_io import load_strict_yaml, read_text_file
 
+        text = read_text_file(path, "config file", ConfigError)
         try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: invalid YAML: {str(exc).splitlines()[0]}") from None
-        if data is None:
-            data = {}
+            data = load_strict_yaml(text)
+        except (yaml.YAMLError, RecursionError) as exc:
+            raise ConfigError(f"{path}: invalid YAML: {_first_line(exc)}") from None
+        if data is None:  # an empty file would silently start the defaults (e.g. a 200 M-step run)
+            raise ConfigError(f"{path}: holds no settings (empty file); give at least one field, or copy "
+                              f"a shipped config such as configs/quick.yaml")
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: expected a mapping of config fields, got {type(data).__name__}")
         data = apply_aliases(data, aliases)
@@ -63,6 +71,8 @@ def load_config(cls: type[T], path: str | Path | None = None, overrides: Sequenc
             merged = OmegaConf.merge(merged, OmegaConf.from_dotlist([f"{aliases.get(key.strip(), key)}={value}"]))
         except OmegaConfBaseException as exc:
             raise _error(f"override '{item}'", exc) from None
+        except (yaml.YAMLError, ValueError, RecursionError) as exc:  # OmegaConf parses the value as YAML
+            raise ConfigError(f"override '{item}': invalid YAML value: {_first_line(exc)}") from None
     try:
         obj = OmegaConf.to_object(merged)
     except OmegaConfBaseException as exc:
@@ -137,3 +147,24 @@ def to_dict(obj: Any) -> dict:
     from omegaconf import OmegaConf
 
     return OmegaConf.to_container(OmegaConf.structured(obj))
+
+
+MAX_THREADS = 1024
+"""CPU threads a config may ask torch for (more only thrashes; 100,000 would take minutes to start)."""
+
+MAX_SEED = 2**32 - 1
+"""Seeds lie in [0, 2**32 - 1]: numpy's ``np.random.seed`` and torch generators accept no more."""
+
+
+def seed_problem(value: object) -> str | None:
+    """Why ``value`` is not a usable random seed, or None."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        return f"expected an integer seed, got {value!r}"
+    if not 0 <= value <= MAX_SEED:
+        return f"must lie in [0, 2**32 - 1 = {MAX_SEED}], got {value}"
+    return None
+
+
+def require_seed(value: object, field: str = "seed") -> None:
+    problem = seed_problem(value)
+    require(problem is None, field, str(problem))

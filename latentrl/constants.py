@@ -8,6 +8,9 @@ terms and metrics, and the observation clips of the goal.
 GUIDANCE_SCALE = 5.0
 """Classifier-free guidance weight of the motion model's sampler (DART's ``guidance_param``)."""
 
+MAX_GUIDANCE = 100.0
+"""Guidance weights beyond +/- this only amplify the denoiser's error into non-finite motion."""
+
 SUCCESS_RADIUS_M = 0.3
 """A goal counts as reached when the pelvis comes closer (xy) than this, metres."""
 

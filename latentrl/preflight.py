@@ -33,6 +33,8 @@ def check_device(device: str, what: str = "--device"):
     except (RuntimeError, TypeError, ValueError):
         raise ConfigError(f"{what}: unknown device '{device}'; use 'cpu', 'cuda' or 'cuda:<index>'") from None
     if parsed.type == "cpu":
+        if parsed.index not in (None, 0):  # torch accepts 'cpu:9' here and fails later on loading tensors
+            raise ConfigError(f"{what}: '{device}' does not exist; the CPU is 'cpu' (or 'cpu:0')")
         return parsed
     if parsed.type == "cuda":
         if not torch.cuda.is_available():

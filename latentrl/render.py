@@ -15,7 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from latentrl.errors import DataError
-from latentrl.motion.clip import MotionClip, load_motion_npz, save_motion_npz  # noqa: F401  (the old address)
+from latentrl.motion.clip import (  # noqa: F401  (the old address)
+    MAX_COORD_M,
+    MAX_FPS,
+    MotionClip,
+    check_motion,
+    load_motion_npz,
+    save_motion_npz,
+)
 from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS, PARENTS, SMPL_REST_OFFSETS, rest_offsets
 from latentrl.safe_io import atomic_write_bytes
 
@@ -26,36 +33,49 @@ def render_gif(
     fps: float = FPS,
     texts: Sequence[str] | None = None,
     title: str = "",
-    stride: int = 2,
+    stride: int = 3,
     size: float = 4.0,
     goals: np.ndarray | None = None,
 ) -> Path:
     """Animate a skeleton (T, 22, 3) as a GIF: a 3-D view that follows the pelvis, with its track.
 
-    ``stride`` keeps every n-th frame (the GIF plays at ``fps / stride``).
+    ``stride`` keeps every n-th frame; the GIF plays in real time at ``fps / stride`` (the default 3
+    gives 10 frames/s: GIF frame times are whole centiseconds, so 30 / 2 = 15 frames/s would play ~10%
+    fast). Goals and the pelvis track are drawn only where they lie inside the moving box (3-D axes do
+    not clip), the title and the prompt sit above the axes, and a legend names what is drawn.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.lines import Line2D
 
     joints = np.asarray(joints, dtype=np.float32)
-    frames = list(range(0, len(joints), max(1, stride)))
+    stride = max(1, int(stride))
+    frames = list(range(0, len(joints), stride))
     fig = plt.figure(figsize=(size, size))
-    ax = fig.add_subplot(111, projection="3d")
+    ax = fig.add_axes((0.0, 0.07, 1.0, 0.78), projection="3d")
     pelvis = joints[:, 0]
     lines = [ax.plot([], [], [], lw=2, color="tab:blue" if j % 2 else "tab:red")[0] for j in range(1, NUM_JOINTS)]
     track = ax.plot([], [], [], lw=1, color="gray")[0]
-    if goals is not None and len(goals):
-        goals = np.asarray(goals)
-        ax.scatter(goals[:, 0], goals[:, 1], np.zeros(len(goals)), color="tab:green", s=20)
-    label = ax.text2D(0.02, 0.95, "", transform=ax.transAxes)
+    goal_marks = ax.plot([], [], [], "o", ms=5, color="tab:green")[0]
+    goals = None if goals is None or not len(goals) else np.asarray(goals, dtype=np.float32)
+    heading = fig.text(0.02, 0.98, title, va="top", fontsize=7, wrap=True)
+    label = fig.text(0.02, 0.89, "", va="top", fontsize=8, weight="bold")
+    fig.legend(handles=[Line2D([], [], color="tab:red", lw=2, label="left"),
+                        Line2D([], [], color="tab:blue", lw=2, label="right"),
+                        Line2D([], [], color="gray", lw=1, label="pelvis track"),
+                        Line2D([], [], color="tab:green", marker="o", ls="none", label="goal")],
+               loc="lower center", ncol=4, fontsize=6, frameon=False)
     half = 1.2
+
+    def inside(xy: np.ndarray, cx: float, cy: float) -> np.ndarray:
+        return (np.abs(xy[:, 0] - cx) <= half) & (np.abs(xy[:, 1] - cy) <= half)
 
     def draw(i: int):
         p = joints[i]
-        cx, cy = pelvis[i, 0], pelvis[i, 1]
+        cx, cy = float(pelvis[i, 0]), float(pelvis[i, 1])
         ax.set_xlim(cx - half, cx + half)
         ax.set_ylim(cy - half, cy + half)
         ax.set_zlim(0, 2 * half)
@@ -63,11 +83,17 @@ def render_gif(
             a, b = p[j], p[PARENTS[j]]
             line.set_data([a[0], b[0]], [a[1], b[1]])
             line.set_3d_properties([a[2], b[2]])
-        track.set_data(pelvis[: i + 1, 0], pelvis[: i + 1, 1])
+        trail = pelvis[: i + 1, :2].copy()
+        trail[~inside(trail, cx, cy)] = np.nan  # a gap, not a line floating outside the box
+        track.set_data(trail[:, 0], trail[:, 1])
         track.set_3d_properties(np.zeros(i + 1))
+        if goals is not None:
+            shown = goals[inside(goals, cx, cy)]
+            goal_marks.set_data(shown[:, 0], shown[:, 1])
+            goal_marks.set_3d_properties(np.zeros(len(shown)))
         text = texts[i] if texts is not None and i < len(texts) else ""
-        label.set_text(f"{title}  {i / fps:5.2f} s  {text}".strip())
-        return [*lines, track, label]
+        label.set_text(f"{i / fps:5.2f} s  {text}".strip())
+        return [*lines, track, goal_marks, heading, label]
 
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -76,7 +102,7 @@ def render_gif(
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.gif")
-    anim.save(tmp, writer=PillowWriter(fps=max(1, round(fps / max(1, stride)))))
+    anim.save(tmp, writer=PillowWriter(fps=fps / stride))
     plt.close(fig)
     tmp.replace(path)
     return path
@@ -249,11 +275,7 @@ def save_bvh(path: str | Path, joints, fps: float = FPS) -> Path:
     input positions to well under 1 mm. BVH has no comment syntax, so these conventions are
     documented here and in docs/evaluation.md, not inside the file.
     """
-    joints = np.asarray(joints, dtype=np.float64)
-    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3) or len(joints) == 0:
-        raise DataError(f"{path}: joints must be (T>0, {NUM_JOINTS}, 3), got {joints.shape}")
-    if not np.isfinite(joints).all():
-        raise DataError(f"{path}: joints hold NaN or inf; cannot write a BVH")
+    joints, fps = check_motion(joints, fps, str(path))
     offsets = _bone_offsets(joints)
     leg = offsets[1] + offsets[4] + offsets[7] + offsets[10]  # rest pelvis height: the rest pose stands on the floor
     root_offset = ZUP_TO_YUP @ np.array([0.0, 0.0, max(-leg[2], 0.0)]) * BVH_UNITS_PER_M

@@ -45,7 +45,7 @@ def load_torch(path: str | Path, map_location: str | torch.device = "cpu", what:
             f"{path}: refused to load: the file holds Python objects other than tensors and plain "
             f"containers (it asks for {found.group(1)}; only weights_only=True files are read)"
         ) from None
-    except (RuntimeError, EOFError, OSError, ValueError, KeyError, AttributeError) as exc:
+    except Exception as exc:  # noqa: BLE001 - arbitrary bytes make the unpickler raise any type (IndexError, ...)
         reason = f"{type(exc).__name__}: {str(exc)[:160]}"
         raise CheckpointError(f"{path}: not a readable torch file (corrupt or truncated?): {reason}") from None
 
@@ -158,7 +158,7 @@ def load_pickle(path: str | Path, what: str = "pickle") -> Any:
         raise CheckpointError(
             f"{path}: refused to unpickle: {exc} (only tensors, numpy arrays and plain containers are accepted)"
         ) from None
-    except (EOFError, ValueError, TypeError, RuntimeError, ImportError) as exc:
+    except Exception as exc:  # noqa: BLE001 - arbitrary bytes make the unpickler raise any type
         raise CheckpointError(f"{path}: not a readable pickle (corrupt or truncated?): {str(exc)[:200]}") from None
 
 
@@ -201,8 +201,80 @@ def load_tyro_yaml(path: str | Path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"args file not found: {path}")
-    outer = load_plain_yaml(path.read_text(encoding="utf-8"), str(path))
+    outer = load_plain_yaml(read_text_file(path, "DART args file"), str(path))
     data = load_plain_yaml(outer, str(path)) if isinstance(outer, str) else outer
     if not isinstance(data, dict):
         raise CheckpointError(f"{path}: expected a mapping of DART arguments, got {type(data).__name__}")
+    return data
+
+
+# --------------------------------------------------------------------------- text and config files
+MAX_ALIASES = 100  # YAML aliases (*name) per document: more is an alias bomb, never a config
+
+
+def read_text_file(path: str | Path, what: str = "file", error: type[Exception] = CheckpointError) -> str:
+    """A UTF-8 text file's content; one-line ``error`` if it is unreadable, binary or not UTF-8."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    if b"\x00" in data:
+        raise error(f"{path}: not a text {what} (it holds NUL bytes; binary or UTF-16?); expected UTF-8 text")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a UTF-8 text {what} (byte 0x{data[exc.start]:02x} at offset {exc.start}); "
+                    f"expected UTF-8 text") from None
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that refuses duplicate keys and more than :data:`MAX_ALIASES` aliases."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            self._aliases = getattr(self, "_aliases", 0) + 1
+            if self._aliases > MAX_ALIASES:
+                raise yaml.YAMLError(f"more than {MAX_ALIASES} aliases (*name); refused as a possible alias bomb")
+        return super().compose_node(parent, index)
+
+    def construct_mapping(self, node, deep=False):
+        seen: set = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                duplicate = key in seen
+                seen.add(key)
+            except TypeError:  # unhashable key: SafeLoader reports it below
+                continue
+            if duplicate:
+                raise yaml.YAMLError(f"duplicate key '{key}' (line {key_node.start_mark.line + 1}); "
+                                     f"each key may appear once")
+        return super().construct_mapping(node, deep=deep)
+
+
+MAX_YAML_VALUES = 1_000_000  # values in a document once aliases are expanded
+
+
+def _expanded_size(obj: Any, memo: dict[int, int]) -> int:
+    """Number of values in ``obj`` with every shared (aliased) container counted at each use; memoised."""
+    if not isinstance(obj, (dict, list)):
+        return 1
+    if id(obj) not in memo:
+        memo[id(obj)] = 0  # a self-referencing alias counts once
+        items = [*obj.keys(), *obj.values()] if isinstance(obj, dict) else obj
+        memo[id(obj)] = 1 + sum(_expanded_size(x, memo) for x in items)
+    return memo[id(obj)]
+
+
+def load_strict_yaml(text: str) -> Any:
+    """``yaml.safe_load`` that also refuses duplicate keys and alias bombs (raises ``yaml.YAMLError``).
+
+    At most :data:`MAX_ALIASES` aliases and :data:`MAX_YAML_VALUES` values once they are expanded.
+    """
+    data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506 - a SafeLoader subclass
+    size = _expanded_size(data, {})
+    if size > MAX_YAML_VALUES:
+        raise yaml.YAMLError(f"expands to {size} values through its aliases, more than {MAX_YAML_VALUES}; "
+                             f"refused as an alias bomb")
     return data

@@ -66,7 +66,85 @@ def fx(tmp_path_factory) -> Path:
     n = 10_001
     (root / "huge.json").write_text(json.dumps([{"goal_location": [[0.0, 0.3 * i, 0.0] for i in range(n)],
                                                  "goal_text": ["walk"] * n}]))
+    _round2_files(root, state)
     return root
+
+
+def _round2_files(root: Path, state: dict) -> None:
+    """Files of the second reliability round (issue 17): unreadable, tampered, huge and nonsensical inputs."""
+    import copy
+
+    (root / "text.pt").write_text("hello, a text file renamed .pt\n" * 4)
+    (root / "binary.yaml").write_bytes(bytes(range(256)))
+    (root / "utf16.yaml").write_bytes("env:\n  num_envs: 8\n".encode("utf-16"))
+    (root / "latin1.yaml").write_bytes("env:\n  texts: [caf\xe9]\n".encode("latin-1"))
+    (root / "empty.yaml").write_text("")
+    (root / "comments.yaml").write_text("# only a comment\n")
+    (root / "dup.yaml").write_text("env:\n  num_envs: 8\nenv:\n  num_envs: 4\n")
+    (root / "dupinner.yaml").write_text("ppo:\n  seed: 1\n  seed: 2\n")
+    rows = "".join(f"{c}: &{c} [{', '.join(['*' + chr(ord(c) - 1)] * 9)}]\n" for c in "bcdefg")
+    (root / "bomb.yaml").write_text('a: &a ["x", "x", "x", "x", "x", "x", "x", "x", "x"]\n' + rows)
+    (root / "aliases.yaml").write_text("a: &a 1\n" + "".join(f"k{i}: *a\n" for i in range(101)))
+    (root / "bigseed.yaml").write_text("ppo: {seed: 100000000000000000000000}\n")
+    run = root / "badrun"
+    run.mkdir()
+    (run / "config.yaml").write_bytes(b"\xff\xfe" + "env: {}".encode("utf-16-le"))
+    mrun = root / "badmrun"
+    mrun.mkdir()
+    (mrun / "config.yaml").write_bytes(bytes(range(256)))
+
+    def path_file(name: str, paths) -> None:
+        (root / name).write_text(paths if isinstance(paths, str) else json.dumps(paths))
+
+    path_file("digits.json", '[{"goal_location": [[0, ' + "9" * 400 + ', 0]], "goal_text": ["walk"]}]')
+    path_file("deep.json", "[" * 200_000 + "]" * 200_000)
+    path_file("many.json", [{"goal_location": [[0, 1, 0]], "goal_text": ["walk"]}] * 20_000)
+    path_file("far.json", [{"goal_location": [[0, 1e308, 0]], "goal_text": ["walk"]}])
+    path_file("nanpath.json", '[{"goal_location": [[0, NaN, 0]], "goal_text": ["walk"]}]')
+    path_file("boolpath.json", [{"goal_location": [[0, True, 0]], "goal_text": ["walk"]}])
+    path_file("utf16.json", None)
+    (root / "utf16.json").write_bytes(json.dumps([]).encode("utf-16"))
+
+    def policy(name: str, change) -> None:
+        s = copy.deepcopy(state)
+        change(s)
+        torch.save(s, root / name)
+
+    policy("nospec.pt", lambda s: s.pop("policy_spec"))
+    policy("negobs.pt", lambda s: s["policy_spec"].__setitem__("obs_dim", -5))
+    policy("strobs.pt", lambda s: s["policy_spec"].__setitem__("obs_dim", "64"))
+    policy("hugelatent.pt", lambda s: s["policy_spec"]["config"].__setitem__("latent_dim", 10**9))
+    policy("motionstr.pt", lambda s: s.__setitem__("motion", "default"))
+    policy("noweights.pt", lambda s: s.__setitem__("policy", [1, 2, 3]))
+    policy("negiter.pt", lambda s: s.__setitem__("iteration", -1))
+    policy("specconfig.pt", lambda s: s["policy_spec"].__setitem__("config", "dart"))
+    flipped = copy.deepcopy(state)
+    name = next(k for k, v in flipped["policy"].items() if v.is_floating_point() and v.numel())
+    flipped["policy"][name].view(-1)[0] = 3.5e35  # a bit flip; the recorded hash stays
+    torch.save(flipped, root / "flipped.pt")
+
+    joints = np.zeros((5, 22, 3), np.float32)
+    for name, data in {
+        "fps0": {"joints": joints, "fps": 0}, "fpsneg": {"joints": joints, "fps": -30},
+        "fpsnan": {"joints": joints, "fps": np.nan}, "fpsarr": {"joints": joints, "fps": np.array([30, 60])},
+        "fpsstr": {"joints": joints, "fps": "thirty"}, "fpshuge": {"joints": joints, "fps": 1e9},
+        "jstr": {"joints": np.full((5, 22, 3), "a")}, "jcomplex": {"joints": joints.astype(complex)},
+        "jint": {"joints": joints.astype(np.int64)}, "jhuge": {"joints": np.full((5, 22, 3), 3e40)},
+        "jnan": {"joints": np.full((5, 22, 3), np.nan, np.float32)}, "jempty": {"joints": np.zeros((0, 22, 3))},
+        "jbool": {"joints": joints.astype(bool)}, "nojoints": {"fps": 30.0},
+    }.items():
+        np.savez(root / f"{name}.npz", **data)
+    np.savez(root / "nanseed.npz", seed_history=np.full((1, 2, 276), np.nan, np.float32))
+    base = {"format": "latentrl.eval/1", "settings": {}, "overall": {"metrics": {}}}
+    for name, report in {
+        "rep_suites_list.json": {**base, "suites": [1, 2]},
+        "rep_metrics_str.json": {**base, "suites": {"a": {"metrics": "x", "paths": []}}},
+        "rep_mean_str.json": {**base, "suites": {"a": {"metrics": {"success": {"mean": "high"}}, "paths": []}}},
+        "rep_overall_list.json": {**base, "suites": {}, "overall": []},
+        "rep_paths_dict.json": {**base, "suites": {"a": {"metrics": {}, "paths": {"0": 1}}}},
+        "rep_settings_str.json": {**base, "suites": {}, "settings": "cpu"},
+    }.items():
+        (root / name).write_text(json.dumps(report))
 
 
 # (id, argv, regex); {fx} is the fixture folder, {TINY}/{MTINY} the tiny PPO / motion configs, {LONG} 1001 chars
@@ -101,9 +179,11 @@ ROWS = [
      r"env\.texts: .*has 1001 characters, more than the 1000"),
     ("train-unknown-reward", [*TRAIN, "--set", "env.reward_weights.skatee=1"],
      r"env\.reward_weights: unknown reward term 'skatee' \(did you mean 'skate'\?\)"),
-    ("train-negative-threads", [*TRAIN, "--set", "threads=-1"], r"threads: must be >= 0"),
+    ("train-negative-threads", [*TRAIN, "--set", "threads=-1"],
+     r"threads: must lie in \[0, 1024\] \(0: torch.s default\), got -1"),
     ("train-zero-steps", [*TRAIN, "--total-steps", "0"], r"ppo\.total_steps: must be > 0, got 0"),
-    ("train-bad-seed", [*TRAIN, "--seed", "abc"], r"latentrl train: error: argument --seed: invalid int value: 'abc'"),
+    ("train-bad-seed", [*TRAIN, "--seed", "abc"],
+     r"latentrl train: error: argument --seed: expected an integer seed, got 'abc'"),
     ("train-bad-trainer", [*TRAIN, "--trainer", "jax"], r"argument --trainer: invalid choice: 'jax'"),
     # ---------------------------------------------------------------- train: devices
     ("train-device-tpu", [*TRAIN, "--device", "tpu"], r"argument --device: unknown device 'tpu'; use 'cpu', 'cuda'"),
@@ -151,7 +231,8 @@ ROWS = [
     ("sample-zero-seconds", [*SAMPLE, "--seconds", "0"], r"--seconds must be in \(0, 3600\], got 0\.0"),
     ("sample-nan-seconds", [*SAMPLE, "--seconds", "nan"], r"--seconds must be in \(0, 3600\], got nan"),
     ("sample-zero-batch", [*SAMPLE, "--batch", "0"], r"--batch must be in \[1, 1024\], got 0"),
-    ("sample-infinite-guidance", [*SAMPLE, "--guidance", "inf"], r"--guidance must be a finite number, got inf"),
+    ("sample-infinite-guidance", [*SAMPLE, "--guidance", "inf"],
+     r"--guidance must be a finite number in \[-100, 100\], got inf"),
     ("sample-empty-prompt", [*SAMPLE, "--text", ""], r"--text: prompt '' is empty"),
     ("sample-huge-prompt", [*SAMPLE, "--text", "{LONG}"], r"--text: prompt 'xxx.*' has 1001 characters"),
     ("sample-unknown-prompt", ["motion", "sample", "--motion", "{fx}/table.pt", "--text", "moonwalk"],
@@ -180,7 +261,7 @@ ROWS = [
     ("export-bvh-missing", ["motion", "export-bvh", "missing.npz"], r"motion file not found: missing\.npz"),
     ("export-bvh-junk", ["motion", "export-bvh", "{fx}/junk.npz"], r"junk\.npz: not a readable motion \.npz"),
     ("export-bvh-bad-shape", ["motion", "export-bvh", "{fx}/badshape.npz"],
-     r"badshape\.npz: field 'joints' must be \(T, 22, 3\), got \(5, 21, 3\)"),
+     r"badshape\.npz: field 'joints' must be \(T, 22, 3\) with T > 0, got \(5, 21, 3\)"),
     # ---------------------------------------------------------------- eval / compare
     ("eval-missing-policy", ["eval", "missing.pt", "--motion", "{fx}/motion.pt", "--paths", "dart_demo_walk"],
      r"PPO checkpoint file not found: missing\.pt"),
@@ -225,6 +306,157 @@ ROWS = [
     ("no-command", [], r"latentrl: error: the following arguments are required: COMMAND"),
     ("unknown-command", ["fly"], r"argument COMMAND: invalid choice: 'fly'"),
 ]
+ROUND2 = [  # issue 17: tracebacks, hangs and silent nonsense found by a careless and a hostile user
+    # ------------------------------------------------ unreadable files
+    ("eval-text-as-policy", ["eval", "{fx}/text.pt", "--motion", "{fx}/motion.pt", "--paths", "dart_demo_walk"],
+     r"text\.pt: not a readable torch file"),
+    ("train-text-as-motion", ["train", "{TINY}", "--set", "env.motion={fx}/text.pt"],
+     r"text\.pt: not a readable torch"),
+    ("info-etc-passwd", ["motion", "info", "--motion", "/etc/passwd"], r"/etc/passwd: not a readable torch file"),
+    ("sample-text-as-motion", ["motion", "sample", "--motion", "{fx}/text.pt"], r"text\.pt: not a readable torch"),
+    ("train-binary-config", ["train", "{fx}/binary.yaml"], r"binary\.yaml: not a text config file"),
+    ("train-utf16-config", ["train", "{fx}/utf16.yaml"], r"utf16\.yaml: not a text config file"),
+    ("train-latin1-config", ["train", "{fx}/latin1.yaml"], r"latin1\.yaml: not a UTF-8 text config file \(byte 0xe9"),
+    ("train-resume-utf16-config", ["train", "--resume", "{fx}/badrun"], r"config\.yaml: not a text config file"),
+    ("motion-train-binary-config", ["motion", "train", "{fx}/binary.yaml"], r"binary\.yaml: not a text config"),
+    ("motion-train-resume-binary", ["motion", "train", "--resume", "{fx}/badmrun"], r"config\.yaml: not a text config"),
+    ("eval-utf16-paths", [*EVAL, "--paths", "{fx}/utf16.json"], r"utf16\.json: not a UTF-8 text file"),
+    # ------------------------------------------------ malformed --set YAML
+    ("train-set-unclosed-list", [*TRAIN, "--set", "env.texts=[walk"],
+     r"override 'env\.texts=\[walk': invalid YAML value: while parsing a flow sequence"),
+    ("train-set-python-tag", [*TRAIN, "--set", "env.texts=!!python/object/apply:os.system ['true']"],
+     r"invalid YAML value: could not determine a constructor for the tag"),
+    ("train-set-unclosed-map", [*TRAIN, "--set", 'env.texts=["walk'], r"invalid YAML value"),
+    ("motion-train-set-unclosed", ["motion", "train", "{MTINY}", "--set", "data.source=[x"], r"invalid YAML value"),
+    # ------------------------------------------------ seeds out of range
+    ("train-seed-2-64", [*TRAIN, "--seed", str(2**64)], r"argument --seed: must lie in \[0, 2\*\*32 - 1"),
+    ("train-seed-negative", [*TRAIN, "--seed", "-1"],
+     r"argument --seed: must lie in \[0, 2\*\*32 - 1 = 4294967295\], got -1"),
+    ("train-seed-float", [*TRAIN, "--seed", "1e23"], r"argument --seed: expected an integer seed, got '1e23'"),
+    ("train-config-seed-huge", ["train", "{fx}/bigseed.yaml", "--set", "env.motion={fx}/motion.pt"],
+     r"ppo\.seed: must lie in \[0, 2\*\*32 - 1"),
+    ("train-set-seed-1e23", [*TRAIN, "--set", "ppo.seed=1e23"],
+     r"ppo\.seed: Value '1e\+23' of type 'float' could not be converted to Integer"),
+    ("eval-seed-2-64", [*EVAL, "--paths", "dart_demo_walk", "--seed", str(2**64)], r"argument --seed: must lie in"),
+    ("sample-seed-2-64", [*SAMPLE, "--seed", str(2**64)], r"argument --seed: must lie in"),
+    ("sample-seed-negative", [*SAMPLE, "--seed", "-5"], r"argument --seed: must lie in"),
+    ("motion-train-seed", ["motion", "train", "{MTINY}", "--set", "seed=-1"], r"seed: must lie in \[0, 2\*\*32"),
+    # ------------------------------------------------ path JSON
+    ("eval-path-400-digits", [*EVAL, "--paths", "{fx}/digits.json"],
+     r"digits\.json: path 0, waypoint 0: field 'goal_location' must be \[x, y, z\] finite numbers within"),
+    ("eval-path-deep", [*EVAL, "--paths", "{fx}/deep.json"], r"deep\.json: JSON nested too deeply"),
+    ("eval-path-20000-paths", [*EVAL, "--paths", "{fx}/many.json"],
+     r"many\.json: 20000 paths, more than the 1000 a path file may hold"),
+    ("eval-path-1e308", [*EVAL, "--paths", "{fx}/far.json"], r"far\.json: .*within \+/-10000 m, got \[0, 1e\+308, 0\]"),
+    ("eval-path-nan", [*EVAL, "--paths", "{fx}/nanpath.json"], r"nanpath\.json: .*finite numbers"),
+    ("eval-path-bool", [*EVAL, "--paths", "{fx}/boolpath.json"], r"boolpath\.json: .*finite numbers"),
+    ("train-path-deep", [*TRAIN, "--set", "env.task=path", "--set", "env.paths={fx}/deep.json"],
+     r"deep\.json: JSON nested too deeply"),
+    ("quickstart-guidance-nan", ["quickstart", "--set", "env.motion={fx}/motion.pt", "--set", "env.guidance_scale=nan"],
+     r"env\.guidance_scale: must be a finite number"),
+    # ------------------------------------------------ hand-made policy checkpoints
+    ("eval-policy-no-spec", ["eval", "{fx}/nospec.pt", "--motion", "{fx}/motion.pt"],
+     r"nospec\.pt: field 'policy_spec': expected a dict"),
+    ("eval-policy-negative-obs", ["eval", "{fx}/negobs.pt", "--motion", "{fx}/motion.pt"],
+     r"field 'policy_spec\.obs_dim': expected an integer in \[1, 1000000\], got -5"),
+    ("eval-policy-string-obs", ["eval", "{fx}/strobs.pt", "--motion", "{fx}/motion.pt"],
+     r"field 'policy_spec\.obs_dim': expected an integer .* got '64'"),
+    ("eval-policy-huge-latent", ["eval", "{fx}/hugelatent.pt", "--motion", "{fx}/motion.pt"],
+     r"policy_spec\.config: latent_dim: must lie in \[1, 16384\], got 1000000000"),
+    ("eval-policy-motion-string", ["eval", "{fx}/motionstr.pt", "--motion", "{fx}/motion.pt"],
+     r"field 'motion': expected a dict \{path, sha256\} or None, got 'default'"),
+    ("eval-policy-weights-list", ["eval", "{fx}/noweights.pt", "--motion", "{fx}/motion.pt"],
+     r"field 'policy': expected a dict of tensors"),
+    ("eval-policy-negative-iteration", ["eval", "{fx}/negiter.pt", "--motion", "{fx}/motion.pt"],
+     r"field 'iteration': expected an integer >= 0, got -1"),
+    ("eval-policy-spec-config-string", ["eval", "{fx}/specconfig.pt", "--motion", "{fx}/motion.pt"],
+     r"field 'policy_spec\.config': expected a dict"),
+    ("eval-policy-bit-flip", ["eval", "{fx}/flipped.pt", "--motion", "{fx}/motion.pt"],
+     r"flipped\.pt: policy weights do not match their recorded sha256"),
+    # ------------------------------------------------ export-bvh
+    ("export-bvh-fps-0", ["motion", "export-bvh", "{fx}/fps0.npz"],
+     r"fps0\.npz: field 'fps' must lie in \(0, 1000\], got 0"),
+    ("export-bvh-fps-negative", ["motion", "export-bvh", "{fx}/fpsneg.npz"], r"field 'fps' must lie in .*got -30"),
+    ("export-bvh-fps-nan", ["motion", "export-bvh", "{fx}/fpsnan.npz"], r"field 'fps' must lie in .*got nan"),
+    ("export-bvh-fps-array", ["motion", "export-bvh", "{fx}/fpsarr.npz"], r"field 'fps' must be one real number"),
+    ("export-bvh-fps-string", ["motion", "export-bvh", "{fx}/fpsstr.npz"], r"field 'fps' must be one real number"),
+    ("export-bvh-fps-huge", ["motion", "export-bvh", "{fx}/fpshuge.npz"], r"field 'fps' must lie in .*got 1e\+09"),
+    ("export-bvh-joints-string", ["motion", "export-bvh", "{fx}/jstr.npz"],
+     r"field 'joints' must hold real floating-point numbers, got dtype <U1"),
+    ("export-bvh-joints-complex", ["motion", "export-bvh", "{fx}/jcomplex.npz"], r"got dtype complex128"),
+    ("export-bvh-joints-int", ["motion", "export-bvh", "{fx}/jint.npz"], r"got dtype int64"),
+    ("export-bvh-joints-bool", ["motion", "export-bvh", "{fx}/jbool.npz"], r"got dtype bool"),
+    ("export-bvh-joints-huge", ["motion", "export-bvh", "{fx}/jhuge.npz"],
+     r"field 'joints' reaches 3e\+40 m, beyond the \+/-10000 m"),
+    ("export-bvh-joints-nan", ["motion", "export-bvh", "{fx}/jnan.npz"], r"field 'joints' holds NaN or inf in 5 of 5"),
+    ("export-bvh-joints-empty", ["motion", "export-bvh", "{fx}/jempty.npz"], r"with T > 0, got \(0, 22, 3\)"),
+    ("export-bvh-no-joints", ["motion", "export-bvh", "{fx}/nojoints.npz"], r"no field 'joints'"),
+    # ------------------------------------------------ compare with wrong types
+    ("compare-suites-list", ["compare", "{fx}/rep_suites_list.json"], r"field 'suites' must be an object of suites"),
+    ("compare-metrics-string", ["compare", "{fx}/rep_metrics_str.json"],
+     r"field 'suites\.a\.metrics' must be an object of metrics or null, got 'x'"),
+    ("compare-mean-string", ["compare", "{fx}/rep_mean_str.json"],
+     r"field 'suites\.a\.metrics\.success\.mean' must be a number or null, got 'high'"),
+    ("compare-overall-list", ["compare", "{fx}/rep_overall_list.json"], r"field 'overall' must be an object"),
+    ("compare-paths-dict", ["compare", "{fx}/rep_paths_dict.json"], r"field 'suites\.a\.paths' must be a list"),
+    ("compare-settings-string", ["compare", "{fx}/rep_settings_str.json"], r"field 'settings' must be an object"),
+    # ------------------------------------------------ what cannot fit, refused before work
+    ("eval-episodes-1e8", [*EVAL, "--paths", "dart_demo_walk", "--episodes", "100000000"],
+     r"--episodes: must be <= 65536 \(they run as one batch of envs\), got 100000000"),
+    ("eval-max-steps-huge", [*EVAL, "--paths", "dart_demo_walk", "--max-steps", "10000000"],
+     r"--max-steps: must be <= 100000"),
+    ("train-num-envs-1e12", [*TRAIN, "--set", "env.num_envs=1000000000000"],
+     r"env\.num_envs: must be <= 1048576, got 1000000000000"),
+    ("train-num-steps-1e11", [*TRAIN, "--set", "ppo.num_steps=100000000000"],
+     r"ppo\.num_steps: must be <= 100000, got 100000000000"),
+    ("train-batch-too-big", [*TRAIN, "--set", "env.num_envs=1000000", "--set", "ppo.num_steps=100000"],
+     r"the batch num_steps \* num_envs = 100000 \* 1000000 = 100000000000 exceeds 67108864"),
+    ("train-prime-batch-hint", [*TRAIN, "--set", "env.num_envs=1000003", "--set", "ppo.num_steps=1",
+                                "--set", "ppo.num_minibatches=2"], r"2 does not divide the batch .*; try 1\b"),
+    ("train-policy-latent-huge", [*TRAIN, "--set", "policy.latent_dim=1000000000"],
+     r"policy\.latent_dim: must lie in \[1, 16384\]"),
+    # ------------------------------------------------ hangs: YAML bombs, empty and duplicated configs
+    ("train-yaml-alias-bomb", ["train", "{fx}/bomb.yaml"],
+     r"bomb\.yaml: invalid YAML: expands to \d+ values .*alias bomb"),
+    ("train-yaml-many-aliases", ["train", "{fx}/aliases.yaml"], r"aliases\.yaml: invalid YAML: more than 100 aliases"),
+    ("train-empty-config", ["train", "{fx}/empty.yaml"], r"empty\.yaml: holds no settings \(empty file\)"),
+    ("train-comment-only-config", ["train", "{fx}/comments.yaml"], r"comments\.yaml: holds no settings"),
+    ("train-duplicate-key", ["train", "{fx}/dup.yaml"], r"dup\.yaml: invalid YAML: duplicate key 'env' \(line 3\)"),
+    ("train-duplicate-inner-key", ["train", "{fx}/dupinner.yaml"], r"duplicate key 'seed' \(line 3\)"),
+    ("motion-train-empty-config", ["motion", "train", "{fx}/empty.yaml"], r"empty\.yaml: holds no settings"),
+    ("motion-train-duplicate-key", ["motion", "train", "{fx}/dup.yaml"], r"duplicate key 'env'"),
+    ("motion-train-alias-bomb", ["motion", "train", "{fx}/bomb.yaml"], r"alias bomb"),
+    # ------------------------------------------------ silent nonsense
+    ("train-guidance-nan", [*TRAIN, "--set", "env.guidance_scale=.nan"],
+     r"env\.guidance_scale: must be a finite number in \[-100, 100\], got nan"),
+    ("train-guidance-huge", [*TRAIN, "--set", "env.guidance_scale=1e30"], r"env\.guidance_scale: must be a finite"),
+    ("sample-guidance-1e30", [*SAMPLE, "--guidance", "1e30"], r"--guidance must be a finite number in \[-100, 100\]"),
+    ("sample-nan-seed-history", [*SAMPLE, "--seed-history", "{fx}/nanseed.npz"],
+     r"nanseed\.npz: seed history holds NaN or inf in 1 of 1 seeds"),
+    ("info-nan-seed-history", ["motion", "info", "--motion", "{fx}/motion.pt", "--seed-history", "{fx}/nanseed.npz"],
+     r"seed history holds NaN"),
+    ("eval-device-cpu9", [*EVAL, "--paths", "dart_demo_walk", "--device", "cpu:9"],
+     r"argument --device: 'cpu:9' does not exist; the CPU is 'cpu'"),
+    ("train-device-cpu9", [*TRAIN, "--device", "cpu:9"], r"argument --device: 'cpu:9' does not exist"),
+    ("train-config-device-cpu1", [*TRAIN, "--set", "ppo.device=cpu:1"], r"ppo\.device: 'cpu:1' does not exist"),
+    ("sample-device-cpu9", [*SAMPLE, "--device", "cpu:9"], r"'cpu:9' does not exist"),
+    ("bench-rollout-missing-model", ["bench", "rollout", "--models", "nope.pt"], r"motion model not found: nope\.pt"),
+    ("bench-env-missing-model", ["bench", "env", "--models", "tiny", "nope.pt"], r"motion model not found: nope\.pt"),
+]
+ROUND2 += [
+    # ------------------------------------------------ misleading messages: outputs and tools checked before work
+    ("train-threads-100000", [*TRAIN, "--set", "threads=100000"], r"threads: must lie in \[0, 1024\]"),
+    ("motion-train-threads", ["motion", "train", "{MTINY}", "--set", "threads=100000"], r"threads: must lie in"),
+    ("bench-motion-json-under-file", ["bench", "motion", "--json", "{fx}/afile/out.json"],
+     r"--json folder .*afile exists and is not a directory"),
+    ("bench-rollout-json-is-folder", ["bench", "rollout", "--json", "{fx}"], r"--json .* is a directory"),
+    ("bench-env-json-under-file", ["bench", "env", "--json", "{fx}/afile/x.json"], r"--json folder"),
+    ("bench-train-json-is-folder", ["bench", "train", "--json", "{fx}"], r"--json .* is a directory"),
+    ("bench-rollout-dart-python", ["bench", "rollout", "--dart-python", "/nonexistent/python"],
+     r"--dart-python /nonexistent/python: no such program"),
+    ("bench-rollout-dart-src", ["bench", "rollout", "--dart-src", "/nonexistent/DART"], r"--dart-src .*: not found"),
+]
+ROWS += ROUND2
 SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS}
 
 
@@ -266,3 +498,21 @@ def test_debug_shows_the_traceback_instead(fx, tmp_path, monkeypatch):
 
     with pytest.raises(ConfigError, match="config file not found"):
         main(["--debug", "train", "missing.yaml"])
+
+
+def test_sample_never_writes_a_diverged_rollout(fx, tmp_path, monkeypatch, capsys):
+    from latentrl.motion.rollout import MotionModel
+
+    real = MotionModel.rollout
+
+    def diverging(self, *args, **kwargs):
+        roll = real(self, *args, **kwargs)
+        roll.joints_world[:, 3:] = float("nan")
+        return roll
+
+    monkeypatch.setattr(MotionModel, "rollout", diverging)
+    monkeypatch.chdir(tmp_path)
+    code = main(["motion", "sample", "--motion", str(fx / "motion.pt"), "--seconds", "1", "--out", "m.npz"])
+    err = capsys.readouterr().err
+    assert code == 3 and "the rollout diverged" in err and "nothing written" in err
+    assert not (tmp_path / "m.npz").exists()

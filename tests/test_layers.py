@@ -17,7 +17,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "latentrl"
 
 FLOORS = (
-    ("errors", "constants", "config", "safe_io", "preflight", "timing", "resources", "monitor"),
+    ("errors", "constants", "config", "safe_io", "preflight", "timing", "resources", "monitor", "runlock"),
     ("motion",),
     ("datasets", "render", "rewards"),
     ("motion_training", "envs", "ppo"),

@@ -101,7 +101,7 @@ Frame Time: 0.5
 
 
 def test_bvh_errors(tmp_path):
-    with pytest.raises(DataError, match=r"joints must be \(T>0, 22, 3\)"):
+    with pytest.raises(DataError, match=r"joints. must be \(T, 22, 3\) with T > 0"):
         save_bvh(tmp_path / "x.bvh", np.zeros((3, 21, 3)))
     with pytest.raises(DataError, match="NaN"):
         save_bvh(tmp_path / "x.bvh", np.full((3, 22, 3), np.nan))
@@ -122,3 +122,16 @@ def test_motion_npz_round_trip(tmp_path):
     back = load_motion_npz(path)
     assert np.array_equal(back["joints"], joints) and list(back["texts"]) == ["walk"] * 6
     assert back["actions"].shape == (1, 16) and bool(back["success"])
+
+
+def test_gif_plays_in_real_time_with_goals_outside_the_box_left_out(tmp_path):
+    from PIL import Image
+
+    from latentrl.render import render_gif
+
+    joints = np.zeros((30, 22, 3), np.float32)
+    joints[..., 2] = 1.0
+    path = render_gif(tmp_path / "m.gif", joints, texts=["walk"] * 30, title="suite path 0 (walk)",
+                      goals=np.array([[0.0, 1.0, 0.0], [0.0, 50.0, 0.0]]))
+    with Image.open(path) as im:
+        assert im.n_frames == 10 and im.info["duration"] == 100  # 30 frames at 30 fps, every 3rd: 1 s exactly

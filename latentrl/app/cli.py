@@ -14,6 +14,7 @@ import argparse
 import dataclasses
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
@@ -33,6 +34,22 @@ def _device(text: str) -> str:
     except LatentRLError as exc:
         raise argparse.ArgumentTypeError(str(exc).removeprefix("--device: ")) from None
     return text
+
+
+def _seed(text: str) -> int:
+    """Argument type of ``--seed``: an integer in [0, 2**32 - 1]."""
+    from latentrl.config import seed_problem
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer seed, got '{text}'") from None
+    if seed_problem(value) is not None:
+        raise argparse.ArgumentTypeError(str(seed_problem(value)))
+    return value
+
+
+_seed.__name__ = "int"
 
 
 def _positive(kind: type):
@@ -78,7 +95,7 @@ def _motion_commands(sub) -> None:
     sample.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
     sample.add_argument("--text", action="append", help="prompt; repeat to chain prompts, each gets an equal share")
     sample.add_argument("--seconds", type=float, default=10.0, help="length of the motion")
-    sample.add_argument("--seed", type=int, default=0, help="random seed (noise and seed-history choice)")
+    sample.add_argument("--seed", type=_seed, default=0, help="random seed (noise and seed-history choice)")
     sample.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
     sample.add_argument("--batch", type=int, default=1, help="number of motions (files get _<i> suffixes)")
     sample.add_argument("--device", default="cpu", type=_device)
@@ -127,7 +144,7 @@ def _train_commands(sub) -> None:
     train.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
     train.add_argument("--trainer", default="native", choices=["native", "sb3"], help="PPO implementation")
     train.add_argument("--device", type=_device, help="torch device (sets ppo.device), e.g. cpu or cuda")
-    train.add_argument("--seed", type=int, help="random seed (sets ppo.seed)")
+    train.add_argument("--seed", type=_seed, help="random seed (sets ppo.seed)")
     train.add_argument("--total-steps", type=int, help="env steps to train (sets ppo.total_steps)")
     train.add_argument("--run-dir", help="run directory (default: runs/<config>-<time>)")
     train.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its newest checkpoint")
@@ -194,7 +211,7 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--seconds", type=_pos_float, default=60.0, help="rollout length per prompt")
     motion.add_argument("--batch", type=_pos_int, default=8, help="rollouts per prompt")
     motion.add_argument("--guidance", type=float, default=GUIDANCE_SCALE)
-    motion.add_argument("--seed", type=int, default=0)
+    motion.add_argument("--seed", type=_seed, default=0)
     motion.add_argument("--json", help="write all figures to this JSON file")
     motion.add_argument("--no-floor-snap", action="store_true",
                         help="measure the model alone, without the rollout's floor snap")
@@ -218,7 +235,7 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--allow-motion-mismatch", action="store_true",
                     help="evaluate on a motion model other than the policy's (experts)")
     ev.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
-    ev.add_argument("--seed", type=int, default=0, help="base random seed (seed histories and action noise)")
+    ev.add_argument("--seed", type=_seed, default=0, help="base random seed (seed histories and action noise)")
     ev.add_argument("--out", help="output folder (default: eval-<policy name> beside the policy)")
     ev.add_argument("--render", type=int, default=1, metavar="N",
                     help="render the first N episodes of every path as GIF and BVH (default 1)")
@@ -256,7 +273,7 @@ def _viewer_commands(sub) -> None:
     play.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
     play.add_argument("--text", help="prompt to start with (default: the policy's training text)")
     play.add_argument("--deterministic", action="store_true", help="start with the policy's mean action")
-    play.add_argument("--seed", type=int, default=0, help="seed of the start pose and the action noise")
+    play.add_argument("--seed", type=_seed, default=0, help="seed of the start pose and the action noise")
     server_flags(play)
     play.set_defaults(func=lambda a: _viewer(
         "play_command", a.policy, host=a.host, port=a.port, motion=a.motion, device=a.device, text=a.text,
@@ -362,25 +379,48 @@ def _train(args: argparse.Namespace) -> int:
     return train(request(TrainRequest, args))
 
 
+def _bench_preflight(args: argparse.Namespace) -> None:
+    """Before any benchmark runs: its --json must be writable and the tools it names must exist."""
+    import shutil
+
+    from latentrl.errors import ConfigError
+    from latentrl.preflight import check_output_file
+
+    if getattr(args, "json", None):
+        check_output_file(args.json, "--json")
+    python = getattr(args, "dart_python", None)
+    if python and not (Path(python).is_file() or shutil.which(python)):
+        raise ConfigError(f"--dart-python {python}: no such program (give the python of an environment "
+                          "that can import DART)")
+    for flag in ("dart_src", "dart_bench"):
+        value = getattr(args, flag, None)
+        if value and not Path(value).exists():
+            raise ConfigError(f"--{flag.replace('_', '-')} {value}: not found")
+
+
 def _bench_rollout(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.rollout import RolloutBenchRequest, bench_rollout
 
     return bench_rollout(request(RolloutBenchRequest, args))
 
 
 def _bench_env(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.env import EnvBenchRequest, bench_env
 
     return bench_env(request(EnvBenchRequest, args))
 
 
 def _bench_train(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.train import TrainBenchRequest, bench_train
 
     return bench_train(request(TrainBenchRequest, args))
 
 
 def _bench_motion(args: argparse.Namespace) -> int:
+    _bench_preflight(args)
     from latentrl.app.bench.motion import MotionBenchRequest, bench_motion
 
     return bench_motion(request(MotionBenchRequest, args))

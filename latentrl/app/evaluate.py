@@ -166,8 +166,10 @@ def _progress(result: PathResult) -> None:
     wins = sum(ep.success for ep in result.episodes)
     times = [ep.reach_time_s for ep in result.episodes if ep.success]
     reach = f", reach time of successes {sum(times) / len(times):.1f} s" if times else ""
-    print(f"{result.suite} path {result.index}: {wins}/{len(result.episodes)} reached{reach} ({result.wall_s:.0f} s)",
-          flush=True)
+    from latentrl.evaluation.results import prompts_label
+
+    print(f"{result.suite} path {result.index} ({prompts_label(result.path.texts)}): {wins}/{len(result.episodes)} "
+          f"reached{reach} ({result.wall_s:.0f} s)", flush=True)
 
 
 def evaluate(req: EvalRequest) -> int:

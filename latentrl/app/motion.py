@@ -83,6 +83,8 @@ def info(req: InfoRequest) -> int:
 
 
 def _check_sample(req: SampleRequest, texts: list[str]) -> None:
+    from latentrl.config import seed_problem
+    from latentrl.constants import MAX_GUIDANCE
     from latentrl.motion.text import prompt_problem
     from latentrl.preflight import check_device, check_output_file
 
@@ -90,8 +92,11 @@ def _check_sample(req: SampleRequest, texts: list[str]) -> None:
         raise ConfigError(f"--seconds must be in (0, 3600], got {req.seconds}")
     if not 1 <= req.batch <= MAX_BATCH:
         raise ConfigError(f"--batch must be in [1, {MAX_BATCH}], got {req.batch}")
-    if not math.isfinite(req.guidance):
-        raise ConfigError(f"--guidance must be a finite number, got {req.guidance}")
+    if not math.isfinite(req.guidance) or abs(req.guidance) > MAX_GUIDANCE:
+        raise ConfigError(f"--guidance must be a finite number in [-{MAX_GUIDANCE:g}, {MAX_GUIDANCE:g}], "
+                          f"got {req.guidance}")
+    if seed_problem(req.seed) is not None:
+        raise ConfigError(f"--seed: {seed_problem(req.seed)}")
     for text in texts:
         if prompt_problem(text) is not None:
             raise ConfigError(f"--text: {prompt_problem(text)}")
@@ -122,6 +127,12 @@ def sample(req: SampleRequest) -> int:
     per_step = [texts[min(len(texts) - 1, i * len(texts) // steps)] for i in range(steps)]
     g = torch.Generator().manual_seed(req.seed)
     roll = model.rollout(per_step, steps, batch=req.batch, generator=g, guidance_scale=req.guidance)
+    if not torch.isfinite(roll.joints_world).all():  # never write a NaN motion
+        from latentrl.errors import NonFiniteError
+
+        bad = (~torch.isfinite(roll.joints_world)).flatten(2).any(-1)
+        raise NonFiniteError(f"motion sample: the rollout diverged ({int(bad.sum())} of {bad.numel()} frames hold "
+                             f"NaN or inf; --guidance {req.guidance:g}, model {req.motion}); nothing written")
     frame_texts = [""] * 2 + [t for t in per_step for _ in range(8)]
     for b in range(req.batch):
         path = req.out if req.batch == 1 else req.out.replace(".npz", f"_{b}.npz")
@@ -147,6 +158,7 @@ def train(req: MotionTrainRequest) -> int:
     from latentrl.motion_training.trainer import MotionTrainConfig, MotionTrainer
     from latentrl.preflight import NewOutput, check_device, check_free_space, check_output_file, check_writable
     from latentrl.resources import config_file
+    from latentrl.runlock import RunLock
 
     if req.resume:
         run_dir = Path(req.resume)
@@ -172,14 +184,25 @@ def train(req: MotionTrainRequest) -> int:
     check_writable(run_dir, "run directory")
     if req.out:
         check_output_file(req.out)
+    lock = RunLock(run_dir)
     with NewOutput(run_dir) as output:  # a failure before training starts removes the folder it created
-        trainer = MotionTrainer(cfg, run_dir, out=req.out, progress=req.progress)
-        ckpt = run_dir / "checkpoints" / "state.pt"
-        if req.resume and ckpt.is_file():
-            trainer.load_checkpoint(ckpt)
-        check_free_space(run_dir, trainer.disk_estimate(), "run directory")
+        try:
+            lock.acquire()  # one writer per run directory; a second fails here at once
+        except ConfigError:
+            output.keep()
+            raise
+        try:
+            trainer = MotionTrainer(cfg, run_dir, out=req.out, progress=req.progress)
+            ckpt = run_dir / "checkpoints" / "state.pt"
+            if req.resume and ckpt.is_file():
+                trainer.load_checkpoint(ckpt)
+            check_free_space(run_dir, trainer.disk_estimate(), "run directory")
+        except BaseException:
+            lock.release()
+            raise
         output.keep()
-    out = trainer.run()
+    with lock:
+        out = trainer.run()
     print(f"motion model written to {out} ({trainer.elapsed:.0f} s of training)")
     return 0
 

@@ -24,7 +24,7 @@ from typing import ClassVar
 
 import torch
 
-from latentrl.config import load_config, require
+from latentrl.config import MAX_THREADS, load_config, require
 from latentrl.envs.config import ALIASES as ENV_ALIASES
 from latentrl.envs.config import EnvConfig, build, resolve_task_file
 from latentrl.errors import ConfigError
@@ -49,7 +49,8 @@ class TrainConfig:
     """Keys of earlier versions (the flat ``env:`` section) -> where they live now."""
 
     def validate(self) -> None:
-        require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")
+        require(0 <= self.threads <= MAX_THREADS, "threads",
+                f"must lie in [0, {MAX_THREADS}] (0: torch's default), got {self.threads}")
         try:  # the batch must split into minibatches for this many envs
             self.ppo.plan(self.env.num_envs)
         except ConfigError as exc:
@@ -97,7 +98,18 @@ class QuickstartRequest:
 
 
 QUICK_CONFIG = "quick"
-QUICK_EVAL_PATHS = ("dart_demo_walk", "random_smooth")
+QUICK_EVAL_PATHS = ("dart_demo_walk", "sharp_turns", "random_smooth")
+"""Suites the quickstart may evaluate; it keeps those whose every prompt the policy was trained on."""
+
+
+def trained_suites(suites: tuple[str, ...], texts: list[str] | tuple[str, ...]) -> list[str]:
+    """The suites whose waypoints use only prompts in ``texts`` (a walk policy is not judged on hops)."""
+    from latentrl.app.evaluate import resolve_path_files
+    from latentrl.envs import load_paths
+
+    known = set(texts)
+    return [name for name, file in zip(suites, resolve_path_files(list(suites)))
+            if all(set(p.texts) <= known for p in load_paths(file))]
 
 
 def load_motion(cfg: EnvConfig, device: str):
@@ -253,7 +265,8 @@ def quickstart(req: QuickstartRequest) -> int:
     cfg = load_train_config(QUICK_CONFIG, req.overrides)
     run_dir = Path(req.run_dir) if req.run_dir else Path("runs") / f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}"
     check_new_run(run_dir)
-    eval_req = EvalRequest(policy="", paths=list(QUICK_EVAL_PATHS), episodes=req.episodes, max_steps=req.max_steps,
+    suites = trained_suites(QUICK_EVAL_PATHS, cfg.env.texts) or list(QUICK_EVAL_PATHS[:1])
+    eval_req = EvalRequest(policy="", paths=suites, episodes=req.episodes, max_steps=req.max_steps,
                            motion=cfg.env.motion, device=cfg.ppo.device, out=str(run_dir / "eval"), render=1)
     check_eval_request(eval_req)  # before training, not after
     print(f"[quickstart] training configs/quick.yaml on the '{cfg.env.motion}' motion model in {run_dir}")
@@ -261,7 +274,8 @@ def quickstart(req: QuickstartRequest) -> int:
     print(f"[quickstart] trained {result.iterations} iterations ({result.env_steps} env steps) in "
           f"{result.elapsed_s:.0f} s; TensorBoard: tensorboard --logdir {run_dir}")
     eval_req.policy = str(result.final_checkpoint)
-    print(f"[quickstart] evaluating on {', '.join(QUICK_EVAL_PATHS)}: latentrl {' '.join(eval_req.argv())}")
+    print(f"[quickstart] evaluating on {', '.join(suites)} (the suites using only the trained prompts "
+          f"{', '.join(cfg.env.texts)}): latentrl {' '.join(eval_req.argv())}")
     code = evaluate(eval_req)
     print(f"[quickstart] done: report {run_dir / 'eval' / 'report.md'}, plot {run_dir / 'eval' / 'paths.png'}")
     return code

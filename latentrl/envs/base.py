@@ -67,6 +67,12 @@ def _autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
     return mode
 
 
+DIVERGENCE_DEPTH_M = 1.0
+"""A joint this far under the floor means the motion diverged (feet dip a few centimetres at most)."""
+DIVERGENCE_SIGMAS = 1000.0
+"""A history feature this many of the data's standard deviations from its mean means the motion diverged."""
+
+
 class LatentMotionVectorEnv(VectorEnv):
     """Batched envs whose action is the initial DDIM noise of a frozen motion model.
 
@@ -96,7 +102,10 @@ class LatentMotionVectorEnv(VectorEnv):
         terminate_distance: terminate when the pelvis is farther (xy) than this from the goal, metres
             (DART's ``terminate_threshold``, 100).
         divergence_limit: terminate envs whose motion has a non-finite value or a joint
-            coordinate beyond this, metres; their state is frozen, their reward 0.
+            coordinate beyond this, metres; their state is frozen, their reward 0. An env also
+            diverges when a joint sinks more than :data:`DIVERGENCE_DEPTH_M` under the floor or a
+            history feature leaves the motion data's range by more than :data:`DIVERGENCE_SIGMAS`
+            standard deviations (the model's normalizer).
         random_initial_steps: start the episode counters of a full reset uniformly in
             ``[0, max_episode_steps)`` so truncations do not synchronize.
         reward_weights: per-term weight overrides (names in :data:`latentrl.rewards.TERM_NAMES`).
@@ -501,6 +510,9 @@ class LatentMotionVectorEnv(VectorEnv):
     def _diverged(self, joints_world: torch.Tensor, new_state: RolloutState) -> torch.Tensor:
         """(N,) envs whose new frames or state are non-finite or beyond ``divergence_limit``."""
         ok = (joints_world.abs() <= self.divergence_limit).flatten(1).all(1)  # False for NaN as well
+        ok &= (joints_world[..., 2] >= self.floor_height - DIVERGENCE_DEPTH_M).flatten(1).all(1)  # metres underground
+        scaled = (new_state.history - self.motion.mean) / self.motion.std  # the motion data's range, per feature
+        ok &= (scaled.abs() <= DIVERGENCE_SIGMAS).flatten(1).all(1)
         for value in (new_state.history, new_state.world.rotation, new_state.world.translation):
             ok &= torch.isfinite(value).flatten(1).all(1)
         return ~ok

@@ -16,17 +16,21 @@ Configs written before the sections existed named the task arguments at the top
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from latentrl.config import apply_aliases, require
-from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
+from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
 from latentrl.errors import ConfigError, closest
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import TERM_NAMES, RewardConfig
+
+MAX_NUM_ENVS = 1 << 20
+"""Parallel envs, at most (each holds a motion-model history on the device)."""
 
 
 @dataclass
@@ -128,6 +132,9 @@ class EnvConfig:
     def validate(self) -> None:
         require(self.task in TASKS, "task", f"expected one of {tuple(TASKS)}, got '{self.task}'")
         require(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
+        require(self.num_envs <= MAX_NUM_ENVS, "num_envs", f"must be <= {MAX_NUM_ENVS}, got {self.num_envs}")
+        require(math.isfinite(self.guidance_scale) and abs(self.guidance_scale) <= MAX_GUIDANCE, "guidance_scale",
+                f"must be a finite number in [-{MAX_GUIDANCE:g}, {MAX_GUIDANCE:g}], got {self.guidance_scale}")
         require(len(self.texts) >= 1, "texts", "give at least one prompt")
         for problem in map(prompt_problem, self.texts):
             require(problem is None, "texts", str(problem))

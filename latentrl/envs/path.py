@@ -27,6 +27,10 @@ MAX_WAYPOINTS = 10_000
 """Most waypoints per path (DART's suites have 2-20); every env keeps a padded (W, 3) copy of its path."""
 MAX_FILE_BYTES = 64 << 20
 """Largest path file read (64 MiB, about a million waypoints of JSON)."""
+MAX_PATHS = 1_000
+"""Most paths per file (DART's suites have 1-5); each path is its own evaluated rollout."""
+MAX_COORD_M = 10_000.0
+"""Waypoint coordinates beyond +/- this many metres are refused (episodes end 100 m from the goal anyway)."""
 
 
 @dataclass(frozen=True)
@@ -52,6 +56,11 @@ def load_paths(file: str | Path) -> list[WaypointPath]:
         raise DataError(f"{file}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
     except UnicodeDecodeError:
         raise DataError(f"{file}: not a UTF-8 text file") from None
+    except RecursionError:
+        raise DataError(f"{file}: JSON nested too deeply (a path file is a list of objects holding "
+                        f"lists of [x, y, z])") from None
+    except ValueError as exc:  # e.g. an integer literal longer than Python's digit limit
+        raise DataError(f"{file}: invalid JSON: {str(exc)[:120]}") from None
     return parse_paths(data, str(file))
 
 
@@ -64,6 +73,9 @@ def parse_paths(data: Any, source: str = "paths") -> list[WaypointPath]:
         )
     if not data:
         raise DataError(f"{source}: holds no paths")
+    if len(data) > MAX_PATHS:
+        raise DataError(f"{source}: {len(data)} paths, more than the {MAX_PATHS} a path file may hold; "
+                        "split it into several files")
     return [_parse_path(item, f"{source}: path {i}") for i, item in enumerate(data)]
 
 
@@ -91,11 +103,11 @@ def _parse_path(item: Any, where: str) -> WaypointPath:
     waypoints = []
     for j, (point, text) in enumerate(zip(points, texts)):
         ok = isinstance(point, list) and len(point) == 3
-        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in point)
+        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and -MAX_COORD_M <= v <= MAX_COORD_M
+                        for v in point)  # compares ints exactly (no float overflow) and refuses nan/inf
         if not ok:
-            raise DataError(
-                f"{where}, waypoint {j}: field 'goal_location' must be [x, y, z] finite numbers, got {point!r:.80}"
-            )
+            raise DataError(f"{where}, waypoint {j}: field 'goal_location' must be [x, y, z] finite numbers within "
+                            f"+/-{MAX_COORD_M:g} m, got {str(point)[:80]}")
         if not isinstance(text, str) or not text.strip():
             raise DataError(f"{where}, waypoint {j}: field 'goal_text' must be a non-empty string, got {text!r:.80}")
         if prompt_problem(text) is not None:

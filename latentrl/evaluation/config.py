@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from latentrl.config import require
+from latentrl.config import require, require_seed
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, SUCCESS_RADIUS_M
 from latentrl.motion.skeleton import FPS
 
@@ -38,6 +38,22 @@ class EvalConfig:
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
 
 
+MAX_EPISODES = 1 << 16
+"""Episodes per path, at most (they run in parallel, one env each)."""
+MAX_EVAL_STEPS = 100_000
+"""Step budget per episode, at most."""
+
+
+def physical_memory() -> int | None:
+    """Bytes of RAM of this machine, or None where the OS does not say."""
+    import os
+
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 @dataclass
 class EvalSettings:
     """How an evaluation runs; stored in ``report.json`` under ``settings``."""
@@ -62,7 +78,22 @@ class EvalSettings:
     def validate(self) -> None:
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
+        require(self.episodes <= MAX_EPISODES, "episodes",
+                f"must be <= {MAX_EPISODES} (they run as one batch of envs), got {self.episodes}")
+        require(self.max_steps <= MAX_EVAL_STEPS, "max_steps", f"must be <= {MAX_EVAL_STEPS}, got {self.max_steps}")
+        require_seed(self.seed)
+        need = self.memory_bytes()
+        total = physical_memory()
+        require(total is None or need <= total // 2, "episodes",
+                f"{self.episodes} episodes x {self.max_steps} steps keep about {need / 2**30:.1f} GiB of motion; "
+                f"this machine has {(total or 0) / 2**30:.1f} GiB; lower --episodes or --max-steps")
         require(self.success_threshold > 0, "success_threshold", f"must be > 0, got {self.success_threshold}")
+
+    def memory_bytes(self) -> int:
+        """Rough memory the per-episode records need: joints and features of every frame (float32)."""
+        from latentrl.evaluation.results import frames_after
+
+        return self.episodes * frames_after(self.max_steps) * (22 * 3 + 276) * 4
 
     @property
     def budget_s(self) -> float:

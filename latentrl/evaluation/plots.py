@@ -36,7 +36,10 @@ def _draw_path(ax, result: PathResult) -> None:
         ax.annotate(",".join(labels[(x, y)]), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7, zorder=4)
     n = len(result.episodes)
     wins = sum(ep.success for ep in result.episodes)
-    ax.set_title(f"{result.suite} / path {result.index}: {wins}/{n} reached", fontsize=8)
+    from latentrl.evaluation.results import prompts_label
+
+    ax.set_title(f"{result.suite} / path {result.index} ({prompts_label(result.path.texts)}): {wins}/{n} reached",
+                 fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
     ax.tick_params(labelsize=6)
     ax.grid(alpha=0.3)

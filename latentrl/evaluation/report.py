@@ -211,7 +211,38 @@ def load_report(path: str | Path) -> dict[str, Any]:
     for key in ("suites", "overall", "settings"):
         if key not in report:
             raise DataError(f"{path}: report lacks field '{key}'")
+    _check_report(report, path)
     return report
+
+
+def _check_report(report: dict, path: Path) -> None:
+    """The types ``compare`` and ``report.md`` rely on; one line naming the field."""
+
+    def need(ok: bool, field: str, expected: str, got: Any) -> None:
+        if not ok:
+            shown = type(got).__name__ if isinstance(got, (dict, list)) else repr(got)[:60]
+            raise DataError(f"{path}: field '{field}' must be {expected}, got {shown}")
+
+    def metrics(block: Any, field: str) -> None:
+        need(isinstance(block, dict), field, "an object", block)
+        found = block.get("metrics")
+        need(found is None or isinstance(found, dict), f"{field}.metrics", "an object of metrics or null", found)
+        for key, m in (found or {}).items():
+            need(isinstance(m, dict), f"{field}.metrics.{key}", "an object {mean, ci95}", m)
+            for part in ("mean", "ci95"):
+                v = m.get(part)
+                need(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
+                     f"{field}.metrics.{key}.{part}", "a number or null", v)
+
+    need(isinstance(report["settings"], dict), "settings", "an object", report["settings"])
+    need(isinstance(report["suites"], dict), "suites", "an object of suites", report["suites"])
+    metrics(report["overall"], "overall")
+    for name, suite in report["suites"].items():
+        metrics(suite, f"suites.{name}")
+        paths = suite.get("paths", [])
+        need(isinstance(paths, list), f"suites.{name}.paths", "a list", paths)
+        for i, p in enumerate(paths):
+            metrics(p, f"suites.{name}.paths.{i}")
 
 
 # --------------------------------------------------------------------------- report.md
@@ -245,15 +276,18 @@ def _dart_row(name: str, keys: Sequence[str]) -> str | None:
 def results_table(report: dict[str, Any]) -> list[str]:
     """One row per path, one DART-aggregated row per suite (+ DART's published row), then ``overall``."""
     keys = list(METRICS)
-    lines = _header(keys, ["suite", "path"])
+    from latentrl.evaluation.results import prompts_label
+
+    lines = _header(keys, ["suite", "path (prompts)"])
     for name, suite in report["suites"].items():
         for p in suite["paths"]:
-            lines.append(_row([name, str(p["index"])], p["metrics"], keys))
-        lines.append(_row([f"**{name}**", "all"], suite["metrics"], keys))
+            lines.append(_row([name, f"{p['index']} ({prompts_label(p.get('texts', []))})"], p.get("metrics") or {},
+                              keys))
+        lines.append(_row([f"**{name}**", "all"], suite.get("metrics") or {}, keys))
         dart = _dart_row(name, keys)
         if dart:
             lines.append(dart)
-    lines.append(_row(["**overall**", "all"], report["overall"]["metrics"], keys))
+    lines.append(_row(["**overall**", "all"], report["overall"].get("metrics") or {}, keys))
     return lines
 
 
@@ -278,6 +312,11 @@ def _speed_lines(report: dict[str, Any]) -> list[str]:
     lines.append("")
     lines.append(f"Hardware: {hw.get('gpu') or hw.get('cpu', '?')} ({hw.get('cpu_count', '?')} CPU cores, "
                  f"{hw.get('torch_threads', '?')} torch threads, torch {hw.get('torch', '?')}).")
+    lines.append("")
+    lines.append("A quick sample, not a benchmark: the median of a few steps after one warm-up step, taken while "
+                 "this evaluation ran, so other load on the machine shows up in it (runs on a shared 2-core CPU "
+                 "have differed tenfold). For figures to compare, run `latentrl bench rollout` or "
+                 "`latentrl bench env` on an idle machine.")
     return lines
 
 
@@ -324,7 +363,7 @@ def report_markdown(report: dict[str, Any]) -> str:
         "",
         *_waypoint_table(report),
         "",
-        "## Generation speed (policy + motion model)",
+        "## Generation speed (policy + motion model; a quick sample, see the note below the table)",
         "",
         *_speed_lines(report),
         "",
@@ -349,7 +388,7 @@ def compare_markdown(reports: Sequence[tuple[str, dict[str, Any]]], keys: Sequen
         for label, report in reports:
             block = report["overall"] if name == "overall" else report["suites"].get(name)
             if block is not None:
-                lines.append(_row([name, label], block["metrics"], keys))
+                lines.append(_row([name, label], block.get("metrics") or {}, keys))
     notes = _setting_notes(reports)
     return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
 

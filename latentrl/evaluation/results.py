@@ -61,3 +61,8 @@ class SuiteResult:
     """File stem, e.g. ``dart_walk_long``."""
     file: str
     paths: list[PathResult]
+
+
+def prompts_label(texts) -> str:
+    """A path's prompts in order of first use, e.g. ``walk, run`` (what report.md, paths.png and the summary show)."""
+    return ", ".join(dict.fromkeys(str(t) for t in texts))

@@ -18,10 +18,12 @@ containers and tensors only, so ``torch.load(weights_only=True)`` reads it.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from dataclasses import asdict, fields
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -60,6 +62,12 @@ def file_sha256(path: str | Path) -> str:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
+
+
+def identity_sha256(parts: dict[str, str | os.PathLike | None]) -> str:
+    """sha256 naming a model made of several files: over each present part's name and file sha256."""
+    lines = [f"{name}:{file_sha256(p)}" for name, p in sorted(parts.items()) if p is not None and Path(p).is_file()]
+    return hashlib.sha256("\n".join(lines).encode()).hexdigest()
 
 
 def load_motion_model(
@@ -105,7 +113,12 @@ def load_motion_model(
     if isinstance(data, dict) and data.get("format") == FORMAT:
         model = _from_latentrl(data, path)
     elif isinstance(data, dict) and ("model_state_dict" in data or (path.parent / "args.yaml").is_file()):
-        model = _from_dart(path, data, vae, mean_std, text_table)
+        try:
+            model = _from_dart(path, data, vae, mean_std, text_table)
+        except (ValueError, TypeError, KeyError, IndexError, AttributeError, NotImplementedError, RuntimeError,
+                OverflowError) as exc:  # a foreign layout: whatever its files hold, the user gets one line
+            raise CheckpointError(f"{path}: cannot build a motion model from this DART checkpoint and the files its "
+                                  f"args.yaml names: {type(exc).__name__}: {str(exc)[:160]}") from None
     else:
         raise CheckpointError(
             f"{path}: unknown motion-model format (neither latentrl's '{FORMAT}' nor a DART "
@@ -113,10 +126,29 @@ def load_motion_model(
         )
     if seed_history is not None:
         attach_seed_history(model, seed_history)
+        if not torch.is_tensor(seed_history) and not isinstance(seed_history, np.ndarray):  # part of its identity
+            parts = f"{model.info.get('sha256')}\nseed_history:{file_sha256(seed_history)}"
+            model.info["sha256"] = hashlib.sha256(parts.encode()).hexdigest()
     return model.to(device)
 
 
 # --------------------------------------------------------------------------- helpers
+def _float_tensor(value: Any, what: str) -> torch.Tensor:
+    """A real tensor from a tensor or array of numbers; one-line error for strings, objects, bools, complex."""
+    if torch.is_tensor(value):
+        if value.is_complex() or value.dtype == torch.bool:
+            raise CheckpointError(f"{what}: expected real numbers, got {value.dtype}")
+        return value if value.is_floating_point() else value.float()
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError) as exc:  # ragged lists
+        raise CheckpointError(f"{what}: expected an array of real numbers ({str(exc)[:80]})") from None
+    if arr.dtype.kind not in "iuf":
+        raise CheckpointError(f"{what}: expected real numbers, got {arr.dtype}")
+    return torch.as_tensor(arr if arr.dtype.kind == "f" else arr.astype(np.float32))
+
+
+
 def _check_finite(state: dict, path: Path) -> None:
     for key, value in state.items():
         if torch.is_tensor(value) and value.is_floating_point() and not torch.isfinite(value).all():
@@ -145,15 +177,46 @@ def _load_state(module: torch.nn.Module, state: dict, path: Path, ignore: tuple[
     module.load_state_dict({k: v.to(expected[k].dtype) for k, v in given.items()}, strict=not ignore)
 
 
+MAX_ARCH_INT = 16_384
+"""Integer architecture values (widths, layers, heads, steps) a model file may name, at most."""
+
+
+def _checked(name: str, value: Any, default: Any, source: str) -> Any:
+    """``value`` if it has the type of the field's ``default`` (ints in [1, MAX_ARCH_INT]); else one-line error."""
+    def bad(expected: str) -> CheckpointError:
+        return CheckpointError(f"{source}: field '{name}': expected {expected}, got {str(value)[:60]!r}")
+
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise bad("true or false")
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_ARCH_INT:
+            raise bad(f"an integer in [1, {MAX_ARCH_INT}]")
+    elif isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise bad("a finite number")
+    elif isinstance(default, str):
+        if not isinstance(value, str):
+            raise bad("a string")
+    elif isinstance(default, tuple):
+        if not isinstance(value, (list, tuple)) or len(value) != len(default):
+            raise bad(f"a list of {len(default)} values")
+        return tuple(_checked(name, v, d, source) for v, d in zip(value, default))
+    return value
+
+
 def _config(cls, values: dict, source: str):
-    names = {f.name for f in fields(cls)}
+    if not isinstance(values, dict):
+        raise CheckpointError(f"{source}: expected a mapping of {cls.__name__} values, got {type(values).__name__}")
+    defaults = {f.name: getattr(cls(), f.name) for f in fields(cls)}
     kwargs = {}
     for key, value in values.items():
-        if key in names:
-            kwargs[key] = tuple(value) if isinstance(value, list) else value
+        if key in defaults:
+            default = defaults[key]
+            kwargs[key] = value if default is None else _checked(key, value, default, source)
     try:
         return cls(**kwargs)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise CheckpointError(f"{source}: bad {cls.__name__} values: {exc}") from None
 
 
@@ -180,6 +243,11 @@ def _load_seed(seed) -> torch.Tensor:
         arr = arr[None]
     if arr.shape[1:] != (HISTORY_LENGTH, FEATURE_DIM):
         raise CheckpointError(f"seed history must be (K, {HISTORY_LENGTH}, {FEATURE_DIM}), got {tuple(arr.shape)}")
+    if not torch.isfinite(arr).all():  # a NaN seed makes every rollout NaN
+        bad = int((~torch.isfinite(arr)).flatten(1).any(1).sum())
+        where = "" if torch.is_tensor(seed) or isinstance(seed, np.ndarray) else f"{seed}: "
+        raise CheckpointError(f"{where}seed history holds NaN or inf in {bad} of {len(arr)} seeds; "
+                              "expected finite (K, 2, 276) canonical features")
     return arr
 
 
@@ -272,15 +340,24 @@ def _from_dart(path: Path, data: dict, vae_override, mean_std_override, text_tab
         table = load_pickle(table_path, what="text-embedding table")
         if not isinstance(table, dict):
             raise CheckpointError(f"{table_path}: expected a dict prompt -> vector")
+        for prompt, vector in table.items():
+            if not isinstance(prompt, str):
+                raise CheckpointError(f"{table_path}: expected string prompts, got {prompt!r:.60}")
+            vec = _float_tensor(vector, f"{table_path}: prompt {prompt!r:.60}")
+            if vec.dim() not in (1, 2) or not torch.isfinite(vec).all():
+                raise CheckpointError(f"{table_path}: prompt {prompt!r:.60}: expected a finite vector, "
+                                      f"got shape {tuple(vec.shape)}")
         text_encoder = TableTextEncoder(
             table, name="dart-clip-table", fallback_hint="DART models use CLIP, which cannot run offline here"
         )
     diffusion_cfg = _config(DiffusionConfig, den_args.get("diffusion_args", {}), str(args_path))
     diffusion_cfg.respacing = ""  # DART's env samples with 'ddim10' = all 10 steps
+    parts = {"denoiser": path, "vae": vae_path, "mean_std": ms_path, "text_table": table_path,
+             "seed_history": root / "seed_history.npz"}
     info = {
         "format": "dart",
         "source": str(path),
-        "sha256": file_sha256(path),
+        "sha256": identity_sha256(parts),  # every file the model is made of, not only the denoiser
         "vae": str(vae_path),
         "mean_std": str(ms_path),
     }
@@ -309,14 +386,17 @@ def load_normalizer(path: str | Path) -> Normalizer:
     stats = load_pickle(path, what="mean/std file")
     try:
         if isinstance(stats, (tuple, list)) and len(stats) == 2:
-            return Normalizer(
-                torch.as_tensor(np.asarray(stats[0]) if not torch.is_tensor(stats[0]) else stats[0]),
-                torch.as_tensor(np.asarray(stats[1]) if not torch.is_tensor(stats[1]) else stats[1]),
-            )
-        if isinstance(stats, dict):
-            return Normalizer.from_legacy_dict(stats)
-    except ValueError as exc:
-        raise CheckpointError(f"{path}: {exc}") from None
+            norm = Normalizer(*(_float_tensor(v, f"{path}: {k}") for k, v in zip(("mean", "std"), stats)))
+        elif isinstance(stats, dict):
+            norm = Normalizer.from_legacy_dict(stats)
+        else:
+            norm = None
+    except (ValueError, TypeError, KeyError, RuntimeError) as exc:
+        raise CheckpointError(f"{path}: {str(exc)[:200]}") from None
+    if norm is not None:
+        if not (torch.isfinite(norm.mean).all() and torch.isfinite(norm.std).all() and (norm.std > 0).all()):
+            raise CheckpointError(f"{path}: mean/std must be finite with std > 0")
+        return norm
     raise CheckpointError(f"{path}: expected a (mean, std) tuple or a legacy dict, got {type(stats).__name__}")
 
 

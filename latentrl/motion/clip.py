@@ -152,7 +152,8 @@ class MotionClip:
         return data
 
     def save(self, path: str | Path) -> Path:
-        """Write the clip as a motion ``.npz``, atomically."""
+        """Write the clip as a motion ``.npz``, atomically (refuses what :func:`check_motion` refuses)."""
+        check_motion(self.joints, self.fps, str(path))
         buf = io.BytesIO()
         np.savez_compressed(buf, **self.arrays())
         return atomic_write_bytes(path, buf.getvalue())
@@ -180,6 +181,40 @@ class MotionClip:
             raise DataError(f"{path}: {exc}") from None
 
 
+MAX_FPS = 1000.0
+"""Frame rates outside (0, MAX_FPS] are refused."""
+MAX_COORD_M = 10_000.0
+"""Joint coordinates beyond +/- this many metres are no human motion (a diverged rollout or a broken file)."""
+
+
+def check_motion(joints, fps, source: str) -> tuple[np.ndarray, float]:
+    """The one check of a motion's arrays; returns (float64 joints, fps).
+
+    Joints: real floating point (T>0, 22, 3), finite and within +/- :data:`MAX_COORD_M`;
+    ``fps``: one finite number in (0, :data:`MAX_FPS`].
+    """
+    joints = np.asarray(joints)
+    if joints.dtype.kind != "f":  # integers, complex, strings, objects: not positions in metres
+        raise DataError(f"{source}: field 'joints' must hold real floating-point numbers, got dtype {joints.dtype}")
+    if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3) or len(joints) == 0:
+        raise DataError(f"{source}: field 'joints' must be (T, {NUM_JOINTS}, 3) with T > 0, got {joints.shape}")
+    joints = joints.astype(np.float64)
+    if not np.isfinite(joints).all():
+        bad = int((~np.isfinite(joints)).any(axis=(1, 2)).sum())
+        raise DataError(f"{source}: field 'joints' holds NaN or inf in {bad} of {len(joints)} frames")
+    peak = float(np.abs(joints).max())
+    if peak > MAX_COORD_M:
+        raise DataError(f"{source}: field 'joints' reaches {peak:.3g} m, beyond the +/-{MAX_COORD_M:g} m "
+                        f"a motion may span")
+    fps_arr = np.asarray(fps)
+    if fps_arr.shape != () or fps_arr.dtype.kind not in "iuf":
+        raise DataError(f"{source}: field 'fps' must be one real number, got {fps_arr.dtype} of shape {fps_arr.shape}")
+    fps = float(fps_arr)
+    if not 0 < fps <= MAX_FPS:  # also refuses nan
+        raise DataError(f"{source}: field 'fps' must lie in (0, {MAX_FPS:g}], got {fps:g}")
+    return joints, fps
+
+
 def read_motion_arrays(path: str | Path) -> dict[str, np.ndarray]:
     """The raw arrays of a motion ``.npz``; checks ``joints`` and fills ``fps`` (30) for old files."""
     path = Path(path)
@@ -196,6 +231,8 @@ def read_motion_arrays(path: str | Path) -> dict[str, np.ndarray]:
             f"{path}: field 'joints' must be (T, {NUM_JOINTS}, 3), got {None if joints is None else joints.shape}"
         )
     data.setdefault("fps", np.float32(FPS))
+    joints, fps = check_motion(joints, data["fps"], str(path))
+    data["joints"], data["fps"] = joints.astype(np.float32), np.float32(fps)
     return data
 
 

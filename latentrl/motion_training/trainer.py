@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from latentrl.config import require, to_dict, to_yaml
+from latentrl.config import MAX_THREADS, require, require_seed, to_dict, to_yaml
 from latentrl.datasets.locomotion import LocomotionConfig
 from latentrl.errors import CheckpointError, ConfigError, NonFiniteError
 from latentrl.motion_training.losses import (
@@ -90,7 +90,9 @@ class MotionTrainConfig:
     """Steps between trainer checkpoints (0 = only at stage ends)."""
 
     def validate(self) -> None:
-        require(self.threads >= 0, "threads", f"must be >= 0 (0: torch's default), got {self.threads}")
+        require(0 <= self.threads <= MAX_THREADS, "threads",
+                f"must lie in [0, {MAX_THREADS}] (0: torch's default), got {self.threads}")
+        require_seed(self.seed)
         require(self.log_every > 0, "log_every", f"must be > 0, got {self.log_every}")
         require(self.checkpoint_every >= 0, "checkpoint_every", f"must be >= 0, got {self.checkpoint_every}")
         hashed = self.text_encoder.removeprefix("hashed-bow-")

@@ -9,6 +9,7 @@ A checkpoint is a dict of tensors and plain containers::
     policy_spec, policy      ActorCritic.spec() and state_dict() (normalizer statistics included)
     optimizer                Adam state_dict
     rng                      python, numpy, torch (+cuda) and, when the env has get_rng_state, env
+    policy_sha256            sha256 of the policy weights (:func:`weights_sha256`), verified on load
     config, config_hash      the resolved run config (plain dict) and sha256 of its canonical JSON
     motion                   {"path", "sha256"} of the motion model the env used, or None
     extra                    trainer-specific plain data (SB3 counters)
@@ -159,9 +160,70 @@ def make_checkpoint(*, trainer: str, iteration: int, env_steps: int, elapsed_s: 
         "format": FORMAT, "version": __version__, "trainer": trainer,
         "iteration": int(iteration), "env_steps": int(env_steps), "elapsed_s": float(elapsed_s),
         "policy_spec": policy.spec(), "policy": policy.state_dict(), "optimizer": optimizer.state_dict(),
+        "policy_sha256": weights_sha256(policy.state_dict()),
         "rng": capture_rng(env), "config": plain_config(config), "config_hash": config_hash(config),
         "motion": dict(motion) if motion else None, "extra": dict(extra or {}),
     }
+
+
+def weights_sha256(weights: Mapping[str, Any]) -> str:
+    """sha256 over a state_dict's names, dtypes, shapes and bytes (in name order); device independent."""
+    h = hashlib.sha256()
+    for name in sorted(weights):
+        t = weights[name]
+        if not isinstance(t, torch.Tensor):
+            h.update(f"{name}={t!r};".encode())
+            continue
+        t = t.detach().to("cpu").contiguous()
+        h.update(f"{name}:{t.dtype}:{tuple(t.shape)};".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+    return h.hexdigest()
+
+
+def check_state(state: dict, path: Path) -> None:
+    """The structure every reader relies on, checked once: one ``CheckpointError`` line naming the field."""
+    from latentrl.config import from_dict
+    from latentrl.errors import LatentRLError
+    from latentrl.ppo.config import PolicyConfig
+
+    def bad(field: str, expected: str, got: Any) -> CheckpointError:
+        shown = repr(got) if not isinstance(got, (dict, list)) else type(got).__name__
+        return CheckpointError(f"{path}: field '{field}': expected {expected}, got {shown[:80]}")
+
+    spec = state.get("policy_spec")
+    if not isinstance(spec, dict):
+        raise bad("policy_spec", "a dict (ActorCritic.spec())", spec)
+    for key in ("obs_dim", "action_dim"):
+        value = spec.get(key)
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_SPEC_DIM:
+            raise bad(f"policy_spec.{key}", f"an integer in [1, {MAX_SPEC_DIM}]", value)
+    if not isinstance(spec.get("config"), dict):
+        raise bad("policy_spec.config", "a dict of policy settings", spec.get("config"))
+    if spec.get("layout") is not None and not isinstance(spec.get("layout"), dict):
+        raise bad("policy_spec.layout", "a dict or None", spec.get("layout"))
+    try:  # sizes are checked here, before any layer is allocated
+        from_dict(PolicyConfig, spec["config"], f"{path}: policy_spec.config")
+    except LatentRLError as exc:
+        raise CheckpointError(str(exc)) from None
+    weights = state.get("policy")
+    if not isinstance(weights, dict) or not all(isinstance(v, torch.Tensor) for v in weights.values()):
+        raise bad("policy", "a dict of tensors (a state_dict)", weights)
+    if state.get("motion") is not None and not isinstance(state.get("motion"), dict):
+        raise bad("motion", "a dict {path, sha256} or None", state.get("motion"))
+    for key in ("iteration", "env_steps"):
+        value = state.get(key, 0)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise bad(key, "an integer >= 0", value)
+    if not isinstance(state.get("config", {}), dict):
+        raise bad("config", "a dict", state.get("config"))
+    recorded = state.get("policy_sha256")
+    if recorded is not None and recorded != weights_sha256(weights):  # older checkpoints carry no hash
+        raise CheckpointError(f"{path}: policy weights do not match their recorded sha256 {str(recorded)[:12]} "
+                              f"(the file was changed or damaged after it was written)")
+
+
+MAX_SPEC_DIM = 1_000_000
+"""Observation and action sizes a policy_spec may name, at most."""
 
 
 def iteration_path(run_dir: str | Path, iteration: int) -> Path:
@@ -206,6 +268,7 @@ def read_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         found = state.get("format") if isinstance(state, dict) else type(state).__name__
         raise CheckpointError(f"{path}: not a latentrl PPO checkpoint (format {found!r}, expected {FORMAT!r})")
+    check_state(state, Path(path))
     return state
 
 

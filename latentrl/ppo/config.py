@@ -20,9 +20,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from latentrl.config import require
+from latentrl.config import require, require_seed
 
 ARCHITECTURES = ("dart", "mlp")
+
+
+MAX_WIDTH = 16_384
+"""Layer widths of the policy, at most (a 16k x 16k layer is already 1 GiB of weights)."""
+MAX_BLOCKS = 64
+"""Residual blocks or MLP layers, at most."""
 
 
 @dataclass
@@ -55,9 +61,10 @@ class PolicyConfig:
     def validate(self) -> None:
         require(self.architecture in ARCHITECTURES, "architecture",
                 f"expected one of {ARCHITECTURES}, got '{self.architecture}'")
-        require(self.latent_dim > 0, "latent_dim", f"must be > 0, got {self.latent_dim}")
-        require(self.n_blocks >= 0, "n_blocks", f"must be >= 0, got {self.n_blocks}")
-        require(all(w > 0 for w in self.mlp_hidden), "mlp_hidden", f"widths must be > 0, got {self.mlp_hidden}")
+        require(0 < self.latent_dim <= MAX_WIDTH, "latent_dim", f"must lie in [1, {MAX_WIDTH}], got {self.latent_dim}")
+        require(0 <= self.n_blocks <= MAX_BLOCKS, "n_blocks", f"must lie in [0, {MAX_BLOCKS}], got {self.n_blocks}")
+        require(all(0 < w <= MAX_WIDTH for w in self.mlp_hidden) and len(self.mlp_hidden) <= MAX_BLOCKS,
+                "mlp_hidden", f"at most {MAX_BLOCKS} widths, each in [1, {MAX_WIDTH}], got {self.mlp_hidden}")
         require(self.action_scale > 0, "action_scale", f"must be > 0, got {self.action_scale}")
         low, high = self.log_std_bounds
         require(low <= high, "log_std_bounds",
@@ -161,23 +168,42 @@ class PPOConfig:
         require(self.checkpoint_every >= 0, "checkpoint_every", f"must be >= 0, got {self.checkpoint_every}")
         require(self.keep_checkpoints >= 0, "keep_checkpoints", f"must be >= 0, got {self.keep_checkpoints}")
         require(self.eval_every >= 0, "eval_every", f"must be >= 0, got {self.eval_every}")
+        require(self.num_steps <= MAX_NUM_STEPS, "num_steps", f"must be <= {MAX_NUM_STEPS}, got {self.num_steps}")
+        require_seed(self.seed)
 
     def plan(self, num_envs: int) -> BatchPlan:
         """Batch, minibatch and iteration counts for ``num_envs`` envs; raises ``ConfigError`` if they don't fit."""
         require(num_envs > 0, "num_envs", f"must be > 0, got {num_envs}")
         batch = self.num_steps * num_envs
+        require(batch <= MAX_BATCH, "num_steps", f"the batch num_steps * num_envs = {self.num_steps} * {num_envs} = "
+                f"{batch} exceeds {MAX_BATCH} transitions; lower ppo.num_steps or env.num_envs")
         if self.minibatch_size is not None:
             mb = self.minibatch_size
-            require(batch % mb == 0, "minibatch_size", f"{mb} does not divide the batch num_steps * num_envs = "
-                    f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, mb)}")
+            if batch % mb:  # the hint is computed only on failure (it factors the batch)
+                require(False, "minibatch_size", f"{mb} does not divide the batch num_steps * num_envs = "
+                        f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, mb)}")
         else:
             n = self.num_minibatches
-            require(batch % n == 0, "num_minibatches", f"{n} does not divide the batch num_steps * num_envs = "
-                    f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, n)}")
+            if batch % n:
+                require(False, "num_minibatches", f"{n} does not divide the batch num_steps * num_envs = "
+                        f"{self.num_steps} * {num_envs} = {batch}; try {_nearest_divisor(batch, n)}")
             mb = batch // n
         iterations = -(-self.total_steps // batch)
         return BatchPlan(num_envs, batch, mb, batch // mb, iterations)
 
 
+MAX_NUM_STEPS = 100_000
+"""Rollout steps per env per iteration, at most."""
+MAX_BATCH = 2**26
+"""Transitions per PPO batch (num_steps * num_envs), at most: 64 Mi already needs tens of GB."""
+
+
 def _nearest_divisor(n: int, near: int) -> int:
-    return min((d for d in range(1, n + 1) if n % d == 0), key=lambda d: (abs(d - near), d))
+    """The divisor of ``n`` closest to ``near``, found through the pairs (d, n // d) with d <= sqrt(n)."""
+    divisors = set()
+    d = 1
+    while d * d <= n:
+        if n % d == 0:
+            divisors.update((d, n // d))
+        d += 1
+    return min(divisors, key=lambda x: (abs(x - near), x))

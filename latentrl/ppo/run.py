@@ -25,6 +25,7 @@ from latentrl.ppo.config import PolicyConfig, PPOConfig
 from latentrl.ppo.runner import Evaluator, Runner, TrainResult
 from latentrl.ppo.trainer import NativeTrainer
 from latentrl.preflight import MIB, NewOutput, check_free_space, check_writable
+from latentrl.runlock import RunLock
 from latentrl.safe_io import atomic_write_text
 
 CONFIG_FILE = "config.yaml"
@@ -113,19 +114,31 @@ def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *
     check_writable(run_dir, "run directory")
     runner = make_trainer(env, run_dir, ppo, policy, trainer=trainer, config=config, motion=motion,
                           evaluate=evaluate, layout=layout, progress=progress)
-    if resume:
-        runner.resume(allow_motion_mismatch=allow_motion_mismatch)
-    check_free_space(run_dir, disk_estimate(runner), "run directory")
-    if not distributed.current().is_main:  # under torchrun rank 0 sets up the run directory
-        return runner.train()
-    with NewOutput(run_dir) as output:  # nothing is written before this point
-        run_dir.mkdir(parents=True, exist_ok=True)
+    if not distributed.current().is_main:  # under torchrun rank 0 sets up (and locks) the run directory
         if resume:
-            ckpt.remove_temporaries(run_dir)
-        if not resume or not (run_dir / CONFIG_FILE).is_file() or runner.extended_from is not None:
-            write_config(run_dir, config)  # an extended run's config.yaml holds its new budget
+            runner.resume(allow_motion_mismatch=allow_motion_mismatch)
+        return runner.train()
+    lock = RunLock(run_dir)
+    with NewOutput(run_dir) as output:  # nothing is written before this point
+        try:
+            lock.acquire()  # before reading checkpoints: a live writer makes this fail at once
+        except ConfigError:
+            output.keep()  # the folder belongs to the process holding the lock
+            raise
+        try:
+            if resume:
+                runner.resume(allow_motion_mismatch=allow_motion_mismatch)
+            check_free_space(run_dir, disk_estimate(runner), "run directory")
+            if resume:
+                ckpt.remove_temporaries(run_dir)
+            if not resume or not (run_dir / CONFIG_FILE).is_file() or runner.extended_from is not None:
+                write_config(run_dir, config)  # an extended run's config.yaml holds its new budget
+        except BaseException:
+            lock.release()
+            raise
         output.keep()
-    return runner.train()
+    with lock:
+        return runner.train()
 
 
 def disk_estimate(runner: Any) -> int:
@@ -139,6 +152,10 @@ def disk_estimate(runner: Any) -> int:
     per_file = 3 * weights + MIB
     if runner.name == "sb3":
         per_file *= 2
-    saves = plan.num_iterations // cfg.checkpoint_every if cfg.checkpoint_every else 0
+    remaining = plan.num_iterations - getattr(runner, "iteration", 0)
+    saves = remaining // cfg.checkpoint_every if cfg.checkpoint_every else 0
     kept = min(saves, cfg.keep_checkpoints) if cfg.keep_checkpoints else saves
-    return (kept + 2) * per_file + 16 * MIB
+    # checkpoints already on disk (a resume) are pruned or replaced as the run goes on: their bytes count as free
+    folder = Path(runner.run_dir)
+    on_disk = sum(p.stat().st_size for p in [*ckpt.iteration_checkpoints(folder), folder / ckpt.FINAL] if p.is_file())
+    return max((kept + 2) * per_file - on_disk, per_file) + 16 * MIB

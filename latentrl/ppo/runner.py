@@ -15,7 +15,11 @@ saved after the bad iteration).
 
 from __future__ import annotations
 
+import contextlib
 import random
+import signal
+import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable, Mapping
@@ -212,6 +216,7 @@ class Runner:
         self.last_eval: EvalReport | None = None
         self.times: list[IterationTime] = []
         self.stop_requested = False
+        self.interrupted = False
         self.last_checkpoint: Path | None = None
         self.extended_from: int | None = None
         """The run's former ``ppo.total_steps`` when this resume extends it (``--total-steps``), else None."""
@@ -314,7 +319,8 @@ class Runner:
         start_iteration = self.iteration
         self._start, self._steps_at_start, self._elapsed_at_start = time.perf_counter(), self.env_steps, self.elapsed_s
         try:
-            self.learn()
+            with _sigint_deferred(self):
+                self.learn()
         finally:
             self.monitor.close()
             self.bar.close()
@@ -366,10 +372,46 @@ class Runner:
                 self.bar.write(f"eval iter {k} steps {step}: "
                                + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
             self.stop_requested = self.dist.broadcast_object(self.stop_requested)
-        if cfg.checkpoint_every and k % cfg.checkpoint_every == 0 and not (last or self.stop_requested):
+        due = cfg.checkpoint_every and k % cfg.checkpoint_every == 0
+        if (due or self.interrupted) and not (last or self.stop_requested):
             self.check_ranks_agree()
             self.save(ckpt.iteration_path(self.run_dir, k))
             if self.dist.is_main:
                 ckpt.prune_checkpoints(self.run_dir, cfg.keep_checkpoints, suffixes=self.checkpoint_suffixes)
+        if self.interrupted:  # Ctrl-C: this iteration is saved (final.pt when it was the last); stop here
+            end = last or self.stop_requested
+            saved = self.run_dir / ckpt.FINAL if end else ckpt.iteration_path(self.run_dir, k)
+            if end:
+                self.save(saved)
+            note = (f"interrupted: saved iteration {k} ({step} env steps) to {saved}; "
+                    f"continue with --resume {self.run_dir}")
+            if self.dist.is_main:
+                self.bar.write(note)
+            print(note, file=sys.stderr, flush=True)
+            raise KeyboardInterrupt
         self.monitor.flush()
         self.bar.update(step, fps, rollout)
+
+
+@contextlib.contextmanager
+def _sigint_deferred(runner: Runner):
+    """While training, the first Ctrl-C (SIGINT) asks the runner to save after this iteration and stop.
+
+    A second one stops at once. Only the main thread can install the handler; elsewhere nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        if runner.interrupted:
+            raise KeyboardInterrupt
+        runner.interrupted = True
+        print("\nCtrl-C: saving a checkpoint after this iteration (Ctrl-C again to stop without saving)",
+              file=sys.stderr, flush=True)
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

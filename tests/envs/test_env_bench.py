@@ -23,14 +23,23 @@ def bench_args(tmp_path, **kwargs) -> argparse.Namespace:
 
 
 def test_bench_reports_both_kinds_and_the_ratio(tmp_path):
-    assert bench_env(bench_args(tmp_path, models=["tiny", str(tmp_path / "missing.pt")])) == 0
+    assert bench_env(bench_args(tmp_path)) == 0
     out = json.loads((tmp_path / "env.json").read_text())
     rows = out["models"]["tiny"]["results"]
     assert [r["num_envs"] for r in rows] == [1, 2]
     for row in rows:
         assert row["vector"]["frames_per_s"] == 8 * row["vector"]["env_steps_per_s"]
         assert row["speedup"] == row["vector"]["env_steps_per_s"] / row["loop"]["env_steps_per_s"]
-    assert any("missing.pt" in note for note in out["notes"])
+
+
+def test_bench_refuses_a_missing_model_before_timing_anything(tmp_path):
+    import pytest
+
+    from latentrl.errors import LatentRLError
+
+    with pytest.raises(LatentRLError, match="missing.pt"):
+        bench_env(bench_args(tmp_path, models=["tiny", str(tmp_path / "missing.pt")]))
+    assert not (tmp_path / "env.json").exists()
 
 
 def test_bench_skips_figures_over_budget(tmp_path):

@@ -268,6 +268,26 @@ def test_diverged_env_is_terminated_frozen_and_reset(make_reach, tiny_model, mon
     assert torch.isfinite(env._state.history).all()
 
 
+@pytest.mark.parametrize("how", ["underground", "out-of-data-range"])
+def test_a_body_under_the_floor_or_out_of_the_data_range_diverges(make_reach, tiny_model, monkeypatch, how):
+    env = make_reach(3, max_episode_steps=10)
+    env.reset(seed=0)
+    real = tiny_model.rollout_step
+
+    def sinking(state, text, noise, guidance):  # finite, within 1000 m: only the new checks catch it
+        out = real(state, text, noise, guidance)
+        joints, history = out.joints_world.clone(), out.state.history.clone()
+        if how == "underground":
+            joints[2, ..., 2] -= 5.0
+        else:
+            history[2] = tiny_model.mean + 1e4 * tiny_model.std
+        return out._replace(joints_world=joints, state=out.state._replace(history=history))
+
+    monkeypatch.setattr(tiny_model, "rollout_step", sinking)
+    _, _, terminated, _, infos = env.step(actions(3))
+    assert infos["diverged"].tolist() == [False, False, True] and terminated[2]
+
+
 def test_unknown_text_with_table_only_encoder(tiny_model, monkeypatch, make_reach):
     table = TableTextEncoder({"walk": torch.ones(32)}, name="table")
     monkeypatch.setattr(tiny_model, "text_encoder", table)

@@ -54,7 +54,7 @@ GOOD = {"goal_location": [[0, 1, 0], [1, 2, 0]], "goal_text": ["walk", "run"]}
         ([{**GOOD, "goal_txt": []}], r"path 0: unknown field 'goal_txt' \(did you mean 'goal_text'\?\)"),
         (
             [GOOD, {"goal_location": [[0, 1, 0], [1, 2]], "goal_text": ["a", "b"]}],
-            r"path 1, waypoint 1: field 'goal_location' must be \[x, y, z\] finite numbers, got \[1, 2\]",
+            r"path 1, waypoint 1: field 'goal_location' must be \[x, y, z\] finite numbers within .* m, got \[1, 2\]",
         ),
         ([{"goal_location": [[0, "x", 0]], "goal_text": ["a"]}], r"path 0, waypoint 0: field 'goal_location'"),
         (

@@ -1,6 +1,7 @@
 """``latentrl eval``, ``compare`` and ``motion export-bvh`` end to end on the tiny model and a fresh policy."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -33,7 +34,8 @@ def test_eval_writes_report_plot_motions_and_renders(evaluated):
     assert len(report["motion"]["sha256"]) == 64 and set(report["speed"]) == {"1", "2"}
     assert (evaluated / "paths.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     md = (evaluated / "report.md").read_text()
-    assert "| mini | 0 | 1.00 ± 0.00 |" in md and "| mini | 1 | 0.00 ± 0.00 |" in md
+    assert re.search(r"\| mini \| 0 \([^)]+\) \| 1.00 ± 0.00 \|", md)  # each path row names its prompts
+    assert re.search(r"\| mini \| 1 \([^)]+\) \| 0.00 ± 0.00 \|", md)
     motions = sorted((evaluated / "motions").glob("*.npz"))
     assert [m.name for m in motions] == [f"mini_path{p}_ep00{e}.npz" for p in (0, 1) for e in (0, 1)]
     far = load_motion_npz(motions[2])

@@ -80,7 +80,7 @@ def test_report_files_are_written_and_well_formed(tmp_path):
     text = md.read_text()
     results = text.split("## Results")[1].split("## Per-waypoint")[0]
     rows = [line for line in results.splitlines() if line.startswith("| dart_walk_long |")]
-    assert len(rows) == 2 and rows[0].startswith("| dart_walk_long | 0 | 0.50 ± 0.69 |")  # one row per path
+    assert len(rows) == 2 and rows[0].startswith("| dart_walk_long | 0 (walk, run) | 0.50 ± 0.69 |")  # one row per path
     assert "| **mixed_text** | all |" in text and "| **overall** | all |" in text
     assert "DART paper, Table 4 (walk)" in text and "17.08" in text
     assert "budget time" in text and "| 1 | 800 | 10.0 |" in text

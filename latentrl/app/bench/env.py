@@ -11,7 +11,6 @@ about linearly once the machine is saturated).
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -23,7 +22,6 @@ from gymnasium.vector import AutoresetMode
 from latentrl.app.bench.common import default_devices, official_size_model, write_json
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.envs.single import SingleEnv
-from latentrl.errors import LatentRLError
 from latentrl.motion.rollout import MotionModel
 from latentrl.timing import hardware, mean_time
 
@@ -162,13 +160,8 @@ def bench_env(args: EnvBenchRequest) -> int:
         "notes": [],
     }
     print(f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads)")
-    for name in args.models:
-        try:
-            model = bench_model(name)
-        except LatentRLError as exc:
-            out["notes"].append(f"model '{name}' skipped: {exc}")
-            print(f"skipping model '{name}': {exc}", file=sys.stderr)
-            continue
+    loaded = {name: bench_model(name) for name in args.models}  # a bad name fails before any timing
+    for name, model in loaded.items():
         rows, last = [], {}
         for device in devices:
             model = model.to(device)

@@ -133,12 +133,9 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
         f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads); "
         f"fp32 matmul peak {peak:.1f} GFLOP/s"
     )
-    for name in req.models:
-        try:
-            model = official_size_model() if name == "official" else load_motion_model(name)
-        except LatentRLError as exc:
-            print(f"skipping model '{name}': {exc}", file=sys.stderr)
-            continue
+    # every model loads before any timing starts: a bad name fails at once (exit 2), never after a half run
+    loaded = {name: official_size_model() if name == "official" else load_motion_model(name) for name in req.models}
+    for name, model in loaded.items():
         flops = analytic_flops_per_primitive(model)
         rows = []
         for device in devices:

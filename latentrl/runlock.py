@@ -1,0 +1,60 @@
+"""One writer per run directory: an exclusive OS file lock on ``<run_dir>/.lock``.
+
+``latentrl train`` and ``motion train`` hold the lock from before their first write until they
+exit, so two processes never interleave checkpoints in one folder. The kernel drops the lock when
+its holder dies (``SIGKILL`` included), so a stale ``.lock`` file never blocks a later resume. The
+file keeps the holder's PID, which the refusal names. Where ``fcntl`` does not exist (Windows) no
+lock is taken.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from types import TracebackType
+
+from latentrl.errors import ConfigError
+
+LOCK_FILE = ".lock"
+
+
+class RunLock:
+    """``with RunLock(run_dir): ...`` holds an exclusive, non-blocking lock; a second holder gets ``ConfigError``."""
+
+    def __init__(self, run_dir: str | Path):
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / LOCK_FILE
+        self._fd: int | None = None
+
+    def acquire(self) -> RunLock:
+        """Take the lock (a no-op while this object holds it); ``ConfigError`` naming the holder if another does."""
+        if self._fd is not None:
+            return self
+        try:
+            import fcntl
+        except ImportError:  # no OS lock here; nothing to hold
+            return self
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.read(fd, 64).decode("ascii", "replace").strip() or "unknown"
+            os.close(fd)
+            raise ConfigError(f"run directory {self.run_dir} is in use by another latentrl process (PID {holder}); "
+                              "wait for it to finish or stop it, then --resume") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # closing drops the flock; the file stays (unlinking would race a waiting opener)
+            self._fd = None
+
+    def __enter__(self) -> RunLock:
+        return self.acquire()
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+        self.release()
