@@ -80,8 +80,10 @@ def _checked(arr: torch.Tensor, path: Path) -> torch.Tensor:
     if arr.dim() != 3 or tuple(arr.shape[1:]) != (HISTORY_LENGTH, FEATURE_DIM) or arr.shape[0] < 1:
         raise CheckpointError(f"{path}: seed history must be (K, {HISTORY_LENGTH}, {FEATURE_DIM}), "
                               f"got {tuple(arr.shape)}")
-    if not bool(torch.isfinite(arr).all()):
-        raise CheckpointError(f"{path}: seed history holds NaN or infinite values")
+    if not bool(torch.isfinite(arr).all()):  # a NaN seed makes every rollout NaN
+        bad = int((~torch.isfinite(arr)).flatten(1).any(1).sum())
+        raise CheckpointError(f"{path}: seed history holds NaN or inf in {bad} of {len(arr)} seeds; "
+                              "expected finite (K, 2, 276) canonical features")
     return arr
 
 
