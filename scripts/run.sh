@@ -29,9 +29,10 @@ setup() {
         echo "[latentrl] keeping the installed torch $have"
     else
         echo "[latentrl] no torch in $VENV: installing $TORCH_SPEC, CPU build, from $TORCH_INDEX"
-        if ! "$VENV/bin/python" -m pip install -q "$TORCH_SPEC" --index-url "$TORCH_INDEX"; then
-            echo "[latentrl] $TORCH_INDEX unreachable: installing $TORCH_SPEC from pip's default index" \
-                 "(on Linux that is the CUDA build, a few GB)"
+        if ! "$VENV/bin/python" -m pip install -q --retries 1 --timeout 15 "$TORCH_SPEC" --index-url "$TORCH_INDEX" \
+                >"$VENV/torch-install.log" 2>&1; then
+            echo "[latentrl] $TORCH_INDEX unreachable: installing $TORCH_SPEC from pip's configured index" \
+                 "(on Linux PyPI's build is the CUDA one, a few GB; a local wheel folder may hold the CPU build)"
             "$VENV/bin/python" -m pip install -q "$TORCH_SPEC"
         fi
     fi

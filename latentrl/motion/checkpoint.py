@@ -51,9 +51,17 @@ LEGACY_CFG = "./config_files/config_hydra/motion_primitive/mp_2_8.yaml"
 _DERIVED_BUFFERS = ("sequence_pos_encoder.pe", "embed_timestep.sequence_pos_encoder.pe")
 
 
-def default_model_path() -> Path:
-    """The embedded default model shipped as package data."""
-    return Path(str(resources.files("latentrl").joinpath("assets/default_motion.pt")))
+#: Names of the models shipped as package data -> their file under ``latentrl/assets``.
+EMBEDDED_MODELS = {
+    "default": "default_motion.pt",
+    # the v2 candidate (configs/motion/v2.yaml, docs/benchmarks.md): steerable, on the floor; no policies yet
+    "default-v2": "default_motion_v2.pt",
+}
+
+
+def default_model_path(name: str = "default") -> Path:
+    """An embedded model shipped as package data (``EMBEDDED_MODELS``)."""
+    return Path(str(resources.files("latentrl").joinpath("assets", EMBEDDED_MODELS[name])))
 
 
 def file_sha256(path: str | Path) -> str:
@@ -81,7 +89,7 @@ def load_motion_model(
     """Load a frozen motion model.
 
     Args:
-        source: ``"default"`` (the embedded model), a latentrl ``.pt`` file or a folder holding
+        source: ``"default"`` (the embedded model), ``"default-v2"`` (its v2 candidate), a latentrl ``.pt`` file or a folder holding
             ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
         device: where the model runs.
@@ -90,10 +98,10 @@ def load_motion_model(
         text_table: a DART ``train_text_embedding_dict.pkl`` (prompt -> vector) to use instead of
             the one found beside the mean/std file.
     """
-    if str(source) == "default":
-        path = default_model_path()
+    if str(source) in EMBEDDED_MODELS:
+        path = default_model_path(str(source))
         if not path.is_file():
-            raise CheckpointError(f"the embedded default motion model is missing from the installation ({path})")
+            raise CheckpointError(f"the embedded motion model '{source}' is missing from the installation ({path})")
     else:
         path = Path(source).expanduser()
         if path.is_dir():
