@@ -90,7 +90,8 @@ def load_motion_model(
 
     Args:
         source: ``"default"`` (the embedded model), ``"default-v2"`` (its v2 candidate), a latentrl
-            ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with ``args.yaml`` beside it).
+            ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt``
+            (with ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
         device: where the model runs.
         seed_history: (K, 2, 276) canonical seed histories, or a ``.npz``/``.pt`` file holding
