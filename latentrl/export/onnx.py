@@ -29,8 +29,8 @@ next_world_translation    (B, 3)          feed back as ``world_translation``
 Inside the graph: the env's observation (DART's goal features, text, history, floor height) ->
 the policy's mean -> :meth:`latentrl.motion.MotionModel.rollout_step` (10 DDIM steps with
 classifier-free guidance unrolled, the scale and the step indices as constants, then the VAE
-decode and the re-canonicalization). :meth:`ControllerStep.post_step` is where a world-space
-correction after the step (such as a floor snap) would go. Initial states (the model's seed
+decode and the re-canonicalization). The rollout's floor snap is part of ``rollout_step`` and so of the graph;
+:meth:`ControllerStep.post_step` is where any further world-space correction would go. Initial states (the model's seed
 histories, identity rotation, the translation that puts the lowest joint on the floor), the
 prompt embeddings of the policy's training texts and this contract are stored as JSON in the
 file's metadata (``latentrl.*`` keys). The rest of an env step (goal reached? next waypoint?) is
@@ -161,9 +161,10 @@ class ControllerStep(nn.Module):
     def post_step(self, step: StepResult) -> StepResult:
         """World-space correction after the motion step; the identity, so the graph is exactly ``rollout_step``.
 
-        A post-step such as a floor snap returns ``step._replace(joints_world=..., state=RolloutState(history,
+        A post-step returns ``step._replace(joints_world=..., state=RolloutState(history,
         WorldTransform(rotation, translation)))`` computed with tensor operations only (``torch.where``,
-        no Python branches on values), so that it traces into the graph.
+        no Python branches on values), so that it traces into the graph (the floor snap already runs
+        inside ``rollout_step``).
         """
         return step
 
