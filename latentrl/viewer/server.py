@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import signal
 import socket
 import threading
 from typing import Any
@@ -78,6 +79,10 @@ def serve_until_interrupted(server: Any, command: str, host: str, stop: threadin
                             on_stop: Any = None) -> int:
     """Print the URL, block until Ctrl-C (or ``stop`` is set), then stop the server; returns exit status 0."""
     stop = stop or threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        # A command started in the background by a non-interactive shell inherits SIGINT as ignored, and
+        # Python then never raises KeyboardInterrupt: take Ctrl-C back so it always stops the server.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         announce(command, host, server.get_port())  # inside the try: a Ctrl-C right after the line stops cleanly
         while not stop.wait(0.25):
