@@ -115,7 +115,7 @@ def _skill_signature(text: str, joints: torch.Tensor) -> torch.Tensor:
     return (speed > 0.5) & (speed < 2.0) & (shares["left_only"] >= 0.15) & (shares["right_only"] >= 0.15)
 
 
-def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float = 5.0) -> dict:
+def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float = GUIDANCE_SCALE) -> dict:
     """Roll ``SWITCH_TIMELINE`` out; per switch, seconds until the new skill's signature holds.
 
     Latency is from the text change to the start of the first 0.5 s window that moves like the new
