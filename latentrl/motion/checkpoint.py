@@ -53,9 +53,12 @@ _DERIVED_BUFFERS = ("sequence_pos_encoder.pe", "embed_timestep.sequence_pos_enco
 
 #: Names of the models shipped as package data -> their file under ``latentrl/assets``.
 EMBEDDED_MODELS = {
+    # the default since v2 (configs/motion/default.yaml, docs/benchmarks.md "Default model v2")
     "default": "default_motion.pt",
-    # the v2 candidate (configs/motion/v2.yaml, docs/benchmarks.md): steerable, on the floor; no policies yet
-    "default-v2": "default_motion_v2.pt",
+    # the same file under the name it shipped with as a candidate, so run dirs that named it still load
+    "default-v2": "default_motion.pt",
+    # the first release (configs/motion/v1.yaml), kept for comparison and for policies trained on it
+    "default-v1": "default_motion_v1.pt",
 }
 
 
@@ -89,7 +92,8 @@ def load_motion_model(
     """Load a frozen motion model.
 
     Args:
-        source: ``"default"`` (the embedded model), ``"default-v2"`` (its v2 candidate), a latentrl
+        source: ``"default"`` (the embedded model; ``"default-v2"`` is another name for it),
+            ``"default-v1"`` (the first release), a latentrl
             ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt``
             (with ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
