@@ -26,6 +26,7 @@ import torch
 
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.motion.contacts import foot_positions, skate_weights, weighted_foot_slide
+from latentrl.motion.heading import hip_yaw_rad
 from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
 
 SKATE_THRESHOLD_M = CONTACT_HEIGHT_M
@@ -100,11 +101,8 @@ def pelvis_speed_m_s(joints, fps: float = 30.0) -> torch.Tensor:
 
 def heading_change_rad(joints) -> torch.Tensor:
     """Total signed yaw change of the hip axis (right_hip - left_hip), radians, + = counter-clockwise."""
-    j = _t(joints)
-    x = j[..., 2, :2] - j[..., 1, :2]
-    ang = torch.atan2(x[..., 1], x[..., 0])
-    d = torch.remainder(ang[..., 1:] - ang[..., :-1] + math.pi, 2 * math.pi) - math.pi
-    return d.sum(dim=-1)
+    yaw = hip_yaw_rad(_t(joints))
+    return yaw[..., -1] - yaw[..., 0]
 
 
 def foot_contact_shares(joints, floor: float = 0.0, threshold: float = 0.05) -> dict[str, torch.Tensor]:

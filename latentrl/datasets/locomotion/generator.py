@@ -31,6 +31,7 @@ from latentrl.datasets.locomotion.plan import (
 )
 from latentrl.datasets.motion_text import make_sequence, write_meta, write_sequence
 from latentrl.motion.contacts import foot_positions, weighted_foot_slide
+from latentrl.motion.heading import hip_yaw_rad
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS
 
 # --- one sequence -----------------------------------------------------------------------------------------
@@ -154,12 +155,6 @@ _CONTACT_SHARE_M = 0.05  # a foot joint this close to the floor counts as down (
 _STEER_WINDOW = 32  # frames: the window of ``bench motion``'s steering spread (4 primitives)
 
 
-def _hip_yaw(joints: np.ndarray) -> np.ndarray:
-    """(T,) unwrapped heading of the hip axis (right_hip - left_hip), radians."""
-    x = joints[:, 2, :2] - joints[:, 1, :2]
-    return np.unwrap(np.arctan2(x[:, 1], x[:, 0]))
-
-
 def _window_turns(yaw: np.ndarray, mask: np.ndarray, stride: int = 8) -> list[float]:
     """Yaw changes (deg) over every ``_STEER_WINDOW``-frame window (step ``stride``) inside ``mask``."""
     out = []
@@ -208,7 +203,7 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
         speed = np.linalg.norm(np.diff(joints[:, 0, :2], axis=0), axis=-1) * FPS
         skate, skate_xy = foot_skate(joints), foot_skate(joints, horizontal=True)
         floor = np.abs(joints[:, list(FOOT_JOINTS), 2].min(axis=-1))
-        yaw = _hip_yaw(joints)
+        yaw = hip_yaw_rad(torch.from_numpy(joints)).numpy()
         feet_down = joints[:, list(FOOT_JOINTS), 2] < _CONTACT_SHARE_M
         for skill in set(owner[pure]):
             m, mp = pure & (owner == skill), pair & (owner[1:] == skill)
