@@ -9,6 +9,8 @@ import torch
 
 from latentrl.app.bench.common import write_json
 from latentrl.constants import GUIDANCE_SCALE
+from latentrl.motion.representation import FUTURE_LENGTH
+from latentrl.motion.skeleton import FPS
 from latentrl.timing import hardware
 
 
@@ -128,18 +130,18 @@ def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float =
     texts, starts = [], []
     for text, seconds in SWITCH_TIMELINE:
         starts.append(len(texts))
-        texts += [text] * max(1, round(seconds * 30 / 8))
+        texts += [text] * max(1, round(seconds * FPS / FUTURE_LENGTH))
     g = torch.Generator().manual_seed(seed)
     roll = model.rollout(texts, len(texts), batch=batch, generator=g, guidance_scale=guidance)
     j = roll.joints_world[:, 2:]
     out = {"switches": []}
     for k in range(1, len(SWITCH_TIMELINE)):
-        text, first = SWITCH_TIMELINE[k][0], starts[k] * 8
-        last = (starts[k + 1] * 8 if k + 1 < len(starts) else j.shape[1]) - _SWITCH_WINDOW
+        text, first = SWITCH_TIMELINE[k][0], starts[k] * FUTURE_LENGTH
+        last = (starts[k + 1] * FUTURE_LENGTH if k + 1 < len(starts) else j.shape[1]) - _SWITCH_WINDOW
         latency = torch.full((batch,), math.inf)
         for f in range(last, first - 1, -1):  # backwards: the earliest matching window wins
             hit = _skill_signature(text, j[:, f:f + _SWITCH_WINDOW])
-            latency = torch.where(hit, torch.tensor((f - first) / 30), latency)
+            latency = torch.where(hit, torch.tensor((f - first) / FPS), latency)
         out["switches"].append({
             "to": text,
             "median_s": float(latency.median()),
@@ -194,7 +196,7 @@ def bench_motion(args: MotionBenchRequest) -> int:
     model = load_motion_model(args.motion)
     if args.no_floor_snap:
         model.floor_snap = None
-    steps = max(1, round(args.seconds * 30 / 8))
+    steps = max(1, round(args.seconds * FPS / FUTURE_LENGTH))
     ref = _data_reference(model)
     out = {
         "benchmark": "motion",
@@ -226,7 +228,7 @@ def bench_motion(args: MotionBenchRequest) -> int:
             "pelvis_z_max": float(j[..., 0, 2].max()),
             "pelvis_over_feet_min": float(_pelvis_over_feet(j).min()),
             "pelvis_over_feet_max": float(_pelvis_over_feet(j).max()),
-            "turn_deg_s": float(M.heading_change_rad(j).mean()) * 180 / 3.14159265 / (j.shape[1] / 30),
+            "turn_deg_s": float(M.heading_change_rad(j).mean()) * 180 / math.pi / (j.shape[1] / FPS),
             "left_only": float(shares["left_only"].mean()),
             "right_only": float(shares["right_only"].mean()),
             "steer_spread_deg": steering_spread_deg(model, text, seed=args.seed, guidance=args.guidance),
