@@ -9,7 +9,7 @@ from gymnasium.vector import AutoresetMode
 from latentrl.errors import ConfigError, NonFiniteError, TextError
 from latentrl.motion.representation import joints_of
 from latentrl.motion.text import TableTextEncoder
-from latentrl.rewards import TERM_NAMES
+from latentrl.rewards import DART_TERMS as TERM_NAMES
 from tests.envs.conftest import actions
 
 OBS = 4 + 32 + 552 + 1

@@ -8,7 +8,7 @@ from stable_baselines3.common.vec_env import VecCheckNan, VecEnv
 
 from latentrl.envs import Sb3VecEnv
 from latentrl.errors import ConfigError
-from latentrl.rewards import TERM_NAMES
+from latentrl.rewards import DART_TERMS as TERM_NAMES
 
 OBS = 4 + 32 + 552 + 1
 
