@@ -1,8 +1,9 @@
 """The files latentrl ships inside its package, found through :mod:`importlib.resources`.
 
 ``latentrl/configs/`` holds the training configs (``configs/motion/`` the motion-training ones,
-``configs/policies/`` those of the shipped policies) and ``latentrl/tasks/paths/`` the waypoint-path
-suites (``tasks/joystick/`` the command timelines, ``tasks/timed/`` the timed paths), ``latentrl/policies/`` the shipped policies (``<name>.pt`` and its card ``<name>.md``). A
+``configs/policies/`` those of the shipped policies), ``latentrl/tasks/paths/`` the waypoint-path
+suites (``tasks/joystick/`` the command timelines, ``tasks/timed/`` the timed paths),
+``latentrl/policies/`` the shipped policies (``<name>.pt`` and its card ``<name>.md``). A
 checkout also has ``configs``, ``tasks`` and ``policies`` links at its root, so ``latentrl train
 configs/quick.yaml`` works there as well as ``latentrl train quick`` anywhere, and ``latentrl eval
 policies/reach_walk_default.pt`` as well as ``latentrl eval reach_walk_default``.

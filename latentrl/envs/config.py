@@ -1,7 +1,8 @@
 """``EnvConfig``: the ``env:`` section of a training config, and :func:`build`, the env it describes.
 
 Settings every task shares sit at the top of the section; each task has its own sub-section
-(``env.reach``, ``env.path``, ``env.joystick``, ``env.timed``) holding its constructor's arguments, and an entry in :data:`TASKS`::
+(``env.reach``, ``env.path``, ``env.joystick``, ``env.timed``) holding its constructor's arguments,
+and an entry in :data:`TASKS`::
 
     env:
       task: path

@@ -288,7 +288,8 @@ class JoystickEnv(LatentMotionVectorEnv):
             else:
                 self._timeline[idx] = torch.randint(p, (len(idx),), generator=self._generator, device=self.device)
             self._text_idx[idx] = self._tl_text[self._timeline[idx]]
-            self._heading[idx], self._speed[idx] = self._timeline_command(idx, torch.zeros(len(idx), device=self.device))
+            start = torch.zeros(len(idx), device=self.device)
+            self._heading[idx], self._speed[idx] = self._timeline_command(idx, start)
         self._changed[idx] = False
 
     @property

@@ -6,8 +6,7 @@ import pytest
 import torch
 
 from latentrl.errors import ConfigError
-from latentrl.rewards import DART_TERMS, DEFAULT_WEIGHTS, TERM_NAMES, RewardComposer, RewardConfig, RewardInputs
-from latentrl.rewards import terms
+from latentrl.rewards import DART_TERMS, DEFAULT_WEIGHTS, TERM_NAMES, RewardComposer, RewardConfig, RewardInputs, terms
 from tests.rewards.test_reward_compose import gliding_body
 
 STEP_S = 8 / 30
