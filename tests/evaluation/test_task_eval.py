@@ -150,3 +150,23 @@ def test_shipped_task_suites_resolve_by_name():
 
     assert [p.name for p in resolve_path_files(["joystick_walk"], "joystick")] == ["joystick_walk.json"]
     assert [p.name for p in resolve_path_files(None, "timed", ("timed_walk",))] == ["timed_walk.json"]
+
+
+def test_training_runs_the_task_evaluator_periodically(tiny_model, tmp_path):
+    from latentrl.app.train import TrainConfig, make_eval_hook
+    from latentrl.envs.config import build
+    from latentrl.ppo.config import PolicyConfig
+    from latentrl.ppo.policy import ActorCritic
+
+    timeline = tmp_path / "hook.json"
+    timeline.write_text(json.dumps([{"text": "walk", "duration": 3.0,  # past the 2 s settle window
+                                     "commands": [{"t": 0, "heading_deg": 0, "speed": 1.0}]}]))
+    cfg = TrainConfig()
+    cfg.env.task, cfg.env.num_envs = "joystick", 1
+    cfg.ppo.eval_every, cfg.eval.paths, cfg.eval.episodes = 1, [str(timeline)], 1
+    env = build(cfg.env, "cpu", motion=tiny_model)
+    policy = ActorCritic(env.single_observation_space.shape[0], 16, PolicyConfig(latent_dim=32),
+                         env.metadata["observation_layout"])
+    report = make_eval_hook(cfg, tiny_model, "cpu")(policy)
+    assert {"heading_err_deg", "speed_err_m_s", "skate_cm_s", "floor_cm"} <= set(report.metrics)
+    assert not report.stop
