@@ -84,9 +84,13 @@ class JoystickConfig:
     """A command-timeline file (or suite name in tasks/joystick) to train on instead of random commands."""
 
     def validate(self) -> None:
-        require(len(self.speed_range) == 2, "speed_range", f"must be [min, max] m/s, got {self.speed_range}")
-        require(len(self.heading_change_seconds) == 2, "heading_change_seconds",
-                f"must be [min, max] seconds, got {self.heading_change_seconds}")
+        require(len(self.speed_range) == 2 and 0 <= self.speed_range[0] <= self.speed_range[1], "speed_range",
+                f"must be [min, max] m/s with 0 <= min <= max, got {self.speed_range}")
+        require(0 <= self.heading_change_deg <= 180, "heading_change_deg",
+                f"must be degrees in [0, 180], got {self.heading_change_deg}")
+        require(len(self.heading_change_seconds) == 2 and 0 < self.heading_change_seconds[0]
+                <= self.heading_change_seconds[1], "heading_change_seconds",
+                f"must be [min, max] seconds with 0 < min <= max, got {self.heading_change_seconds}")
 
     def kwargs(self) -> dict[str, Any]:
         commands = str(resolve_task_file(self.commands, "joystick")) if self.commands else None
@@ -112,7 +116,10 @@ class TimedConfig:
     """The time-left observation is clipped to +/- this many seconds."""
 
     def validate(self) -> None:
-        require(len(self.speed_range) == 2, "speed_range", f"must be [min, max] m/s, got {self.speed_range}")
+        require(len(self.speed_range) == 2 and 0 < self.speed_range[0] <= self.speed_range[1], "speed_range",
+                f"must be [min, max] m/s with 0 < min <= max, got {self.speed_range}")
+        require(self.time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {self.time_left_clip}")
+        require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
 
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths, "timed")) if self.paths else None

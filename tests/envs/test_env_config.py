@@ -58,3 +58,17 @@ def test_joystick_and_timed_sections_round_trip_and_build(tmp_path, tiny_model):
     commands = EnvConfig(task="joystick", num_envs=1)
     commands.joystick.commands = "joystick_walk"
     assert len(build(commands, "cpu", motion=tiny_model).timelines) == 3
+
+
+def test_bad_task_sections_name_the_dotted_key(tmp_path):
+    import pytest
+
+    from latentrl.errors import ConfigError
+
+    f = tmp_path / "bad.yaml"
+    f.write_text("env: {task: joystick, joystick: {speed_range: [1.5, 1.0]}}\n")
+    with pytest.raises(ConfigError, match=r"env\.joystick\.speed_range: must be \[min, max\] m/s"):
+        load_config(TrainConfig, f)
+    f.write_text("env: {task: timed, timed: {time_left_clip: 0}}\n")
+    with pytest.raises(ConfigError, match=r"env\.timed\.time_left_clip: must be > 0"):
+        load_config(TrainConfig, f)
