@@ -1,8 +1,9 @@
 """The files latentrl ships inside its package, found through :mod:`importlib.resources`.
 
 ``latentrl/configs/`` holds the training configs (``configs/motion/`` the motion-training ones,
-``configs/policies/`` those of the shipped policies) and ``latentrl/tasks/paths/`` the waypoint-path
-suites, ``latentrl/policies/`` the shipped policies (``<name>.pt`` and its card ``<name>.md``). A
+``configs/policies/`` those of the shipped policies), ``latentrl/tasks/paths/`` the waypoint-path
+suites (``tasks/joystick/`` the command timelines, ``tasks/timed/`` the timed paths),
+``latentrl/policies/`` the shipped policies (``<name>.pt`` and its card ``<name>.md``). A
 checkout also has ``configs``, ``tasks`` and ``policies`` links at its root, so ``latentrl train
 configs/quick.yaml`` works there as well as ``latentrl train quick`` anywhere, and ``latentrl eval
 policies/reach_walk_default.pt`` as well as ``latentrl eval reach_walk_default``.
@@ -30,9 +31,9 @@ def packaged(*parts: str) -> Path:
     return Path(str(root))
 
 
-def suites_folder() -> Path:
-    """The folder of the shipped path suites (``latentrl/tasks/paths``)."""
-    return packaged(*PATH_SUITES)
+def suites_folder(kind: str = "paths") -> Path:
+    """The folder of the shipped suites of a task: ``latentrl/tasks/paths`` (also ``joystick``, ``timed``)."""
+    return packaged(PATH_SUITES[0], kind)
 
 
 def config_file(spec: str | Path) -> Path:
@@ -43,9 +44,9 @@ def config_file(spec: str | Path) -> Path:
     return find_file(spec, (packaged(), packaged(CONFIGS)), ".yaml")
 
 
-def task_file(spec: str | Path) -> Path | None:
-    """A path file by path, by path inside the package, or by suite name; None if there is none."""
-    found = find_file(spec, (packaged(), suites_folder()), ".json")
+def task_file(spec: str | Path, kind: str = "paths") -> Path | None:
+    """A task file by path, by path inside the package, or by suite name in ``tasks/<kind>``; None if there is none."""
+    found = find_file(spec, (packaged(), suites_folder(kind)), ".json")
     return found if found.is_file() else None
 
 

@@ -171,7 +171,7 @@ ROWS = [
     ("train-override-syntax", [*TRAIN, "--set", "ppo.learning_rate"],
      r"override 'ppo\.learning_rate': expected key=value"),
     ("train-bad-choice", [*TRAIN, "--set", "env.task=dance"],
-     r"env\.task: expected one of \('reach', 'path'\), got 'dance'"),
+     r"env\.task: expected one of \('reach', 'path', 'joystick', 'timed'\), got 'dance'"),
     ("train-out-of-range", [*TRAIN, "--set", "ppo.gamma=1.5"], r"ppo\.gamma: must lie in \[0, 1\], got 1\.5"),
     ("train-no-prompts", [*TRAIN, "--set", "env.texts=[]"], r"env\.texts: give at least one prompt"),
     ("train-empty-prompt", [*TRAIN, "--set", "env.texts=['']"], r"env\.texts: prompt '' is empty"),

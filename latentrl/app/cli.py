@@ -224,7 +224,8 @@ def _eval_commands(sub) -> None:
                     help="PPO checkpoint (.pt) from latentrl train, or a shipped policy by name (reach_walk_default)")
     ev.add_argument("--paths", nargs="+", metavar="FILE",
                     help="DART-format path files or suite names in tasks/paths (default: dart_walk_long "
-                         "dart_run_long dart_hop_long)")
+                         "dart_run_long dart_hop_long); for joystick and timed policies, command-timeline or "
+                         "timed path files, or suite names in tasks/joystick or tasks/timed")
     ev.add_argument("--episodes", type=int, default=32, help="episodes per path, run as one batch (DART: 32)")
     ev.add_argument("--max-steps", type=int, default=256,
                     help="step budget per episode, in primitives of 8 frames (DART: 256 = 68.3 s); "

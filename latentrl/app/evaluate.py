@@ -8,10 +8,16 @@
     motions/<suite>_path<i>_ep<e>.npz    every episode in the shared motion format
     renders/<suite>_path<i>_ep<e>.gif    skeleton animations of the first --render episodes of each path
     renders/<suite>_path<i>_ep<e>.bvh    the same motions as BVH (SMPL-22, Y-up, centimetres)
+
+A policy trained on the joystick or timed task (its checkpoint's ``env.task``) is evaluated by that
+task's evaluator instead (:func:`evaluate_task`): ``--paths`` then names command-timeline files
+(``tasks/joystick/``) or timed path files (``tasks/timed/``), and ``report.json`` has the format
+``latentrl.eval.task/1``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,12 +69,17 @@ class CompareRequest:
     out: str | None = None
 
 
-def resolve_path_files(specs: list[str] | None) -> list[Path]:
-    """Path files from ``--paths``: existing files, or suite names in ``tasks/paths`` (``sharp_turns``)."""
+TASK_SUITES: dict[str, tuple[str, ...]] = {"joystick": ("joystick_walk", "joystick_run"), "timed": ("timed_walk",)}
+"""Shipped suites of the tasks with their own evaluator; ``latentrl eval`` runs those whose texts the policy knows."""
+
+
+def resolve_path_files(specs: list[str] | None, kind: str = "paths",
+                       defaults: tuple[str, ...] = DEFAULT_SUITES) -> list[Path]:
+    """Suite files from ``--paths``: existing files, or suite names in ``tasks/<kind>`` (``sharp_turns``)."""
     from latentrl.resources import suites_folder
 
-    folder, files = suites_folder(), []
-    for spec in specs or DEFAULT_SUITES:
+    folder, files = suites_folder(kind), []
+    for spec in specs or defaults:
         path = Path(spec)
         if not path.is_file():
             named = folder / f"{spec.removesuffix('.json')}.json"
@@ -172,6 +183,18 @@ def _progress(result: PathResult) -> None:
           f"reached{reach} ({result.wall_s:.0f} s)", flush=True)
 
 
+def _stored_env(policy: str):
+    """The ``EnvConfig`` stored in a policy checkpoint, or None (no config, or a file ``_load`` will refuse)."""
+    from latentrl.envs.config import stored_env_config
+    from latentrl.errors import LatentRLError
+    from latentrl.ppo.checkpoint import read_checkpoint
+
+    try:
+        return stored_env_config(read_checkpoint(policy, map_location="cpu").get("config"))
+    except (LatentRLError, OSError):
+        return None
+
+
 def evaluate(req: EvalRequest) -> int:
     """``latentrl eval``: run the suites, measure speed, write the report, plot and motions."""
     from latentrl.envs import load_paths
@@ -181,6 +204,9 @@ def evaluate(req: EvalRequest) -> int:
     from latentrl.resources import is_packaged, policy_file
     from latentrl.timing import hardware
 
+    env = _stored_env(str(policy_file(req.policy)))
+    if env is not None and env.task in TASK_SUITES:
+        return evaluate_task(req, env)
     settings = _settings(req)
     files = resolve_path_files(req.paths)
     first_path = [load_paths(f) for f in files][0][0]  # check every file before loading models
@@ -203,6 +229,91 @@ def evaluate(req: EvalRequest) -> int:
         js, md = report.write_report(out_dir, data)
     print("\n".join(report.results_table(data)))
     print(f"wrote {js}, {md}, {png}")
+    return 0
+
+
+def _task_suites(task: str, texts) -> tuple[str, ...]:
+    """The shipped suites of ``task`` whose every text the policy was trained on (all of them if none is)."""
+    from latentrl.evaluation import joystick, timed
+    from latentrl.resources import suites_folder
+
+    known, fits = set(texts), []
+    for name in TASK_SUITES[task]:
+        file = suites_folder(task) / f"{name}.json"
+        entries = joystick.load_timelines(file) if task == "joystick" else timed.load_timed_paths(file)
+        used = {e.text for e in entries} if task == "joystick" else {t for e in entries for t in e.texts}
+        if used <= known:
+            fits.append(name)
+    return tuple(fits) or TASK_SUITES[task]
+
+
+def _task_sink(out_dir: Path, render: int, write_motions: bool):
+    """Per-episode writer of the task evaluations: the motion ``.npz`` and, for the first ``render``, GIF + BVH."""
+    from latentrl.render import render_gif, save_bvh
+
+    def sink(ep, clip) -> str | None:
+        name = f"{ep.suite}_{ep.index}_ep{ep.episode:03d}"
+        written = None
+        if write_motions:
+            clip.meta.update(suite=ep.suite, index=ep.index, episode=ep.episode, end=ep.end)
+            clip.save(out_dir / "motions" / f"{name}.npz")
+            written = f"motions/{name}.npz"
+        if ep.episode < render:
+            render_gif(out_dir / "renders" / f"{name}.gif", clip.joints, texts=clip.texts,
+                       title=f"{ep.suite} {ep.index} ep {ep.episode} ({ep.end})", stride=GIF_STRIDE,
+                       goals=clip.waypoints)
+            save_bvh(out_dir / "renders" / f"{name}.bvh", clip.joints, clip.fps)
+        return written
+
+    return sink
+
+
+def evaluate_task(req: EvalRequest, env_cfg) -> int:
+    """``latentrl eval`` of a joystick or timed policy: its task's suites, report.json/.md and motions."""
+    from latentrl.errors import CheckpointError
+    from latentrl.evaluation import joystick, timed
+    from latentrl.evaluation.runner import policy_fn
+    from latentrl.evaluation.task_eval import aggregate, build_task_report, results_table, write_task_report
+    from latentrl.preflight import NewOutput, check_writable
+    from latentrl.resources import is_packaged, policy_file
+    from latentrl.timing import hardware
+
+    task = env_cfg.task
+    module = joystick if task == "joystick" else timed
+    settings = _settings(req)
+    files = resolve_path_files(req.paths, task, _task_suites(task, env_cfg.texts))
+    entries = [joystick.load_timelines(f) if task == "joystick" else timed.load_timed_paths(f) for f in files]
+    req.policy = str(policy_file(req.policy))
+    beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
+    out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"
+    check_writable(out_dir, "--out")
+    model, policy, motion, policy_info, observe_next = _load(req, settings)
+    first = entries[0][0]
+    probe = (joystick.make_env(model, first, 1, settings) if task == "joystick"
+             else timed.make_env(model, first, 1, settings, observe_next=bool(observe_next)))
+    dims = (probe.single_observation_space.shape[0], probe.single_action_space.shape[0])
+    if (policy.obs_dim, policy.action_dim) != dims:
+        raise CheckpointError(f"the policy takes {policy.obs_dim}-D observations and gives {policy.action_dim}-D "
+                              f"actions, but the {task} env has {dims[0]} and {dims[1]}; evaluate with the motion "
+                              "model the policy was trained on (--motion)")
+    act = policy_fn(policy, settings.deterministic)
+    extra = {"observe_next": bool(observe_next)} if task == "timed" else {}
+    criteria = module.TrackingCriteria() if task == "joystick" else module.TimingCriteria()
+
+    def progress(result) -> None:
+        means = {k: v["mean"] for k, v in aggregate(result.episodes).items()}
+        shown = ", ".join(f"{k} {v:.2f}" for k, v in means.items() if v == v)
+        print(f"{result.suite} {result.index} ({result.label}): {shown} ({result.wall_s:.0f} s)", flush=True)
+
+    with NewOutput(out_dir):
+        suites = module.run_suites(act, model, files, settings, criteria=criteria,
+                                   sink=_task_sink(out_dir, req.render, req.motions), progress=progress, **extra)
+        data = build_task_report(task, suites, settings, module.UNITS, module.DEFINITIONS,
+                                 criteria=dataclasses.asdict(criteria), policy=policy_info, motion=motion,
+                                 hardware=hardware())
+        js, md = write_task_report(out_dir, data)
+    print("\n".join(results_table(data)))
+    print(f"wrote {js}, {md}")
     return 0
 
 

@@ -127,6 +127,17 @@ def make_eval_hook(cfg: TrainConfig, motion, device: str):
     """The trainer's periodic evaluation: our path runner on ``cfg.eval.paths``, plus a track plot."""
     if cfg.ppo.eval_every <= 0:
         return None
+    task = cfg.env.task
+    if task in ("joystick", "timed"):  # their own suites (tasks/<task>/) and evaluators
+        from latentrl.app.evaluate import TASK_SUITES
+
+        if task == "joystick":
+            from latentrl.evaluation.joystick import training_eval_hook
+        else:
+            from latentrl.evaluation.timed import training_eval_hook
+        paths = cfg.eval.paths if cfg.eval.paths != EvalConfig().paths else list(TASK_SUITES[task][:1])
+        files = [resolve_task_file(p, task) for p in paths]
+        return training_eval_hook(files, motion, cfg.env, cfg.eval, device=device)
     from latentrl.evaluation.runner import training_eval_hook
 
     files = [resolve_task_file(p) for p in cfg.eval.paths]

@@ -47,7 +47,7 @@ from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_o
 from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
-from latentrl.rewards.compose import RewardComposer, RewardConfig, RewardInputs
+from latentrl.rewards.compose import DART_TERMS, RewardComposer, RewardConfig, RewardInputs
 
 _AUTORESET_MODES = {AutoresetMode.SAME_STEP, AutoresetMode.DISABLED}
 _RESET_OPTIONS = ("reset_mask",)
@@ -119,6 +119,8 @@ class LatentMotionVectorEnv(VectorEnv):
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
     goal_fields: tuple[tuple[str, int], ...] = (("goal_dir", 3), ("goal_dist", 1))
     """Named fields of the ``goal`` observation group, in order; tasks may extend."""
+    reward_terms: tuple[str, ...] = DART_TERMS
+    """The reward terms this task computes and reports (``infos["reward/<name>"]``)."""
 
     def __init__(
         self,
@@ -178,7 +180,7 @@ class LatentMotionVectorEnv(VectorEnv):
         self.divergence_limit = float(divergence_limit)
         self.random_initial_steps = bool(random_initial_steps)
         self.render_mode = None
-        self.rewards = RewardComposer(reward_config, reward_weights)
+        self.rewards = RewardComposer(reward_config, reward_weights, terms=self.reward_terms)
         self._setup_texts(texts, text_weights)
         self._setup_spaces()
         self._generator = torch.Generator(device=self.device)
@@ -300,6 +302,16 @@ class LatentMotionVectorEnv(VectorEnv):
 
     def _task_infos(self, infos: dict[str, Any], reached: torch.Tensor) -> None:
         """Add task-specific infos (batched, with ``_key`` masks); ``reached`` is the (N,) goal mask."""
+
+    def _reward_inputs(
+        self, before: torch.Tensor, future: torch.Tensor, goal: torch.Tensor, reached: torch.Tensor
+    ) -> dict[str, torch.Tensor]:
+        """Task fields of :class:`~latentrl.rewards.RewardInputs` for this step (``command``, ...); none here.
+
+        Called before :meth:`_advance_task`, with the (N, 2, 22, 3) history before the step, the (N, 8, 22, 3)
+        new frames, the (N, 3) goal in force and the (N,) reached mask.
+        """
+        return {}
 
     # ------------------------------------------------------------------ helpers for tasks
     def _sample_texts(self, count: int) -> torch.Tensor:
@@ -424,7 +436,12 @@ class LatentMotionVectorEnv(VectorEnv):
             reached = self._reached(future, goal) & ~diverged
             reward, terms = self.rewards(
                 RewardInputs(
-                    torch.cat((before, future), 1), goal, reached, self._floor_scale[self._text_idx], self.floor_height
+                    torch.cat((before, future), 1),
+                    goal,
+                    reached,
+                    self._floor_scale[self._text_idx],
+                    self.floor_height,
+                    **self._reward_inputs(before, future, goal, reached),
                 )
             )
             reward = torch.where(diverged, 0.0, reward)

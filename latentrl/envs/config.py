@@ -1,7 +1,8 @@
 """``EnvConfig``: the ``env:`` section of a training config, and :func:`build`, the env it describes.
 
 Settings every task shares sit at the top of the section; each task has its own sub-section
-(``env.reach``, ``env.path``) holding its constructor's arguments, and an entry in :data:`TASKS`::
+(``env.reach``, ``env.path``, ``env.joystick``, ``env.timed``) holding its constructor's arguments,
+and an entry in :data:`TASKS`::
 
     env:
       task: path
@@ -68,6 +69,65 @@ class PathConfig:
                 "text_per_waypoint": self.text_per_waypoint}
 
 
+@dataclass
+class JoystickConfig:
+    """``env.joystick``: arguments of :class:`~latentrl.envs.JoystickEnv` (commanded heading and speed)."""
+
+    speed_range: list[float] = field(default_factory=lambda: [0.7, 1.4])
+    """Commanded speeds are drawn uniformly in [min, max] m/s; keep them plausible for the texts
+    (the default model walks at about 0.85-1.2 m/s and runs at 3.2-4.2 m/s)."""
+    heading_change_deg: float = 90.0
+    """Each new command turns the heading by up to +/- this many degrees (the first, from the body's facing)."""
+    heading_change_seconds: list[float] = field(default_factory=lambda: [2.0, 6.0])
+    """Seconds between command changes, uniform in [min, max]."""
+    commands: str | None = None
+    """A command-timeline file (or suite name in tasks/joystick) to train on instead of random commands."""
+
+    def validate(self) -> None:
+        require(len(self.speed_range) == 2 and 0 <= self.speed_range[0] <= self.speed_range[1], "speed_range",
+                f"must be [min, max] m/s with 0 <= min <= max, got {self.speed_range}")
+        require(0 <= self.heading_change_deg <= 180, "heading_change_deg",
+                f"must be degrees in [0, 180], got {self.heading_change_deg}")
+        require(len(self.heading_change_seconds) == 2 and 0 < self.heading_change_seconds[0]
+                <= self.heading_change_seconds[1], "heading_change_seconds",
+                f"must be [min, max] seconds with 0 < min <= max, got {self.heading_change_seconds}")
+
+    def kwargs(self) -> dict[str, Any]:
+        commands = str(resolve_task_file(self.commands, "joystick")) if self.commands else None
+        return {"speed_range": tuple(self.speed_range), "heading_change_deg": self.heading_change_deg,
+                "heading_change_seconds": tuple(self.heading_change_seconds), "commands": commands}
+
+
+@dataclass
+class TimedConfig:
+    """``env.timed``: arguments of :class:`~latentrl.envs.TimedPathEnv` (waypoints with arrival times)."""
+
+    paths: str | None = None
+    """A timed path file (or suite name in tasks/timed); None draws random timed paths each episode."""
+    speed_range: list[float] = field(default_factory=lambda: [0.7, 1.4])
+    """Random paths time each segment at a speed uniform in [min, max] m/s; max also caps the pace target."""
+    observe_next: bool = False
+    """Also observe the waypoint after the current one."""
+    random_waypoints: int = 5
+    """Waypoints per random path."""
+    text_per_waypoint: bool = False
+    """Random paths draw a new text per waypoint."""
+    time_left_clip: float = 10.0
+    """The time-left observation is clipped to +/- this many seconds."""
+
+    def validate(self) -> None:
+        require(len(self.speed_range) == 2 and 0 < self.speed_range[0] <= self.speed_range[1], "speed_range",
+                f"must be [min, max] m/s with 0 < min <= max, got {self.speed_range}")
+        require(self.time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {self.time_left_clip}")
+        require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
+
+    def kwargs(self) -> dict[str, Any]:
+        paths = str(resolve_task_file(self.paths, "timed")) if self.paths else None
+        return {"paths": paths, "speed_range": tuple(self.speed_range), "observe_next": self.observe_next,
+                "random_waypoints": self.random_waypoints, "text_per_waypoint": self.text_per_waypoint,
+                "time_left_clip": self.time_left_clip}
+
+
 def _reach_env() -> type:
     from latentrl.envs.reach import ReachLocationEnv
 
@@ -80,7 +140,20 @@ def _path_env() -> type:
     return FollowPathEnv
 
 
-TASKS: dict[str, Callable[[], type]] = {"reach": _reach_env, "path": _path_env}
+def _joystick_env() -> type:
+    from latentrl.envs.joystick import JoystickEnv
+
+    return JoystickEnv
+
+
+def _timed_env() -> type:
+    from latentrl.envs.timed import TimedPathEnv
+
+    return TimedPathEnv
+
+
+TASKS: dict[str, Callable[[], type]] = {"reach": _reach_env, "path": _path_env, "joystick": _joystick_env,
+                                        "timed": _timed_env}
 """Task name (= the name of its ``EnvConfig`` section) -> its env class, imported when first built."""
 
 ALIASES: dict[str, str] = {
@@ -99,7 +172,8 @@ class EnvConfig:
     """Which environment to train in (see docs/envs.md for every argument)."""
 
     task: str = "reach"
-    """'reach' (latentrl/ReachLocation-v0, DART's task) or 'path' (latentrl/FollowPath-v0)."""
+    """'reach' (latentrl/ReachLocation-v0, DART's task), 'path' (latentrl/FollowPath-v0), 'joystick'
+    (latentrl/Joystick-v0) or 'timed' (latentrl/TimedPath-v0)."""
     num_envs: int = 256
     """Environments stepped together (DART: 256)."""
     motion: str = "default"
@@ -111,7 +185,7 @@ class EnvConfig:
     text_weights: list[float] | None = None
     """Sampling weight per text (default: uniform)."""
     max_episode_steps: int | None = None
-    """Primitives per episode before truncation (default: 32 for reach, 256 for path)."""
+    """Primitives per episode before truncation (default: 32 for reach, 256 for path and timed, 75 for joystick)."""
     guidance_scale: float = GUIDANCE_SCALE
     """Classifier-free guidance of the motion model (DART: 5)."""
     action_bound: float = ACTION_BOUND
@@ -128,6 +202,10 @@ class EnvConfig:
     """Arguments of the reach task."""
     path: PathConfig = field(default_factory=PathConfig)
     """Arguments of the path task."""
+    joystick: JoystickConfig = field(default_factory=JoystickConfig)
+    """Arguments of the joystick task."""
+    timed: TimedConfig = field(default_factory=TimedConfig)
+    """Arguments of the timed-path task."""
 
     def validate(self) -> None:
         require(self.task in TASKS, "task", f"expected one of {tuple(TASKS)}, got '{self.task}'")
@@ -148,13 +226,13 @@ class EnvConfig:
 
     @property
     def observe_next(self) -> bool:
-        """Whether the env observes the waypoint after the current one (path task only)."""
-        return self.task == "path" and self.path.observe_next
+        """Whether the env observes the waypoint after the current one (path and timed tasks only)."""
+        return (self.task == "path" and self.path.observe_next) or (self.task == "timed" and self.timed.observe_next)
 
 
-def resolve_task_file(path: str) -> Path:
-    """A path file named relative to the working directory, to the package, or by suite name."""
-    found = task_file(path)
+def resolve_task_file(path: str, kind: str = "paths") -> Path:
+    """A task file named relative to the working directory, to the package, or by suite name in ``tasks/<kind>``."""
+    found = task_file(path, kind)
     if found is None:
         raise ConfigError(f"path file not found: {path} (looked in {Path.cwd()} and {packaged()})")
     return found

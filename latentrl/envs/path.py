@@ -255,15 +255,18 @@ class FollowPathEnv(LatentMotionVectorEnv):
             texts = self._sample_texts(m)[:, None].expand(m, w)
         return points, texts, torch.full((m,), w, dtype=torch.long, device=self.device)
 
+    def _choose_paths(self, idx: torch.Tensor) -> torch.Tensor:
+        """(M,) index into :attr:`paths` for envs ``idx``: ``i % P`` (``by_env``) or drawn uniformly."""
+        p = len(self.paths)
+        if self.path_assignment == "by_env":
+            return idx % p
+        return torch.randint(p, (len(idx),), generator=self._generator, device=self.device)
+
     def _reset_task(self, idx: torch.Tensor) -> None:
         if self._path_points is None:
             points, texts, lengths = self._random_paths(idx)
         else:
-            p = len(self.paths)
-            if self.path_assignment == "by_env":
-                pid = idx % p
-            else:
-                pid = torch.randint(p, (len(idx),), generator=self._generator, device=self.device)
+            pid = self._choose_paths(idx)
             points, texts, lengths = self._path_points[pid], self._path_texts[pid], self._path_len[pid]
         self._wp[idx] = points
         self._wp_text[idx] = texts

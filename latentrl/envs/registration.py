@@ -1,6 +1,6 @@
 """Gymnasium ids of the latentrl tasks; importing :mod:`latentrl` registers them.
 
-Both ids have only a ``vector_entry_point``: create them with
+The ids have only a ``vector_entry_point``: create them with
 ``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point", **kwargs)``, where
 ``kwargs`` are the task's constructor arguments (``motion``, ``texts``, ``device``, ...).
 Registration imports nothing but Gymnasium; the env modules (and torch) load on ``make_vec``.
@@ -14,6 +14,8 @@ import gymnasium
 ENV_IDS: dict[str, tuple[str, int]] = {
     "latentrl/ReachLocation-v0": ("latentrl.envs.reach:ReachLocationEnv", 32),
     "latentrl/FollowPath-v0": ("latentrl.envs.path:FollowPathEnv", 256),
+    "latentrl/Joystick-v0": ("latentrl.envs.joystick:JoystickEnv", 75),
+    "latentrl/TimedPath-v0": ("latentrl.envs.timed:TimedPathEnv", 256),
 }
 
 

@@ -1,5 +1,14 @@
 """Reward terms (pure tensor kernels) and their weighted composition."""
 
-from latentrl.rewards.compose import DEFAULT_WEIGHTS, TERM_NAMES, RewardComposer, RewardConfig, RewardInputs, RewardTerm
+from latentrl.rewards.compose import (
+    DART_TERMS,
+    DEFAULT_WEIGHTS,
+    TERM_NAMES,
+    RewardComposer,
+    RewardConfig,
+    RewardInputs,
+    RewardTerm,
+)
 
-__all__ = ["DEFAULT_WEIGHTS", "TERM_NAMES", "RewardComposer", "RewardConfig", "RewardInputs", "RewardTerm"]
+__all__ = ["DART_TERMS", "DEFAULT_WEIGHTS", "TERM_NAMES", "RewardComposer", "RewardConfig", "RewardInputs",
+           "RewardTerm"]

@@ -18,7 +18,15 @@ name            weight   term
 ``orient``      0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
 ``rotation``    10.0     -(1 - cos) of the hip-axis yaw change per frame
 ``jerk``        0        -(largest third difference of any joint), metres per frame^3
+``heading``     1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
+``speed``       1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
+``pace``        1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
+``timing``      1.0      on reaching a waypoint, 1 - |arrival error| / tolerance, in [0, 1] (TimedPath)
 ==============  =======  ====================================================================
+
+Each task computes and reports only its own terms (``terms=`` of :class:`RewardComposer`; the envs'
+``reward_terms``): ReachLocation and FollowPath the seven of :data:`DART_TERMS`, Joystick and TimedPath
+theirs. The task terms read the extra inputs their env fills (:attr:`RewardInputs.command` ...).
 """
 
 from __future__ import annotations
@@ -35,13 +43,16 @@ from latentrl.config import require
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import closest
 from latentrl.motion.representation import HISTORY_LENGTH
-from latentrl.motion.skeleton import PELVIS
+from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.rewards import terms
 
-#: Term names in reporting order.
-TERM_NAMES: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
+#: DART's terms (ReachLocation and FollowPath compute these), in reporting order.
+DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
 
-#: DART's README weights (``fixtext_repeat_floor100_hop10_skate100``).
+#: Every term name, in reporting order: DART's, then the terms of the Joystick and TimedPath tasks.
+TERM_NAMES: tuple[str, ...] = (*DART_TERMS, "heading", "speed", "pace", "timing")
+
+#: DART's README weights (``fixtext_repeat_floor100_hop10_skate100``), then the task terms' (1 each).
 DEFAULT_WEIGHTS: dict[str, float] = {
     "dist": 1.0,
     "success": 1.0,
@@ -50,6 +61,10 @@ DEFAULT_WEIGHTS: dict[str, float] = {
     "orient": 0.1,
     "rotation": 10.0,
     "jerk": 0.0,
+    "heading": 1.0,
+    "speed": 1.0,
+    "pace": 1.0,
+    "timing": 1.0,
 }
 
 
@@ -69,6 +84,24 @@ class RewardInputs:
     """Floor z, metres."""
     history_length: int = HISTORY_LENGTH
     """H: how many leading frames of ``joints_world`` precede the step."""
+    command: torch.Tensor | None = None
+    """Joystick: (N, 3) the command in force, world unit heading (x, y) and speed (m/s)."""
+    target_speed: torch.Tensor | None = None
+    """TimedPath: (N,) speed toward the goal that arrives on time (distance left / time left), m/s."""
+    arrival_error: torch.Tensor | None = None
+    """TimedPath: (N,) arrival time - goal time of the waypoint reached in the step, seconds (0 elsewhere)."""
+
+    def step_seconds(self) -> float:
+        """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
+        return (self.joints_world.shape[1] - self.history_length) / FPS
+
+    def need(self, name: str, term: str) -> torch.Tensor:
+        """The task input ``name``, or a ValueError naming the term that needs it."""
+        value = getattr(self, name)
+        if value is None:
+            raise ValueError(f"reward term '{term}' needs RewardInputs.{name}, which this task does not fill; "
+                             f"drop '{term}' from the task's reward terms")
+        return value
 
     def pelvis_before_after(self) -> tuple[torch.Tensor, torch.Tensor]:
         """(N, 3) pelvis at the last history frame before the step, and at the last new frame."""
@@ -89,6 +122,8 @@ class RewardConfig:
     (once per matching word, as DART does)."""
     floor_scale: float = 0.1
     """The multiplier for those texts."""
+    timing_tolerance: float = 1.0
+    """TimedPath's ``timing`` bonus falls linearly from 1 (on time) to 0 at this arrival error, seconds."""
 
     def validate(self) -> None:
         """Unknown term names, non-finite weights and negative thresholds are errors."""
@@ -103,6 +138,9 @@ class RewardConfig:
                 f"weights.{name}",
                 f"must be a finite number, got {weight!r}",
             )
+        require(isinstance(self.timing_tolerance, (int, float)) and math.isfinite(self.timing_tolerance)
+                and self.timing_tolerance > 0, "timing_tolerance",
+                f"must be a finite number of seconds > 0, got {self.timing_tolerance!r}")
         for name in ("contact_threshold", "floor_scale"):
             value = getattr(self, name)
             require(
@@ -157,6 +195,27 @@ def _jerk(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     return terms.jerk(x.joints_world)
 
 
+def _heading(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.heading_tracking` of the step's pelvis displacement against the commanded heading."""
+    return terms.heading_tracking(*x.pelvis_before_after(), x.need("command", "heading")[:, :2])
+
+
+def _speed(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.speed_tracking` of the step's mean pelvis speed against the commanded speed."""
+    return terms.speed_tracking(*x.pelvis_before_after(), x.need("command", "speed")[:, 2], x.step_seconds())
+
+
+def _pace(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.pace_tracking` toward the goal at the env's on-time speed."""
+    return terms.pace_tracking(*x.pelvis_before_after(), x.goal_world, x.need("target_speed", "pace"),
+                               x.step_seconds())
+
+
+def _timing(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.arrival_timing` of the waypoint reached in the step."""
+    return terms.arrival_timing(x.reached, x.need("arrival_error", "timing"), cfg.timing_tolerance)
+
+
 _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
     "dist": _dist,
     "success": _success,
@@ -165,28 +224,40 @@ _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
     "orient": _orient,
     "rotation": _rotation,
     "jerk": _jerk,
+    "heading": _heading,
+    "speed": _speed,
+    "pace": _pace,
+    "timing": _timing,
 }
 
 
 class RewardComposer:
-    """Weighted sum of every term in :data:`TERM_NAMES`.
+    """Weighted sum of a task's terms (DART's seven by default).
 
     Args:
         config: weights and thresholds (default: DART's).
         weights: extra per-term weight overrides applied on top of ``config.weights``.
+        terms: the names the task computes and reports, a subset of :data:`TERM_NAMES`
+            (default :data:`DART_TERMS`).
 
     Raises:
-        ConfigError: an unknown term name (with a "did you mean"), a non-finite weight or a
-            negative threshold.
+        ConfigError: an unknown term name (with a "did you mean"), a non-finite weight, a
+            negative threshold, or an override in ``weights`` of a term the task does not compute.
     """
 
-    def __init__(self, config: RewardConfig | None = None, weights: Mapping[str, float] | None = None):
+    def __init__(self, config: RewardConfig | None = None, weights: Mapping[str, float] | None = None,
+                 terms: Sequence[str] = DART_TERMS):
         config = config or RewardConfig()
         merged = {**DEFAULT_WEIGHTS, **config.weights, **dict(weights or {})}
         config = dataclasses.replace(config, weights=merged, floor_scale_words=tuple(config.floor_scale_words))
         config.validate()
+        for name in terms:
+            require(name in TERM_NAMES, "terms", f"unknown reward term '{name}'{closest(name, TERM_NAMES)}")
+        for name in weights or {}:  # explicit overrides of a term the task never computes are mistakes
+            require(name in terms, "reward_weights",
+                    f"the task has no reward term '{name}'{closest(name, tuple(terms))}; its terms: {', '.join(terms)}")
         self.config = config
-        self.terms = tuple(RewardTerm(name, float(config.weights[name]), _COMPUTE[name]) for name in TERM_NAMES)
+        self.terms = tuple(RewardTerm(name, float(config.weights[name]), _COMPUTE[name]) for name in terms)
 
     @property
     def weights(self) -> dict[str, float]:
@@ -203,7 +274,7 @@ class RewardComposer:
     def __call__(self, inputs: RewardInputs) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Returns ``(total (N,), {name: (N,) unweighted term})``, float32."""
         values = {t.name: t.compute(inputs, self.config).float() for t in self.terms}
-        total = torch.zeros_like(values[TERM_NAMES[0]])
+        total = torch.zeros_like(next(iter(values.values())))
         for t in self.terms:
             if t.weight != 0.0:
                 total = total + t.weight * values[t.name]

@@ -14,6 +14,9 @@ Frame windows (``F`` = 8 new frames per step, ``H`` = 2 history frames):
 - ``foot_skate``, ``yaw_rate``: the ``F`` transitions from the last history frame through the
   new frames, i.e. ``F + 1`` frames.
 - ``jerk``: all ``H + F`` frames.
+- ``heading_tracking``, ``speed_tracking``, ``pace_tracking`` (Joystick, TimedPath): the pelvis
+  before and after the step, as ``goal_progress``; velocities are that displacement over the
+  step's duration (``F / 30`` s), which averages out the sway of a gait cycle.
 """
 
 from __future__ import annotations
@@ -27,12 +30,16 @@ from latentrl.motion.contacts import weighted_foot_slide
 from latentrl.motion.skeleton import LEFT_HIP, RIGHT_HIP
 
 __all__ = [
+    "arrival_timing",
     "foot_floor",
     "foot_joints",
     "foot_skate",
     "goal_progress",
+    "heading_tracking",
     "jerk",
     "moving_orientation",
+    "pace_tracking",
+    "speed_tracking",
     "success",
     "yaw_rate",
 ]
@@ -178,3 +185,80 @@ def jerk(joints: torch.Tensor) -> torch.Tensor:
 def foot_joints(joints: torch.Tensor) -> torch.Tensor:
     """(..., 22, 3) joints -> (..., 2, 3) the left and right foot joints DART uses for contact."""
     return _foot_positions(joints)
+
+
+def heading_tracking(pelvis_before: torch.Tensor, pelvis_after: torch.Tensor, heading: torch.Tensor) -> torch.Tensor:
+    """``heading``: does the pelvis move in the commanded world direction?
+
+    ``r = (cos(m, h) + 1) / 2`` with ``m = p_after - p_before`` (xy) and ``h`` the commanded heading;
+    the same form as :func:`moving_orientation`, with a direction instead of a goal.
+
+    Args:
+        pelvis_before: (N, 3), pelvis_after: (N, 3), world metres.
+        heading: (N, 2) commanded direction in the world xy plane (any length > 0).
+
+    Returns:
+        (N,) in [0, 1]; 1 = along the command, 0.5 = at 90 degrees, 0 = opposite (0.5 when not moving).
+    """
+    move = F.normalize(pelvis_after[:, :2] - pelvis_before[:, :2], dim=-1, eps=1e-12)
+    return ((move * F.normalize(heading, dim=-1, eps=1e-12)).sum(dim=-1) + 1.0) / 2.0
+
+
+def speed_tracking(
+    pelvis_before: torch.Tensor, pelvis_after: torch.Tensor, speed: torch.Tensor, seconds: float
+) -> torch.Tensor:
+    """``speed``: how far the pelvis' horizontal speed is from the commanded speed.
+
+    ``r = -| ||p_after - p_before||_xy / seconds - s |``  (m/s)
+
+    Args:
+        pelvis_before: (N, 3), pelvis_after: (N, 3), world metres.
+        speed: (N,) commanded speed, m/s.
+        seconds: time between the two pelvis positions (one step: 8 frames = 0.267 s).
+
+    Returns:
+        (N,) <= 0; 0 = the commanded speed, whatever the direction (:func:`heading_tracking` judges that).
+    """
+    return -(_xy_distance(pelvis_after, pelvis_before) / seconds - speed).abs()
+
+
+def pace_tracking(
+    pelvis_before: torch.Tensor,
+    pelvis_after: torch.Tensor,
+    goal: torch.Tensor,
+    target_speed: torch.Tensor,
+    seconds: float,
+) -> torch.Tensor:
+    """``pace``: is the pelvis approaching the goal at the speed that arrives on time?
+
+    ``r = -| (p_after - p_before) . u / seconds - v |``  (m/s), with ``u`` the unit xy direction from
+    ``p_before`` to the goal and ``v`` the target speed (TimedPath: distance left / time left).
+
+    Args:
+        pelvis_before: (N, 3), pelvis_after: (N, 3), goal: (N, 3), world metres.
+        target_speed: (N,) speed toward the goal that would arrive on time, m/s.
+        seconds: time between the two pelvis positions.
+
+    Returns:
+        (N,) <= 0; 0 = straight at the goal at the target speed; moving at 90 degrees gives ``-v``.
+    """
+    toward = F.normalize(goal[:, :2] - pelvis_before[:, :2], dim=-1, eps=1e-12)
+    velocity = (pelvis_after[:, :2] - pelvis_before[:, :2]) / seconds
+    return -((velocity * toward).sum(dim=-1) - target_speed).abs()
+
+
+def arrival_timing(reached: torch.Tensor, arrival_error: torch.Tensor, tolerance: float) -> torch.Tensor:
+    """``timing``: a bonus for reaching a waypoint on time, falling linearly to 0 at ``tolerance``.
+
+    ``r = reached * max(0, 1 - |e| / tolerance)``, ``e`` = arrival time - goal time (seconds).
+
+    Args:
+        reached: (N,) bool, a waypoint was reached during the step.
+        arrival_error: (N,) seconds, late > 0, early < 0 (ignored where not reached).
+        tolerance: seconds at which the bonus reaches 0 (> 0).
+
+    Returns:
+        (N,) in [0, 1]; 1 = reached exactly on time; 0 when nothing was reached or off by >= tolerance.
+    """
+    score = (1.0 - arrival_error.abs() / tolerance).clamp(min=0.0)
+    return torch.where(reached, score, torch.zeros_like(score))

@@ -30,3 +30,45 @@ def test_build_maps_the_task_section_and_rewards_onto_the_env(tiny_model):
     cfg.rewards.contact_threshold = 0.05
     env = build(cfg, "cpu", motion=tiny_model)
     assert env.goal_angle_deg == 20.0 and env.rewards.config.contact_threshold == 0.05
+
+
+def test_joystick_and_timed_sections_round_trip_and_build(tmp_path, tiny_model):
+    import dataclasses
+
+    from latentrl.config import from_dict
+    from latentrl.envs.joystick import JoystickEnv
+    from latentrl.envs.timed import TimedPathEnv
+
+    f = tmp_path / "joy.yaml"
+    f.write_text("env: {task: joystick, num_envs: 2, texts: [run], joystick: {speed_range: [2.5, 4.0], "
+                 "heading_change_deg: 45}}\n")
+    cfg = load_config(TrainConfig, f, ["env.joystick.heading_change_seconds=[1.0,3.0]"])
+    assert cfg.env.joystick.speed_range == [2.5, 4.0] and cfg.env.joystick.heading_change_seconds == [1.0, 3.0]
+    again = from_dict(EnvConfig, dataclasses.asdict(cfg.env), "stored")  # what a checkpoint stores and eval reads
+    assert again == cfg.env
+    env = build(again, "cpu", motion=tiny_model)
+    assert isinstance(env, JoystickEnv) and env.speed_range == (2.5, 4.0) and env.heading_change_deg == 45.0
+    assert env.max_episode_steps == 75
+
+    timed = stored_env_config({"env": {"task": "timed", "num_envs": 1, "timed": {"paths": "timed_walk",
+                                                                                 "observe_next": True}}})
+    assert timed.observe_next
+    env = build(timed, "cpu", motion=tiny_model)
+    assert isinstance(env, TimedPathEnv) and len(env.paths) == 3 and env.paths[0].times[0] == 3.5
+    commands = EnvConfig(task="joystick", num_envs=1)
+    commands.joystick.commands = "joystick_walk"
+    assert len(build(commands, "cpu", motion=tiny_model).timelines) == 3
+
+
+def test_bad_task_sections_name_the_dotted_key(tmp_path):
+    import pytest
+
+    from latentrl.errors import ConfigError
+
+    f = tmp_path / "bad.yaml"
+    f.write_text("env: {task: joystick, joystick: {speed_range: [1.5, 1.0]}}\n")
+    with pytest.raises(ConfigError, match=r"env\.joystick\.speed_range: must be \[min, max\] m/s"):
+        load_config(TrainConfig, f)
+    f.write_text("env: {task: timed, timed: {time_left_clip: 0}}\n")
+    with pytest.raises(ConfigError, match=r"env\.timed\.time_left_clip: must be > 0"):
+        load_config(TrainConfig, f)

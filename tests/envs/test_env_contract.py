@@ -9,7 +9,7 @@ from gymnasium.vector import AutoresetMode
 from latentrl.errors import ConfigError, NonFiniteError, TextError
 from latentrl.motion.representation import joints_of
 from latentrl.motion.text import TableTextEncoder
-from latentrl.rewards import TERM_NAMES
+from latentrl.rewards import DART_TERMS
 from tests.envs.conftest import actions
 
 OBS = 4 + 32 + 552 + 1
@@ -38,7 +38,7 @@ def test_reset_and_step_return_batched_tensors(make_reach):
     obs, reward, terminated, truncated, infos = env.step(actions(3).numpy().astype(np.float64))  # numpy accepted
     assert obs.shape == (3, OBS) and reward.shape == (3,) and reward.dtype == torch.float32
     assert terminated.dtype == torch.bool and truncated.dtype == torch.bool and terminated.shape == (3,)
-    for name in TERM_NAMES:
+    for name in DART_TERMS:
         assert infos[f"reward/{name}"].shape == (3,) and infos[f"_reward/{name}"].all()
     for key in ("is_success", "diverged", "nonfinite_action"):
         assert infos[key].dtype == torch.bool and infos[f"_{key}"].all()
@@ -52,7 +52,7 @@ def test_reward_is_the_weighted_sum_of_reported_terms(make_reach):
     env = make_reach(3, reward_weights={"jerk": 0.5})
     env.reset(seed=0)
     _, reward, _, _, infos = env.step(actions(3))
-    manual = sum(env.rewards.weights[k] * infos[f"reward/{k}"] for k in TERM_NAMES)
+    manual = sum(env.rewards.weights[k] * infos[f"reward/{k}"] for k in DART_TERMS)
     torch.testing.assert_close(reward, manual)
 
 
@@ -264,7 +264,7 @@ def test_diverged_env_is_terminated_frozen_and_reset(make_reach, tiny_model, mon
     assert infos["diverged"].tolist() == [False, True, False]
     assert terminated.tolist() == [False, True, False] and infos["_final_obs"].tolist() == [False, True, False]
     assert torch.isfinite(obs).all() and torch.isfinite(infos["final_obs"]).all() and torch.isfinite(reward).all()
-    assert reward[1] == 0 and all(infos[f"reward/{k}"][1] == 0 for k in TERM_NAMES)
+    assert reward[1] == 0 and all(infos[f"reward/{k}"][1] == 0 for k in DART_TERMS)
     assert torch.isfinite(env._state.history).all()
 
 
@@ -317,3 +317,85 @@ def test_text_weights_select_texts(make_reach):
     env.reset(seed=0)
     assert [env.texts[i] for i in env._text_idx] == ["run"] * 8
     assert env._floor_scale.tolist() == pytest.approx([1.0, 0.1])
+
+
+# --------------------------------------------------------------------------- every task, every id
+TASK_IDS = {
+    "latentrl/ReachLocation-v0": ({}, 4),
+    "latentrl/FollowPath-v0": ({"random_waypoints": 3}, 4),
+    "latentrl/Joystick-v0": ({"heading_change_seconds": (0.3, 0.6)}, 3),  # commands change every 1-2 steps
+    "latentrl/TimedPath-v0": ({"random_waypoints": 3}, 5),
+}
+
+
+@pytest.fixture(params=list(TASK_IDS))
+def make_task(request, tiny_model):
+    """Factory of small envs of each registered id, through gymnasium.make_vec, over the tiny model."""
+    import gymnasium as gym
+
+    import latentrl  # noqa: F401  (registers the ids)
+
+    env_id = request.param
+    extra, goal_size = TASK_IDS[env_id]
+
+    def make(num_envs: int = 3, **kwargs):
+        env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", motion=tiny_model,
+                           texts=("walk", "run"), **{**extra, **kwargs})
+        assert env.observation_layout["goal"] == (0, goal_size)
+        return env
+
+    return make
+
+
+def test_every_task_steps_batched_tensors_and_reports_its_terms(make_task):
+    env = make_task(3)
+    obs, _ = env.reset(seed=0)
+    dim = env.single_observation_space.shape[0]
+    assert obs.shape == (3, dim) and obs.dtype == torch.float32 and torch.isfinite(obs).all()
+    assert list(env.observation_layout) == ["goal", "text", "motion", "scene"]
+    assert env.observation_fields["scene"] == (dim - 1, dim)
+    for k in range(3):
+        obs, reward, terminated, truncated, infos = env.step(actions(3, k))
+        assert obs.shape == (3, dim) and reward.shape == (3,) and torch.isfinite(reward).all()
+        assert terminated.dtype == torch.bool and truncated.dtype == torch.bool
+        assert {k[len("reward/"):] for k in infos if k.startswith("reward/")} == set(env.reward_terms)
+        manual = sum(env.rewards.weights[t] * infos[f"reward/{t}"] for t in env.reward_terms)
+        torch.testing.assert_close(reward, manual)
+        for key in ("is_success", "diverged", "nonfinite_action"):
+            assert infos[key].shape == (3,) and infos[f"_{key}"].all()
+
+
+def test_every_task_autoresets_in_the_same_step(make_task):
+    env = make_task(3, max_episode_steps=2)
+    env.reset(seed=0)
+    env.step(actions(3, 1))
+    obs, _, _, truncated, infos = env.step(actions(3, 2))
+    assert truncated.all() and infos["_final_obs"].all() and infos["_episode"].all()
+    assert infos["episode"]["l"].tolist() == [2, 2, 2] and not torch.equal(obs, infos["final_obs"])
+    assert env._ep_len.eq(0).all()
+
+
+def test_every_task_partial_reset_leaves_other_envs_untouched(make_task):
+    env = make_task(4, autoreset_mode="Disabled")
+    env.reset(seed=3)
+    for k in range(2):
+        env.step(actions(4, k))
+    keep = torch.tensor([0, 3])
+    before = env.observation()[keep].clone()
+    task_state = {k: v[keep].clone() for k, v in vars(env).items()
+                  if torch.is_tensor(v) and v.ndim >= 1 and v.shape[0] == 4 and not k.startswith("_all")}
+    obs, _ = env.reset(options={"reset_mask": np.array([False, True, True, False])})
+    assert torch.equal(obs[keep], before)
+    for name, value in task_state.items():
+        assert torch.equal(getattr(env, name)[keep], value), name
+    assert env._steps[1:3].tolist() == [0, 0] and env._steps[keep].tolist() == [2, 2]
+
+
+def test_every_task_is_reproducible_from_its_seed(make_task):
+    a, b, c = make_task(3), make_task(3), make_task(3)
+    oa, ob, oc = a.reset(seed=5)[0], b.reset(seed=5)[0], c.reset(seed=6)[0]
+    assert torch.equal(oa, ob) and not torch.equal(oa[:, :3], oc[:, :3])
+    for k in range(4):
+        sa, sb = a.step(actions(3, k)), b.step(actions(3, k))
+        for x, y in zip(sa[:4], sb[:4]):
+            assert torch.equal(x, y)

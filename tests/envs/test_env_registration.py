@@ -15,7 +15,8 @@ from tests.envs.test_follow_path import PATHS
 
 
 def test_ids_are_registered_with_vector_entry_points():
-    for env_id in ("latentrl/ReachLocation-v0", "latentrl/FollowPath-v0"):
+    for env_id in ("latentrl/ReachLocation-v0", "latentrl/FollowPath-v0", "latentrl/Joystick-v0",
+                   "latentrl/TimedPath-v0"):
         spec = gym.spec(env_id)
         assert spec.vector_entry_point and spec.entry_point is None
 
@@ -60,3 +61,14 @@ def test_import_latentrl_does_not_load_torch():
 def test_single_env_view_passes_gymnasiums_checker(make_reach):
     env = SingleEnv(make_reach(1, autoreset_mode=AutoresetMode.DISABLED, texts=("walk", "run")))
     check_env(env, skip_render_check=True)
+
+
+def test_make_vec_joystick_and_timed_path(tiny_model):
+    from latentrl.envs import JoystickEnv, TimedPathEnv
+
+    joy = gym.make_vec("latentrl/Joystick-v0", num_envs=2, motion=tiny_model, texts=["run"], speed_range=(2.5, 4.0))
+    assert isinstance(joy, JoystickEnv) and joy.max_episode_steps == 75 and joy.single_observation_space.shape == (588,)
+    timed = gym.make_vec("latentrl/TimedPath-v0", num_envs=1, motion=tiny_model,
+                         paths=str(PATHS.parent / "timed" / "timed_walk.json"))
+    assert isinstance(timed, TimedPathEnv) and timed.max_episode_steps == 256
+    assert timed.single_observation_space.shape == (590,)

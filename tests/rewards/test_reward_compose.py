@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from latentrl.errors import ConfigError
-from latentrl.rewards import DEFAULT_WEIGHTS, TERM_NAMES, RewardComposer, RewardConfig, RewardInputs
+from latentrl.rewards import DART_TERMS, DEFAULT_WEIGHTS, TERM_NAMES, RewardComposer, RewardConfig, RewardInputs
 from tests.helpers import rest_joints
 
 
@@ -35,13 +35,13 @@ def test_defaults_are_darts_readme_weights():
         "rotation": 10.0,
         "jerk": 0.0,
     }
-    assert tuple(comp.weights) == TERM_NAMES == tuple(DEFAULT_WEIGHTS)
+    assert tuple(comp.weights) == DART_TERMS == TERM_NAMES[:7] and tuple(DEFAULT_WEIGHTS) == TERM_NAMES
 
 
 def test_gliding_body_toward_goal_known_terms():
     # the whole body (feet on the floor) glides 2 cm per frame toward a goal straight ahead
     total, terms = RewardComposer()(inputs(gliding_body(0.02)))
-    assert set(terms) == set(TERM_NAMES)
+    assert set(terms) == set(DART_TERMS)
     torch.testing.assert_close(terms["dist"], torch.tensor([0.02 * 8]))  # last history frame -> last new frame
     torch.testing.assert_close(terms["orient"], torch.tensor([1.0]))
     torch.testing.assert_close(terms["rotation"], torch.tensor([0.0]))

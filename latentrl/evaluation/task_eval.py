@@ -1,0 +1,210 @@
+"""What the Joystick and TimedPath evaluations share: the batch rollout, the results and the report.
+
+Both run each entry of a suite file (a command timeline, a timed path) as one batch of
+``settings.episodes`` envs without autoreset, as the path runner does for FollowPath, and score
+every episode with a flat dict of metrics. The report aggregates them per entry, per suite and over
+everything as ``{"mean", "ci95"}`` (:func:`~latentrl.evaluation.metrics.mean_ci95`), and is written as
+``report.json`` (format :data:`FORMAT`) and ``report.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from latentrl.evaluation.metrics import mean_ci95
+
+FORMAT = "latentrl.eval.task/1"
+"""``report.json`` format of the Joystick and TimedPath evaluations."""
+
+
+@dataclass
+class TaskEpisode:
+    """One episode of one suite entry: how it ended and its metrics (None where undefined)."""
+
+    suite: str
+    index: int
+    episode: int
+    end: str
+    """'complete' (the timeline ran out or every waypoint was passed), 'timeout', 'diverged' or 'lost'."""
+    steps: int
+    metrics: dict[str, float | None]
+    detail: dict[str, Any] = field(default_factory=dict)
+    """Per-command or per-waypoint values (settle times, arrival errors) for report.json."""
+    motion_file: str | None = None
+
+
+@dataclass
+class TaskResult:
+    """Every episode of one entry (a timeline or a timed path) of a suite file."""
+
+    suite: str
+    index: int
+    label: str
+    episodes: list[TaskEpisode]
+    wall_s: float
+
+
+def rollout(env, act: Callable[[torch.Tensor], torch.Tensor], budget: int, seed: int,
+            on_step: Callable[[int, dict, torch.Tensor], None] | None = None) -> dict[str, torch.Tensor]:
+    """Step a no-autoreset batch until every env ended or ``budget`` steps; per-env (CPU) outcomes.
+
+    ``on_step(k, infos, live)`` sees every step's infos (k from 1) with the (N,) mask of envs still
+    counting. Returns ``steps`` (N,) and ``complete``/``diverged``/``lost`` (N,) bool.
+    """
+    torch.manual_seed(seed)
+    obs, _ = env.reset(seed=seed)
+    n, dev = env.num_envs, env.device
+    done = torch.zeros(n, dtype=torch.bool, device=dev)
+    out = {k: torch.zeros(n, dtype=torch.bool, device=dev) for k in ("complete", "diverged", "lost")}
+    steps = torch.full((n,), budget, dtype=torch.long, device=dev)
+    for k in range(1, budget + 1):
+        obs, _, terminated, truncated, infos = env.step(act(obs))
+        live = ~done
+        if on_step is not None:
+            on_step(k, infos, live)
+        out["complete"] |= infos["is_success"] & live
+        out["diverged"] |= infos["diverged"] & live
+        ended = live & (terminated | truncated)
+        out["lost"] |= ended & terminated & ~infos["is_success"] & ~infos["diverged"]
+        steps = torch.where(ended, k, steps)
+        done |= ended
+        if bool(done.all()):
+            break
+    return {"steps": steps.cpu(), **{k: v.cpu() for k, v in out.items()}}
+
+
+def end_of(outcome: dict[str, torch.Tensor], i: int) -> str:
+    for name in ("complete", "diverged", "lost"):
+        if bool(outcome[name][i]):
+            return name
+    return "timeout"
+
+
+def episode_clip(env, i: int, steps: int):
+    """Env i's recorded episode cut at its end (envs keep stepping until the whole batch is done)."""
+    clip = env.export_clip(i, episode=0).cut(steps)
+    clip.meta.pop("from_reset", None)
+    return clip
+
+
+# --------------------------------------------------------------------------- report
+def aggregate(episodes: Sequence[TaskEpisode]) -> dict[str, dict[str, float]]:
+    """Metric -> ``{"mean", "ci95", "n"}`` over the episodes that define it (None values left out)."""
+    names = dict.fromkeys(k for ep in episodes for k in ep.metrics)
+    out = {}
+    for name in names:
+        values = [ep.metrics[name] for ep in episodes if ep.metrics.get(name) is not None]
+        values = [float(v) for v in values if math.isfinite(float(v))]
+        out[name] = {**mean_ci95(values), "n": len(values)}
+    return out
+
+
+def build_task_report(task: str, suites: Sequence[tuple[str, str, list[TaskResult]]], settings: Any,
+                      metric_units: dict[str, str], definitions: str, **extra: Any) -> dict[str, Any]:
+    """``report.json`` content: per entry, per suite and overall aggregates, and every episode."""
+    everything = [ep for _, _, results in suites for r in results for ep in r.episodes]
+    return {
+        "format": FORMAT,
+        "task": task,
+        "settings": asdict(settings),
+        "units": metric_units,
+        "definitions": definitions,
+        "overall": aggregate(everything),
+        "suites": [
+            {"name": name, "file": file, "overall": aggregate([ep for r in results for ep in r.episodes]),
+             "entries": [{"index": r.index, "label": r.label, "wall_s": r.wall_s, "metrics": aggregate(r.episodes),
+                          "episodes": [_episode_entry(ep) for ep in r.episodes]} for r in results]}
+            for name, file, results in suites
+        ],
+        **extra,
+    }
+
+
+def _episode_entry(ep: TaskEpisode) -> dict[str, Any]:
+    return {"episode": ep.episode, "end": ep.end, "steps": ep.steps, "metrics": ep.metrics, "detail": ep.detail,
+            "motion_file": ep.motion_file}
+
+
+def _finite(obj: Any) -> Any:
+    """NaN and inf become None so that report.json is strict JSON."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, (np.floating, np.integer)):
+        return _finite(obj.item())
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _fmt(m: dict[str, float] | None) -> str:
+    if not m or m.get("mean") is None or not math.isfinite(m["mean"]):
+        return "-"
+    ci = m.get("ci95")
+    return f"{m['mean']:.2f} ± {ci:.2f}" if ci is not None and math.isfinite(ci) else f"{m['mean']:.2f}"
+
+
+def results_table(report: dict[str, Any]) -> list[str]:
+    """The markdown table of report.md: one row per entry, then per suite, then overall."""
+    units = report["units"]
+    keys = list(units)
+    lines = ["| suite | entry | " + " | ".join(f"{k} ({u})" for k, u in units.items()) + " |",
+             "|---|---|" + "---|" * len(keys)]
+    for suite in report["suites"]:
+        for entry in suite["entries"]:
+            cells = [_fmt(entry["metrics"].get(k)) for k in keys]
+            lines.append(f"| {suite['name']} | {entry['index']}: {entry['label']} | " + " | ".join(cells) + " |")
+        lines.append(f"| **{suite['name']}** | all | " + " | ".join(_fmt(suite["overall"].get(k)) for k in keys) + " |")
+    lines.append("| **all** | | " + " | ".join(_fmt(report["overall"].get(k)) for k in keys) + " |")
+    return lines
+
+
+def write_task_report(out_dir: str | Path, report: dict[str, Any]) -> tuple[Path, Path]:
+    """Write ``report.json`` and ``report.md`` into ``out_dir``."""
+    import json
+
+    from latentrl.safe_io import atomic_write_text
+
+    out_dir = Path(out_dir)
+    js = atomic_write_text(out_dir / "report.json", json.dumps(_finite(report), indent=1) + "\n")
+    md = [f"# {report['task']} evaluation", "", *results_table(report), "", "Mean ± 95% CI over episodes "
+          "(1.96 std / sqrt(n)).", "", report["definitions"]]
+    return js, atomic_write_text(out_dir / "report.md", "\n".join(md) + "\n")
+
+
+def training_hook(run: Callable[[Callable, Any], list], env_cfg: Any, eval_cfg: Any, device: str,
+                  success: str | None = None):
+    """``policy -> EvalReport`` from a suite runner ``run(act, settings)``: the overall finite means.
+
+    Settings come from ``eval_cfg`` (episodes, max_steps, deterministic) and ``env_cfg`` (guidance,
+    action bound); the run stops once the mean of ``success`` reaches ``eval_cfg.success_target``.
+    """
+    from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
+    from latentrl.evaluation.config import EvalSettings
+
+    settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
+                            deterministic=eval_cfg.deterministic, device=str(device),
+                            guidance_scale=getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE),
+                            action_bound=getattr(env_cfg, "action_bound", ACTION_BOUND))
+    settings.validate()
+    target = getattr(eval_cfg, "success_target", None)
+
+    def evaluate(policy: torch.nn.Module):
+        from latentrl.evaluation.runner import policy_fn
+        from latentrl.monitor import EvalReport
+
+        suites = run(policy_fn(policy, settings.deterministic), settings)
+        pooled = aggregate([ep for _, _, results in suites for r in results for ep in r.episodes])
+        metrics = {k: v["mean"] for k, v in pooled.items() if math.isfinite(v["mean"])}
+        stop = target is not None and success is not None and metrics.get(success, 0.0) >= target
+        return EvalReport(metrics, {}, stop)
+
+    return evaluate
