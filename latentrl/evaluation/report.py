@@ -24,6 +24,7 @@ import numpy as np
 
 from latentrl.errors import DataError
 from latentrl.evaluation import metrics as M
+from latentrl.evaluation import skills as K
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.results import PathResult, SuiteResult
 from latentrl.motion.skeleton import FPS
@@ -95,6 +96,16 @@ def waypoint_times(path: PathResult) -> list[dict[str, float]]:
     return out
 
 
+def skill_summary(paths: Sequence[PathResult]) -> dict[str, Any]:
+    """The skill check of several paths, pooled over every segment of every episode.
+
+    ``segment_skill_match``: share of judged segments whose motion matched their text (NaN when none
+    was judged); ``skills``: :func:`~latentrl.evaluation.skills.per_text`.
+    """
+    entries = [e for p in paths for ep in p.episodes for e in ep.segments]
+    return {"segment_skill_match": K.match_share(entries), "skills": K.per_text(entries)}
+
+
 # --------------------------------------------------------------------------- report.json
 def _path_length(path) -> float:
     pts = [(0.0, 0.0)] + [w[:2] for w in path.waypoints]
@@ -112,6 +123,7 @@ def _episode_entry(ep) -> dict[str, Any]:
         "waypoint_times_s": ep.waypoint_times_s,
         **ep.metrics,
         "motion": ep.motion_file,
+        "segments": ep.segments,
     }
 
 
@@ -125,6 +137,7 @@ def _path_entry(p: PathResult) -> dict[str, Any]:
         "metrics": path_metrics(p),
         "waypoint_reach_time_s": waypoint_times(p),
         "episodes": [_episode_entry(ep) for ep in p.episodes],
+        **skill_summary([p]),
     }
 
 
@@ -162,11 +175,11 @@ def build_report(
         "speed": speed or {},
         "suites": {
             s.name: {"file": s.file, "sha256": _sha256(s.file), "metrics": pooled_metrics(s.paths),
-                     "paths": [_path_entry(p) for p in s.paths]}
+                     "paths": [_path_entry(p) for p in s.paths], **skill_summary(s.paths)}
             for s in suites
         },
         "overall": {"metrics": pooled_metrics(all_paths), "paths": len(all_paths),
-                    "episodes": sum(len(p.episodes) for p in all_paths)},
+                    "episodes": sum(len(p.episodes) for p in all_paths), **skill_summary(all_paths)},
         "files": files or {},
     }
 
@@ -302,6 +315,35 @@ def _waypoint_table(report: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _share(value: Any) -> str:
+    return f"{value:.0%}" if isinstance(value, (int, float)) and math.isfinite(value) else "–"
+
+
+def _num(value: Any, digits: int = 2) -> str:
+    return f"{value:.{digits}f}" if isinstance(value, (int, float)) and math.isfinite(value) else "–"
+
+
+def skills_table(report: dict[str, Any]) -> list[str]:
+    """Per suite and text: measured segments, judged, matched share, mean speed and single-foot shares."""
+    lines = ["| suite | text | segments | judged | matched | speed (m/s) | left foot only | right foot only |",
+             "|---|---|---|---|---|---|---|---|"]
+    rows = 0
+    for name, suite in report["suites"].items():
+        skills = suite.get("skills") or {}
+        for text, t in skills.items():
+            matched = _share(t.get("match_share")) if t.get("judged") else "not judged"
+            lines.append(f"| {name} | {text} | {t.get('segments')} | {t.get('judged')} | {matched} | "
+                         f"{_num(t.get('speed_m_s'))} | {_share(t.get('left_only'))} | {_share(t.get('right_only'))} |")
+            rows += 1
+        if skills:
+            judged = sum(t.get("judged") or 0 for t in skills.values())
+            lines.append(f"| **{name}** | all | {sum(t.get('segments') or 0 for t in skills.values())} | {judged} | "
+                         f"{_share(suite.get('segment_skill_match'))} | | | |")
+    if "segment_skill_match" in report["overall"]:
+        lines.append(f"| **overall** | all | | | {_share(report['overall'].get('segment_skill_match'))} | | | |")
+    return lines if rows else ["(no segment was long enough to measure, or the report predates the skill check)"]
+
+
 def _speed_lines(report: dict[str, Any]) -> list[str]:
     if not report.get("speed"):
         return ["(not measured)"]
@@ -337,6 +379,13 @@ DEFINITIONS = """\
 - Per path: mean ± 95% CI (1.96 std / sqrt(n)) over episodes. Per suite and overall: DART's aggregation,
   each episode index averaged over the paths first, then mean ± CI over the indices; *reach time,
   successes* is pooled over all successful episodes instead.
+- **skill per segment**: a segment is the stretch of an episode while one waypoint is the goal (its text
+  conditions the motion). Segments shorter than {min_seg:g} s are not measured; the first {skip:g} s of each
+  are left out (the skill is still changing). On the rest: *speed* is the mean horizontal pelvis speed,
+  *left / right foot only* the share of frames with only that foot joint within {contact:g} cm of the floor. A
+  segment matches its text if run/jog: speed >= {run:g} m/s; walk: {walk0:g} <= speed < {walk1:g} m/s;
+  hop on left (right) leg: left (right) foot only >= {stance:.0%} and the other foot only <= {other:.0%};
+  other texts are not judged. *matched* is the share of judged segments that match (`segment_skill_match`).
 - The DART rows are the paper's numbers on its released BABEL model. Its script counted finished runs only,
   so its time sits under *reach time, successes* and its success of 1.0 ignores timeouts. Ours run on the
   motion model named above.
@@ -363,13 +412,20 @@ def report_markdown(report: dict[str, Any]) -> str:
         "",
         *_waypoint_table(report),
         "",
+        "## Skill per segment (does the motion match the text in force while heading to each waypoint?)",
+        "",
+        *skills_table(report),
+        "",
         "## Generation speed (policy + motion model; a quick sample, see the note below the table)",
         "",
         *_speed_lines(report),
         "",
         "## Definitions",
         "",
-        DEFINITIONS.format(thr=s["success_threshold"], steps=s["max_steps"], budget=s["budget_s"]),
+        DEFINITIONS.format(thr=s["success_threshold"], steps=s["max_steps"], budget=s["budget_s"],
+                           min_seg=K.MIN_SEGMENT_S, skip=K.TRANSITION_S, run=K.RUN_MIN_SPEED_M_S,
+                           walk0=K.WALK_SPEED_M_S[0], walk1=K.WALK_SPEED_M_S[1], stance=K.HOP_STANCE_MIN_SHARE,
+                           other=K.HOP_OTHER_MAX_SHARE, contact=K.CONTACT_HEIGHT_M * 100),
     ]
     return "\n".join(lines)
 

@@ -44,6 +44,8 @@ class EpisodeResult:
     pelvis_xy: np.ndarray = field(repr=False)
     """(T, 2) pelvis track, world metres (for plots; not written to JSON)."""
     motion_file: str | None = None
+    segments: list[dict] = field(default_factory=list)
+    """Per waypoint segment, whether the motion matched its text (:func:`latentrl.evaluation.skills.judge_clip`)."""
 
 
 @dataclass

@@ -14,7 +14,8 @@ step budget ``max_steps`` is spent. What we fix in DART's script (``reference/da
 What we keep: success is the pelvis within 0.3 m (xy) of the final waypoint at one of the 8 frames
 of a step (DART's min over the last 8 frames of the saved sequence); reach time is
 ``num_frames / 30`` including the 2 seed frames; metrics are computed on the whole episode's world
-joints, seed frames included.
+joints, seed frames included. Each waypoint's segment is also checked against its text
+(:mod:`~latentrl.evaluation.skills`).
 
 The runner needs from the env package: ``FollowPathEnv(paths=[p], path_assignment="by_env",
 autoreset_mode="Disabled", record_history=True, max_episode_steps=...)``, the infos
@@ -40,6 +41,7 @@ from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, frames_after
+from latentrl.evaluation.skills import judge_clip
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
@@ -216,6 +218,7 @@ def run_path(
             final_dist_m=float(M.final_goal_distance_m(joints, final_goal)),
             metrics=M.episode_metrics(joints, FPS, env.floor_height),
             pelvis_xy=joints[:, 0, :2].numpy().copy(),
+            segments=judge_clip(motion_i),
         )
         if sink is not None:
             motion_i.waypoints = np.asarray(path.waypoints, np.float32)
@@ -267,7 +270,8 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
     Runs ``eval_cfg.paths``' suites (already resolved to ``files``) with ``eval_cfg.episodes``,
     ``max_steps``, ``deterministic`` and ``text``, and returns the overall DART-aggregated means
-    (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ...; undefined ones left out),
+    (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ..., and ``segment_skill_match``;
+    undefined ones left out),
     the ``eval/trajectories`` figure, and ``stop`` once ``success_rate >= eval_cfg.success_target``.
     ``env_cfg`` gives ``guidance_scale``, ``action_bound`` and, for path policies, ``observe_next``. Files and texts are
     checked now, not at the first evaluation. The trainer restores its random streams afterwards.
@@ -284,13 +288,16 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
     def evaluate(policy: torch.nn.Module):
         from latentrl.evaluation.plots import paths_figure
-        from latentrl.evaluation.report import pooled_metrics
+        from latentrl.evaluation.report import pooled_metrics, skill_summary
         from latentrl.monitor import EVAL_TRAJECTORIES, EvalReport
 
         suites = run_suites(policy_fn(policy, settings.deterministic), motion, files, settings,
                             observe_next=observe_next, text=eval_cfg.text)
-        pooled = pooled_metrics([p for s in suites for p in s.paths])
-        metrics = {k: v["mean"] for k, v in pooled.items() if np.isfinite(v["mean"])}
+        paths = [p for s in suites for p in s.paths]
+        metrics = {k: v["mean"] for k, v in pooled_metrics(paths).items() if np.isfinite(v["mean"])}
+        match = skill_summary(paths)["segment_skill_match"]
+        if np.isfinite(match):
+            metrics["segment_skill_match"] = match
         stop = target is not None and metrics["success_rate"] >= target
         return EvalReport(metrics, {EVAL_TRAJECTORIES: paths_figure(suites)}, stop)
 
