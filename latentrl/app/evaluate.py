@@ -178,9 +178,12 @@ def _progress(result: PathResult) -> None:
     times = [ep.reach_time_s for ep in result.episodes if ep.success]
     reach = f", reach time of successes {sum(times) / len(times):.1f} s" if times else ""
     from latentrl.evaluation.results import prompts_label
+    from latentrl.evaluation.skills import match_share
 
+    judged = [s for ep in result.episodes for s in ep.segments if s["match"] is not None]
+    skill = f", skill matched in {match_share(judged):.0%} of {len(judged)} segments" if judged else ""
     print(f"{result.suite} path {result.index} ({prompts_label(result.path.texts)}): {wins}/{len(result.episodes)} "
-          f"reached{reach} ({result.wall_s:.0f} s)", flush=True)
+          f"reached{reach}{skill} ({result.wall_s:.0f} s)", flush=True)
 
 
 def _stored_env(policy: str):
@@ -228,6 +231,8 @@ def evaluate(req: EvalRequest) -> int:
                                    hardware=hardware(), files=outputs)
         js, md = report.write_report(out_dir, data)
     print("\n".join(report.results_table(data)))
+    if any(s.get("skills") for s in data["suites"].values()):
+        print("\n" + "\n".join(report.skills_table(data)))
     print(f"wrote {js}, {md}, {png}")
     return 0
 
