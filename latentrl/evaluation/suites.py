@@ -1,7 +1,7 @@
 """Our own waypoint path suites, generated deterministically and shipped as DART-format JSON.
 
 DART's suites (``tasks/paths/dart_*.json``) test long straight and gently curved paths with one
-skill each. These three add what they leave out:
+skill each. These four add what they leave out:
 
 - ``random_smooth``: five random smooth paths (seeded), 6 waypoints, segments of 2-4 m turning by up
   to 45 degrees, one skill per path (walk, run, hop, walk, run).
@@ -10,6 +10,10 @@ skill each. These three add what they leave out:
   pentagram (144-degree turns); all walking.
 - ``mixed_text``: the skill changes along the way (walk -> run -> hop...), on a straight line, a
   square, a curve, a back-and-forth and a seeded random path with a random skill per waypoint.
+- ``mixed_skills``: walk, run and hop alternate with segment lengths that suit each skill (run 6-10 m,
+  hop 2-4 m, walk 3-5 m), so each segment is long enough for the per-segment skill check
+  (:mod:`~latentrl.evaluation.skills`): a line, a gentle left curve, a run-first line, right-angle turns
+  and a seeded random path.
 
 ``goal_text[k]`` is the prompt in force while heading to waypoint ``k`` (``FollowPathEnv``
 switches text when a waypoint is reached). Coordinates are world metres, z up, the episode starts
@@ -96,10 +100,38 @@ def mixed_text() -> list[WaypointPath]:
     ]
 
 
+SKILL_SEGMENT_M: dict[str, tuple[float, float]] = {WALK: (3.0, 5.0), RUN: (6.0, 10.0), HOP: (2.0, 4.0)}
+"""Segment lengths (min, max metres) of ``mixed_skills`` per skill: long enough for each to settle after the
+switch (a run needs room to speed up, a hop tires quickly), so the per-segment skill check has frames to judge."""
+
+
+def _skill_path(headings_deg: Sequence[float], texts: Sequence[str], fractions: Sequence[float]) -> WaypointPath:
+    """A polyline whose segment k has the length of its skill's range at ``fractions[k]`` (0 = min, 1 = max)."""
+    lengths = [lo + f * (hi - lo) for f, (lo, hi) in zip(fractions, (SKILL_SEGMENT_M[t] for t in texts))]
+    return _path(_polyline(headings_deg, lengths), texts)
+
+
+def mixed_skills() -> list[WaypointPath]:
+    """Walk, run and hop alternate along each path, with per-skill segment lengths (:data:`SKILL_SEGMENT_M`)."""
+    rng = np.random.default_rng(20250603)
+    cycle = [WALK, RUN, HOP] * 2
+    curve = [90.0 + 15.0 * k for k in range(6)]
+    rng_texts = [WALK, RUN, HOP, RUN, WALK, HOP]
+    rng_headings = 90.0 + np.cumsum(rng.uniform(-45.0, 45.0, 6) * [30.0 / 45.0, 1, 1, 1, 1, 1])
+    return [
+        _skill_path([90.0] * 6, cycle, [0.5] * 6),
+        _skill_path(curve, cycle, [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]),
+        _skill_path([90.0] * 5, [RUN, WALK, HOP, RUN, WALK], [0.5, 0.5, 0.5, 1.0, 0.5]),
+        _skill_path([90.0, 0.0, -90.0, 180.0], [WALK, RUN, HOP, WALK], [0.5, 0.5, 0.5, 0.5]),
+        _skill_path(rng_headings, rng_texts, rng.uniform(0.0, 1.0, 6)),
+    ]
+
+
 SUITES: dict[str, Callable[[], list[WaypointPath]]] = {
     "random_smooth": random_smooth,
     "sharp_turns": sharp_turns,
     "mixed_text": mixed_text,
+    "mixed_skills": mixed_skills,
 }
 """Suite name (= file stem in ``tasks/paths/``) -> generator."""
 

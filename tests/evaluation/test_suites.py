@@ -38,3 +38,12 @@ def test_suite_content_matches_its_description():
         pts = [(0.0, 0.0)] + [w[:2] for w in path.waypoints]
         lengths = [math.dist(a, b) for a, b in zip(pts[:-1], pts[1:])]
         assert all(1.99 <= seg <= 4.01 for seg in lengths)
+
+
+def test_mixed_skills_segments_suit_their_skill():
+    for path in suites.mixed_skills():
+        pts = [(0.0, 0.0)] + [w[:2] for w in path.waypoints]
+        for text, a, b in zip(path.texts, pts[:-1], pts[1:]):
+            lo, hi = suites.SKILL_SEGMENT_M[text]
+            assert lo - 0.01 <= math.dist(a, b) <= hi + 0.01
+        assert all(t != u for t, u in zip(path.texts[:-1], path.texts[1:]))  # the skill changes at every waypoint
