@@ -62,11 +62,23 @@ class PathConfig:
     """Waypoints per random path."""
     text_per_waypoint: bool = False
     """Random paths draw a new text per waypoint (mixed-skill paths)."""
+    random_segment: list[float] = field(default_factory=lambda: [1.0, 3.0])
+    """Random segment lengths, uniform in [min, max] metres (mixed skills want room for each skill to settle)."""
+    random_turn_deg: float = 45.0
+    """Each random segment turns by up to +/- this many degrees."""
+
+    def validate(self) -> None:
+        require(len(self.random_segment) == 2 and 0 < self.random_segment[0] <= self.random_segment[1],
+                "random_segment", f"must be [min, max] metres with 0 < min <= max, got {self.random_segment}")
+        require(0 <= self.random_turn_deg <= 180, "random_turn_deg",
+                f"must be degrees in [0, 180], got {self.random_turn_deg}")
+        require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
 
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths)) if self.paths else None
         return {"paths": paths, "observe_next": self.observe_next, "random_waypoints": self.random_waypoints,
-                "text_per_waypoint": self.text_per_waypoint}
+                "text_per_waypoint": self.text_per_waypoint, "random_segment": tuple(self.random_segment),
+                "random_turn_deg": self.random_turn_deg}
 
 
 @dataclass

@@ -72,3 +72,21 @@ def test_bad_task_sections_name_the_dotted_key(tmp_path):
     f.write_text("env: {task: timed, timed: {time_left_clip: 0}}\n")
     with pytest.raises(ConfigError, match=r"env\.timed\.time_left_clip: must be > 0"):
         load_config(TrainConfig, f)
+
+
+def test_mixed_skill_config_builds_a_path_env_with_a_text_per_waypoint(tiny_model, tmp_path):
+    import pytest
+
+    from latentrl.envs.path import FollowPathEnv
+    from latentrl.errors import ConfigError
+
+    mixed = TINY.parent / "policies" / "path_mixed_default.yaml"
+    cfg = load_config(TrainConfig, mixed, ["env.num_envs=2"])
+    cfg.ppo.plan(128)
+    assert cfg.env.task == "path" and cfg.env.texts == ["walk", "run", "hop on left leg"]
+    assert cfg.eval.paths == ["tasks/paths/mixed_skills.json"]
+    env = build(cfg.env, "cpu", motion=tiny_model)
+    assert isinstance(env, FollowPathEnv) and env.text_per_waypoint and env.paths is None
+    assert env.random_segment == (2.0, 6.0) and env.random_turn_deg == 45.0
+    with pytest.raises(ConfigError, match=r"env\.path\.random_segment: must be \[min, max\] metres"):
+        load_config(TrainConfig, mixed, ["env.path.random_segment=[3.0,1.0]"])
