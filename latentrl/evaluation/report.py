@@ -323,6 +323,12 @@ def _num(value: Any, digits: int = 2) -> str:
     return f"{value:.{digits}f}" if isinstance(value, (int, float)) and math.isfinite(value) else "–"
 
 
+def _skills_total(lead: str, block: dict[str, Any]) -> str:
+    skills = (block.get("skills") or {}).values()
+    segments, judged = (sum(t.get(k) or 0 for t in skills) for k in ("segments", "judged"))
+    return f"| {lead} | all | {segments} | {judged} | {_share(block.get('segment_skill_match'))} | | | |"
+
+
 def skills_table(report: dict[str, Any]) -> list[str]:
     """Per suite and text: measured segments, judged, matched share, mean speed and single-foot shares."""
     lines = ["| suite | text | segments | judged | matched | speed (m/s) | left foot only | right foot only |",
@@ -336,11 +342,9 @@ def skills_table(report: dict[str, Any]) -> list[str]:
                          f"{_num(t.get('speed_m_s'))} | {_share(t.get('left_only'))} | {_share(t.get('right_only'))} |")
             rows += 1
         if skills:
-            judged = sum(t.get("judged") or 0 for t in skills.values())
-            lines.append(f"| **{name}** | all | {sum(t.get('segments') or 0 for t in skills.values())} | {judged} | "
-                         f"{_share(suite.get('segment_skill_match'))} | | | |")
-    if "segment_skill_match" in report["overall"]:
-        lines.append(f"| **overall** | all | | | {_share(report['overall'].get('segment_skill_match'))} | | | |")
+            lines.append(_skills_total(f"**{name}**", suite))
+    if report["overall"].get("skills"):
+        lines.append(_skills_total("**overall**", report["overall"]))
     return lines if rows else ["(no segment was long enough to measure, or the report predates the skill check)"]
 
 

@@ -132,3 +132,7 @@ def test_evaluation_reports_segments_in_json_and_markdown(tiny_model, tmp_path):
     assert "## Skill per segment" in text and "| far | run | 2 | 2 |" in text
     assert f"speed >= {K.RUN_MIN_SPEED_M_S:g} m/s" in text
     assert R.load_report(tmp_path)["overall"]["segment_skill_match"] == loaded["overall"]["segment_skill_match"]
+    assert "| **overall** | all | 2 | 2 |" in text
+    for block in (loaded["overall"], *loaded["suites"].values()):  # a report written before the skill check
+        del block["segment_skill_match"], block["skills"]
+    assert "predates the skill check" in R.report_markdown(loaded)
