@@ -1,22 +1,25 @@
 """Ship a trained policy: export it to policies/<name>.pt and write its card policies/<name>.md.
 
-    python scripts/ship_policy.py RUN_DIR EVAL_DIR NAME --config CONFIG
+    python scripts/ship_policy.py RUN_DIR EVAL_DIR NAME --config CONFIG --text TEXT [--task LINE] [--notes FILE]
 
 RUN_DIR is a `latentrl train` run (its final.pt is exported without optimizer state); EVAL_DIR holds
-the `latentrl eval` report of that final.pt on the skill's suite.
+the `latentrl eval` report of that final.pt on the skill's suite. The eval's ``paths.png`` is copied to
+``docs/eval/NAME_paths.png``; ``--notes`` appends a markdown file (what was tried, what fell short).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from pathlib import Path
 
 import torch
+import yaml
 
-from latentrl.timing import hardware
 from latentrl.evaluation.report import results_table
 from latentrl.ppo.checkpoint import export_policy
+from latentrl.timing import hardware
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,6 +31,8 @@ def main() -> None:
     ap.add_argument("name")
     ap.add_argument("--config", required=True)
     ap.add_argument("--text", required=True)
+    ap.add_argument("--task", default="Reach goals", help="what the policy does, e.g. 'Follow joystick commands'")
+    ap.add_argument("--notes", help="markdown file appended to the card")
     args = ap.parse_args()
     run, ev = Path(args.run_dir), Path(args.eval_dir)
     state = torch.load(run / "final.pt", weights_only=True)
@@ -35,10 +40,11 @@ def main() -> None:
     report = json.loads((ev / "report.json").read_text())
     s = report["settings"]
     hw = hardware()
+    threads = yaml.safe_load((run / "config.yaml").read_text()).get("threads", "?")
     card = [
         f"# {args.name}",
         "",
-        f"Reach goals with **\"{args.text}\"** on the embedded default motion model (`--motion default`, "
+        f"{args.task} with **\"{args.text}\"** on the embedded default motion model (`--motion default`, "
         f"sha256 `{state['motion']['sha256'][:16]}`).",
         "",
         "| | |",
@@ -48,7 +54,8 @@ def main() -> None:
         f"| reproduce | `latentrl train {args.config}` |",
         f"| trainer | {state['trainer']} PPO |",
         f"| iterations / env steps | {state['iteration']} / {state['env_steps']:,} primitives |",
-        f"| wall time | {state['elapsed_s'] / 60:.0f} min on {hw['cpu']} ({hw['cpu_count']} cores, CPU only, shared) |",
+        f"| wall time | {state['elapsed_s'] / 60:.0f} min on {hw['cpu']} ({hw['cpu_count']} cores, CPU only, "
+        f"{threads} torch thread(s), other trainings sharing the machine) |",
         f"| evaluation | `latentrl eval policies/{out.name} --paths {' '.join(report['suites'])} "
         f"--episodes {s['episodes']} --max-steps {s['max_steps']}` (stochastic actions, like DART) |",
         "",
@@ -62,6 +69,13 @@ def main() -> None:
         "on the default model trained on synthetic locomotion.",
         "",
     ]
+    plot = ev / "paths.png"
+    if plot.is_file():
+        target = ROOT / "docs" / "eval" / f"{args.name}_paths.png"
+        shutil.copyfile(plot, target)
+        card += [f"![{args.name} on its evaluation paths](../docs/eval/{target.name})", ""]
+    if args.notes:
+        card += [Path(args.notes).read_text().rstrip(), ""]
     (ROOT / "policies" / f"{args.name}.md").write_text("\n".join(card))
     print(f"wrote {out} and policies/{args.name}.md")
 

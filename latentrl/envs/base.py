@@ -47,7 +47,7 @@ from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_o
 from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
-from latentrl.rewards.compose import DART_TERMS, RewardComposer, RewardConfig, RewardInputs
+from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, RewardComposer, RewardConfig, RewardInputs
 
 _AUTORESET_MODES = {AutoresetMode.SAME_STEP, AutoresetMode.DISABLED}
 _RESET_OPTIONS = ("reset_mask",)
@@ -119,7 +119,7 @@ class LatentMotionVectorEnv(VectorEnv):
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
     goal_fields: tuple[tuple[str, int], ...] = (("goal_dir", 3), ("goal_dist", 1))
     """Named fields of the ``goal`` observation group, in order; tasks may extend."""
-    reward_terms: tuple[str, ...] = DART_TERMS
+    reward_terms: tuple[str, ...] = (*DART_TERMS, *COMMON_TERMS)
     """The reward terms this task computes and reports (``infos["reward/<name>"]``)."""
 
     def __init__(
@@ -441,6 +441,7 @@ class LatentMotionVectorEnv(VectorEnv):
                     reached,
                     self._floor_scale[self._text_idx],
                     self.floor_height,
+                    actions=noise,
                     **self._reward_inputs(before, future, goal, reached),
                 )
             )

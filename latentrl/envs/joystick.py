@@ -30,6 +30,7 @@ from latentrl.errors import DataError, closest
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 from latentrl.motion.text import prompt_problem
+from latentrl.rewards.compose import COMMON_TERMS
 
 STEP_SECONDS = FUTURE_LENGTH / FPS
 """One env step: 8 frames = 0.267 s."""
@@ -191,7 +192,7 @@ class JoystickEnv(LatentMotionVectorEnv):
     """
 
     goal_fields = (("command_dir", 2), ("command_speed", 1))
-    reward_terms = ("heading", "speed", "foot_floor", "skate", "rotation", "jerk")
+    reward_terms = ("heading", "speed", "foot_floor", "skate", "rotation", "jerk", *COMMON_TERMS)
 
     def __init__(
         self,

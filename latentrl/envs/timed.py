@@ -26,6 +26,7 @@ from latentrl.envs.path import MAX_FILE_BYTES, FollowPathEnv, WaypointPath, pars
 from latentrl.errors import DataError, closest
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.rewards.compose import COMMON_TERMS
 
 _FIELDS = ("goal_location", "goal_text", "goal_time")
 MAX_TIME_S = 3600.0
@@ -122,7 +123,8 @@ class TimedPathEnv(FollowPathEnv):
     """
 
     goal_fields = (("goal_dir", 3), ("goal_dist", 1), ("time_left", 1))
-    reward_terms = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk", "pace", "timing")
+    reward_terms = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk", "pace", "timing",
+                    *COMMON_TERMS)
 
     def __init__(
         self,

@@ -1,6 +1,7 @@
 """Reward terms (pure tensor kernels) and their weighted composition."""
 
 from latentrl.rewards.compose import (
+    COMMON_TERMS,
     DART_TERMS,
     DEFAULT_WEIGHTS,
     TERM_NAMES,
@@ -10,5 +11,5 @@ from latentrl.rewards.compose import (
     RewardTerm,
 )
 
-__all__ = ["DART_TERMS", "DEFAULT_WEIGHTS", "TERM_NAMES", "RewardComposer", "RewardConfig", "RewardInputs",
-           "RewardTerm"]
+__all__ = ["COMMON_TERMS", "DART_TERMS", "DEFAULT_WEIGHTS", "TERM_NAMES", "RewardComposer", "RewardConfig",
+           "RewardInputs", "RewardTerm"]

@@ -18,6 +18,7 @@ name            weight   term
 ``orient``      0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
 ``rotation``    10.0     -(1 - cos) of the hip-axis yaw change per frame
 ``jerk``        0        -(largest third difference of any joint), metres per frame^3
+``prior``       0        -max(0, mean square of the action (latent noise) - 1): noise far from N(0, I)
 ``heading``     1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
 ``speed``       1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
 ``pace``        1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
@@ -49,8 +50,11 @@ from latentrl.rewards import terms
 #: DART's terms (ReachLocation and FollowPath compute these), in reporting order.
 DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
 
+#: Terms every task computes besides its own (weight 0 unless a config sets one).
+COMMON_TERMS: tuple[str, ...] = ("prior",)
+
 #: Every term name, in reporting order: DART's, then the terms of the Joystick and TimedPath tasks.
-TERM_NAMES: tuple[str, ...] = (*DART_TERMS, "heading", "speed", "pace", "timing")
+TERM_NAMES: tuple[str, ...] = (*DART_TERMS, "heading", "speed", "pace", "timing", *COMMON_TERMS)
 
 #: DART's README weights (``fixtext_repeat_floor100_hop10_skate100``), then the task terms' (1 each).
 DEFAULT_WEIGHTS: dict[str, float] = {
@@ -65,6 +69,7 @@ DEFAULT_WEIGHTS: dict[str, float] = {
     "speed": 1.0,
     "pace": 1.0,
     "timing": 1.0,
+    "prior": 0.0,
 }
 
 
@@ -90,6 +95,8 @@ class RewardInputs:
     """TimedPath: (N,) speed toward the goal that arrives on time (distance left / time left), m/s."""
     arrival_error: torch.Tensor | None = None
     """TimedPath: (N,) arrival time - goal time of the waypoint reached in the step, seconds (0 elsewhere)."""
+    actions: torch.Tensor | None = None
+    """(N, D) the step's action (latent noise) after clamping to the action bound."""
 
     def step_seconds(self) -> float:
         """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
@@ -216,6 +223,11 @@ def _timing(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     return terms.arrival_timing(x.reached, x.need("arrival_error", "timing"), cfg.timing_tolerance)
 
 
+def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.noise_prior` of the step's action."""
+    return terms.noise_prior(x.need("actions", "prior"))
+
+
 _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
     "dist": _dist,
     "success": _success,
@@ -228,6 +240,7 @@ _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
     "speed": _speed,
     "pace": _pace,
     "timing": _timing,
+    "prior": _prior,
 }
 
 

@@ -89,3 +89,27 @@ def test_task_term_sets_and_overrides():
         RewardComposer(weights={"dist": 1.0}, terms=("heading", "speed"))
     with pytest.raises(ConfigError, match="timing_tolerance"):
         RewardComposer(RewardConfig(timing_tolerance=0.0))
+
+
+def test_noise_prior_is_free_inside_the_prior_and_grows_outside():
+    from latentrl.rewards.terms import noise_prior
+
+    a = torch.stack((torch.zeros(32), torch.ones(32), torch.full((32,), 2.0), torch.full((32,), -4.0)))
+    assert torch.allclose(noise_prior(a), torch.tensor([0.0, 0.0, -3.0, -15.0]))
+    draws = torch.randn(4096, 32, generator=torch.Generator().manual_seed(0))
+    assert float(noise_prior(draws).mean()) > -0.15  # a typical N(0, I) draw costs (almost) nothing
+
+
+def test_every_task_reports_prior_and_weights_it_into_the_reward():
+    from latentrl.rewards.compose import RewardComposer, RewardInputs
+
+    joints = torch.zeros(2, 10, 22, 3)
+    joints[..., 2] = 0.9
+    x = RewardInputs(joints, torch.zeros(2, 3), torch.zeros(2, dtype=torch.bool), torch.ones(2),
+                     actions=torch.stack((torch.zeros(32), torch.full((32,), 3.0))))
+    off = RewardComposer(terms=("dist", "prior"))
+    on = RewardComposer(weights={"prior": 0.5}, terms=("dist", "prior"))
+    total_off, values = off(x)
+    total_on, _ = on(x)
+    assert torch.allclose(values["prior"], torch.tensor([0.0, -8.0]))
+    assert torch.allclose(total_on - total_off, torch.tensor([0.0, -4.0]))
