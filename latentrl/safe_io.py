@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import io
+import json
 import os
 import pickle
 import re
@@ -226,6 +227,31 @@ def read_text_file(path: str | Path, what: str = "file", error: type[Exception] 
     except UnicodeDecodeError as exc:
         raise error(f"{path}: not a UTF-8 text {what} (byte 0x{data[exc.start]:02x} at offset {exc.start}); "
                     f"expected UTF-8 text") from None
+
+
+def read_json_file(path: str | Path, what: str, max_bytes: int, error: type[Exception]) -> Any:
+    """Parse a JSON file (a path suite, a command timeline, ...) with one-line ``error`` s naming it.
+
+    Refuses a missing file, one larger than ``max_bytes`` (say how to split it), invalid JSON (with line and
+    column), text that is not UTF-8, nesting too deep to parse and over-long number literals.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{what} not found: {path}")
+    size = path.stat().st_size
+    if size > max_bytes:
+        raise error(f"{path}: {size / (1 << 20):.0f} MiB is larger than the {max_bytes >> 20} MiB a {what} may have; "
+                    "split it into several files")
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    except UnicodeDecodeError:
+        raise error(f"{path}: not a UTF-8 text file") from None
+    except RecursionError:
+        raise error(f"{path}: JSON nested too deeply for a {what}") from None
+    except ValueError as exc:  # e.g. an integer literal longer than Python's digit limit
+        raise error(f"{path}: invalid JSON: {str(exc)[:120]}") from None
 
 
 class _StrictLoader(yaml.SafeLoader):

@@ -14,7 +14,6 @@ next one, the first at ``t`` 0, and the episode ends at ``duration``.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -31,6 +30,7 @@ from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS
+from latentrl.safe_io import read_json_file
 
 STEP_SECONDS = FUTURE_LENGTH / FPS
 """One env step: 8 frames = 0.267 s."""
@@ -74,17 +74,7 @@ def _number(value: Any) -> bool:
 
 def load_timelines(file: str | Path) -> list[CommandTimeline]:
     """Read a command-timeline file; errors name the file, entry index, command index and field (0-based)."""
-    file = Path(file)
-    if not file.is_file():
-        raise DataError(f"command timeline file not found: {file}")
-    if file.stat().st_size > MAX_FILE_BYTES:
-        raise DataError(f"{file}: larger than the {MAX_FILE_BYTES >> 20} MiB a timeline file may have")
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataError(f"{file}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
-    except (UnicodeDecodeError, RecursionError, ValueError) as exc:
-        raise DataError(f"{file}: not a readable JSON text file ({type(exc).__name__})") from None
+    data = read_json_file(file, "command timeline file", MAX_FILE_BYTES, DataError)
     return parse_timelines(data, str(file))
 
 

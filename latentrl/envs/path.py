@@ -7,7 +7,6 @@ z up, the episode starts with the pelvis at the origin facing +y; only xy is use
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.goal import body_forward
 from latentrl.errors import DataError, closest
 from latentrl.motion.text import prompt_problem
+from latentrl.safe_io import read_json_file
 
 _PATH_FIELDS = ("goal_location", "goal_text")
 MAX_WAYPOINTS = 10_000
@@ -43,24 +43,7 @@ class WaypointPath:
 
 def load_paths(file: str | Path) -> list[WaypointPath]:
     """Read a DART path file; errors name the file, path index, waypoint index and field (0-based)."""
-    file = Path(file)
-    if not file.is_file():
-        raise DataError(f"path file not found: {file}")
-    size = file.stat().st_size
-    if size > MAX_FILE_BYTES:
-        raise DataError(f"{file}: {size / (1 << 20):.0f} MiB is larger than the {MAX_FILE_BYTES >> 20} MiB a path file "
-                        "may have; split it into several files")
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataError(f"{file}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
-    except UnicodeDecodeError:
-        raise DataError(f"{file}: not a UTF-8 text file") from None
-    except RecursionError:
-        raise DataError(f"{file}: JSON nested too deeply (a path file is a list of objects holding "
-                        f"lists of [x, y, z])") from None
-    except ValueError as exc:  # e.g. an integer literal longer than Python's digit limit
-        raise DataError(f"{file}: invalid JSON: {str(exc)[:120]}") from None
+    data = read_json_file(file, "path file", MAX_FILE_BYTES, DataError)
     return parse_paths(data, str(file))
 
 

@@ -11,7 +11,6 @@ A waypoint's arrival time is that of the first new frame whose pelvis lies withi
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,6 +26,7 @@ from latentrl.errors import DataError, closest
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.rewards.compose import COMMON_TERMS
+from latentrl.safe_io import read_json_file
 
 _FIELDS = ("goal_location", "goal_text", "goal_time")
 MAX_TIME_S = 3600.0
@@ -42,17 +42,7 @@ class TimedPath(WaypointPath):
 
 def load_timed_paths(file: str | Path) -> list[TimedPath]:
     """Read a timed path file; errors name the file, path index, waypoint index and field (0-based)."""
-    file = Path(file)
-    if not file.is_file():
-        raise DataError(f"timed path file not found: {file}")
-    if file.stat().st_size > MAX_FILE_BYTES:
-        raise DataError(f"{file}: larger than the {MAX_FILE_BYTES >> 20} MiB a path file may have")
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DataError(f"{file}: invalid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
-    except (UnicodeDecodeError, RecursionError, ValueError) as exc:
-        raise DataError(f"{file}: not a readable JSON text file ({type(exc).__name__})") from None
+    data = read_json_file(file, "timed path file", MAX_FILE_BYTES, DataError)
     return parse_timed_paths(data, str(file))
 
 

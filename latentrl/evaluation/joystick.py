@@ -32,7 +32,7 @@ import torch
 from latentrl.envs.joystick import STEP_SECONDS, CommandTimeline, JoystickEnv, load_timelines, world_angle
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, end_of, episode_clip, rollout
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, end_of, episode_clip, rollout, run_each
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 
@@ -169,21 +169,9 @@ def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: Eva
                criteria: TrackingCriteria | None = None, sink=None,
                progress: Callable[[TaskResult], None] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
     """Every timeline of every file (all files are parsed first); ``[(suite name, file, results)]``."""
-    from latentrl.evaluation.runner import path_seed
-
     settings.validate()
-    loaded = [(Path(f), load_timelines(f)) for f in files]
-    out = []
-    for file, timelines in loaded:
-        results = []
-        for index, timeline in enumerate(timelines):
-            result = run_timeline(act, motion, timeline, settings, suite=file.stem, index=index, criteria=criteria,
-                                  seed=path_seed(settings.seed, file.stem, index), sink=sink)
-            results.append(result)
-            if progress is not None:
-                progress(result)
-        out.append((file.stem, str(file), results))
-    return out
+    return run_each(files, load_timelines, lambda timeline, **where: run_timeline(
+        act, motion, timeline, settings, criteria=criteria, sink=sink, **where), settings.seed, progress)
 
 
 def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_cfg: Any, device: str = "cpu"):

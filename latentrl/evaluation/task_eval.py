@@ -80,6 +80,29 @@ def rollout(env, act: Callable[[torch.Tensor], torch.Tensor], budget: int, seed:
     return {"steps": steps.cpu(), **{k: v.cpu() for k, v in out.items()}}
 
 
+def run_each(
+    files: Sequence[str | Path], load: Callable[[Path], list], run_one: Callable[..., TaskResult], seed: int,
+    progress: Callable[[TaskResult], None] | None = None,
+) -> list[tuple[str, str, list[TaskResult]]]:
+    """Every item (timeline, timed path) of every file, all files parsed first: ``[(suite, file, results)]``.
+
+    ``run_one(item, suite=, index=, seed=)`` evaluates one item; each gets its own seed from the suite
+    name and index (:func:`~latentrl.evaluation.runner.path_seed`), as the path evaluation does.
+    """
+    from latentrl.evaluation.runner import path_seed
+
+    loaded = [(Path(f), load(Path(f))) for f in files]
+    out = []
+    for file, items in loaded:
+        results = []
+        for index, item in enumerate(items):
+            results.append(run_one(item, suite=file.stem, index=index, seed=path_seed(seed, file.stem, index)))
+            if progress is not None:
+                progress(results[-1])
+        out.append((file.stem, str(file), results))
+    return out
+
+
 def end_of(outcome: dict[str, torch.Tensor], i: int) -> str:
     for name in ("complete", "diverged", "lost"):
         if bool(outcome[name][i]):

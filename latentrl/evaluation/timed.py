@@ -34,7 +34,7 @@ from latentrl.envs.timed import TimedPath, TimedPathEnv, load_timed_paths
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.results import prompts_label
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, end_of, episode_clip, rollout
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, end_of, episode_clip, rollout, run_each
 from latentrl.motion.skeleton import FPS
 
 UNITS = {"success": "share", "arrival_err_s": "s", "late_s": "s", "reached": "share", "skate_cm_s": "cm/s",
@@ -126,21 +126,10 @@ def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: Eva
                observe_next: bool = False, criteria: TimingCriteria | None = None, sink=None,
                progress: Callable[[TaskResult], None] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
     """Every path of every file (all files are parsed first); ``[(suite name, file, results)]``."""
-    from latentrl.evaluation.runner import path_seed
-
     settings.validate()
-    loaded = [(Path(f), load_timed_paths(f)) for f in files]
-    out = []
-    for file, paths in loaded:
-        results = []
-        for index, path in enumerate(paths):
-            result = run_path(act, motion, path, settings, suite=file.stem, index=index, observe_next=observe_next,
-                              criteria=criteria, seed=path_seed(settings.seed, file.stem, index), sink=sink)
-            results.append(result)
-            if progress is not None:
-                progress(result)
-        out.append((file.stem, str(file), results))
-    return out
+    return run_each(files, load_timed_paths, lambda path, **where: run_path(
+        act, motion, path, settings, observe_next=observe_next, criteria=criteria, sink=sink, **where),
+        settings.seed, progress)
 
 
 def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_cfg: Any, device: str = "cpu"):
