@@ -75,3 +75,24 @@ def matmul_peak_gflops(n: int = 2048, repeats: int = 7) -> float:
     a, b, c = torch.randn(n, n), torch.randn(n, n), torch.empty(n, n)
     t = median_time(lambda: torch.matmul(a, b, out=c), repeats=repeats, warmup=2)
     return 2.0 * n**3 / t / 1e9
+
+
+def busy_machine_warning(threads: int, load: float | None = None, cpus: int | None = None) -> str | None:
+    """A one-line warning when ``threads`` torch threads will not each get a core, else ``None``.
+
+    Why: torch's CPU threads wait on each other at every operation, so a multi-threaded job that loses a
+    core to another process stalls far more than its share. Measured on the 2-core VM (docs/benchmarks.md,
+    "Threads under load"): a 2-thread training's rollout went from 7 s to 102 s per iteration while a
+    test ran beside it, where single-threaded trainings sharing the machine kept their share.
+    ``load`` is the 1-minute load average (default: the system's) and ``cpus`` the core count.
+    """
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except OSError:  # not available on this platform
+            return None
+    cpus = cpus or os.cpu_count() or 1
+    if threads <= 1 or load + threads <= cpus + 0.5:
+        return None
+    return (f"the machine is busy (load {load:.1f} on {cpus} cores) and this job asks for {threads} torch threads; "
+            f"threads that lose their core stall each other: set threads: 1 (or --set threads=1) to degrade gracefully")

@@ -32,6 +32,7 @@ from latentrl.evaluation.config import EvalConfig
 from latentrl.ppo.config import PolicyConfig, PPOConfig
 from latentrl.preflight import check_device, check_writable
 from latentrl.resources import config_file
+from latentrl.timing import busy_machine_warning
 
 
 @dataclass
@@ -252,6 +253,8 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     collective = distributed.init(device)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
+    if torch.device(device).type == "cpu" and (busy := busy_machine_warning(torch.get_num_threads())):
+        print(f"latentrl: warning: {busy}", file=sys.stderr, flush=True)
     cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
     run_dir = Path(run_dir)
     check_writable(run_dir, "run directory")
