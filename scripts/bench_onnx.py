@@ -17,7 +17,6 @@ from pathlib import Path
 
 import torch
 
-from latentrl.bench import hardware, median_time
 from latentrl.export.onnx import (
     controller_metadata,
     export_onnx,
@@ -26,6 +25,7 @@ from latentrl.export.onnx import (
     onnx_session,
     run_session,
 )
+from latentrl.timing import hardware, median_time
 
 
 def main() -> None:

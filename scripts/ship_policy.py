@@ -18,6 +18,7 @@ import torch
 import yaml
 
 from latentrl.evaluation.report import results_table
+from latentrl.evaluation.task_eval import results_table as task_results_table
 from latentrl.ppo.checkpoint import export_policy
 from latentrl.timing import hardware
 
@@ -56,19 +57,35 @@ def main() -> None:
         f"| iterations / env steps | {state['iteration']} / {state['env_steps']:,} primitives |",
         f"| wall time | {state['elapsed_s'] / 60:.0f} min on {hw['cpu']} ({hw['cpu_count']} cores, CPU only, "
         f"{threads} torch thread(s), other trainings sharing the machine) |",
-        f"| evaluation | `latentrl eval policies/{out.name} --paths {' '.join(report['suites'])} "
-        f"--episodes {s['episodes']} --max-steps {s['max_steps']}` (stochastic actions, like DART) |",
-        "",
-        "## Evaluation",
-        "",
-        *results_table(report),
-        "",
-        "Reach time counts failed (timed-out) episodes at the budget time "
-        f"({s['budget_s']:.1f} s); 'reach time, successes' averages successful episodes only, which is what "
-        "DART's script reports. DART's row is its paper's Table 4, on its released BABEL model; ours runs "
-        "on the default model trained on synthetic locomotion.",
-        "",
     ]
+    if str(report.get("format", "")).startswith("latentrl.eval.task"):  # joystick / timed evaluations
+        files = " ".join(Path(suite["file"]).stem for suite in report["suites"])
+        card += [
+            f"| evaluation | `latentrl eval policies/{out.name} --paths {files} --episodes {s['episodes']}` "
+            "(stochastic actions) |",
+            "",
+            "## Evaluation",
+            "",
+            *task_results_table(report),
+            "",
+            report.get("definitions", ""),
+            "",
+        ]
+    else:
+        card += [
+            f"| evaluation | `latentrl eval policies/{out.name} --paths {' '.join(report['suites'])} "
+            f"--episodes {s['episodes']} --max-steps {s['max_steps']}` (stochastic actions, like DART) |",
+            "",
+            "## Evaluation",
+            "",
+            *results_table(report),
+            "",
+            "Reach time counts failed (timed-out) episodes at the budget time "
+            f"({s['budget_s']:.1f} s); 'reach time, successes' averages successful episodes only, which is what "
+            "DART's script reports. DART's row is its paper's Table 4, on its released BABEL model; ours runs "
+            "on the default model trained on synthetic locomotion.",
+            "",
+        ]
     plot = ev / "paths.png"
     if plot.is_file():
         target = ROOT / "docs" / "eval" / f"{args.name}_paths.png"
