@@ -84,7 +84,8 @@ def busy_machine_warning(threads: int, load: float | None = None, cpus: int | No
     core to another process stalls far more than its share. Measured on the 2-core VM (docs/benchmarks.md,
     "Threads under load"): a 2-thread training's rollout went from 7 s to 102 s per iteration while a
     test ran beside it, where single-threaded trainings sharing the machine kept their share.
-    ``load`` is the 1-minute load average (default: the system's) and ``cpus`` the core count.
+    ``load`` is the 1-minute load average (default: the system's), which counts this process too (one
+    runnable task is taken as ours), and ``cpus`` the core count.
     """
     if load is None:
         try:
@@ -92,7 +93,7 @@ def busy_machine_warning(threads: int, load: float | None = None, cpus: int | No
         except OSError:  # not available on this platform
             return None
     cpus = cpus or os.cpu_count() or 1
-    if threads <= 1 or load + threads <= cpus + 0.5:
+    if threads <= 1 or max(0.0, load - 1.0) + threads <= cpus + 0.5:
         return None
     return (f"the machine is busy (load {load:.1f} on {cpus} cores) and this job asks for {threads} torch threads; "
             f"threads that lose their core stall each other: set threads: 1 (or --set threads=1) to degrade gracefully")

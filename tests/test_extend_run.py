@@ -67,8 +67,11 @@ def test_total_steps_extends_a_finished_run_and_other_changes_are_refused(motion
 
 def _old_layout(env: dict) -> dict:
     """The flat ``env:`` section runs wrote before env.reach/env.path/env.rewards (and env.seed_history)."""
-    old = {k: v for k, v in env.items() if k not in ("reach", "path", "rewards", "seed_history")}
-    return {**old, **env["reach"], **env["path"]}
+    from latentrl.envs.config import ALIASES
+
+    old = {k: v for k, v in env.items() if k not in ("reach", "path", "rewards", "seed_history", "joystick", "timed")}
+    sections = {**env["reach"], **env["path"]}
+    return {**old, **{k: v for k, v in sections.items() if k in ALIASES}}  # fields added since stay defaults
 
 
 def test_runs_written_before_the_env_sections_still_resume(motion_file, tmp_path):

@@ -253,8 +253,6 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     collective = distributed.init(device)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
-    if torch.device(device).type == "cpu" and (busy := busy_machine_warning(torch.get_num_threads())):
-        print(f"latentrl: warning: {busy}", file=sys.stderr, flush=True)
     cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
     run_dir = Path(run_dir)
     check_writable(run_dir, "run directory")
@@ -267,6 +265,8 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
         venv = Sb3VecEnv(env)
     hook = make_eval_hook(cfg, motion, device) if collective.is_main else None  # rank 0 evaluates
     ppo = dataclasses.replace(cfg.ppo, device=device)  # the checkpoints keep the config's device
+    if torch.device(device).type == "cpu" and (busy := busy_machine_warning(torch.get_num_threads())):
+        print(f"latentrl: note: {busy}", flush=True)  # stdout: stderr is kept for errors, one line each
     return train_ppo(venv, run_dir, ppo, cfg.policy, trainer=trainer, config=cfg, resume=resume,
                      motion=motion_info(motion), evaluate=hook, allow_motion_mismatch=allow_motion_mismatch,
                      progress=progress)

@@ -8,7 +8,7 @@ from stable_baselines3.common.vec_env import VecCheckNan, VecEnv
 
 from latentrl.envs import Sb3VecEnv
 from latentrl.errors import ConfigError
-from latentrl.rewards import DART_TERMS
+from latentrl.rewards import COMMON_TERMS, DART_TERMS
 
 OBS = 4 + 32 + 552 + 1
 
@@ -26,7 +26,8 @@ def test_vecenv_contract(make_reach):
     obs, rewards, dones, infos = venv.step(act)
     assert obs.dtype == np.float32 and rewards.dtype == np.float32 and rewards.shape == (3,)
     assert dones.dtype == np.bool_ and not dones.any() and len(infos) == 3
-    assert all(set(info) == {f"reward/{k}" for k in DART_TERMS} for info in infos)  # no episode keys yet
+    # no episode keys yet
+    assert all(set(info) == {f"reward/{k}" for k in (*DART_TERMS, *COMMON_TERMS)} for info in infos)
     assert all(isinstance(v, float) for v in infos[0].values())
     obs, rewards, dones, infos = venv.step(act)
     assert dones.all() and len(infos) == 3

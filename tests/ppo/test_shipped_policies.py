@@ -1,0 +1,49 @@
+"""Every shipped policy loads on the embedded default model and drives one short path of its own skill.
+
+The cards' headline numbers come from ``latentrl eval policies/<name>.pt --paths dart_<skill>_long
+--episodes 32 --max-steps 256`` (each card names its command); this test keeps the files loadable and on
+the model they were trained on, with one cheap deterministic episode each.
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+
+from latentrl.app.cli import main
+from latentrl.motion.checkpoint import default_model_path, file_sha256
+
+ROOT = Path(__file__).resolve().parents[2]
+POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart along +y)
+    "reach_walk_default": ("dart_walk_long", 96),
+    "reach_run_default": ("dart_run_long", 48),
+    "reach_hop_left_default": ("dart_hop_long", 64),
+}
+SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
+
+
+def test_every_shipped_reach_policy_is_listed_here():
+    shipped = {p.stem for p in (ROOT / "policies").glob("reach_*.pt")}
+    assert shipped <= set(POLICIES), shipped - set(POLICIES)
+    assert "reach_walk_default" in shipped
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_drives_its_first_path(name, tmp_path):
+    suite, budget = POLICIES[name]
+    state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
+    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    card = (ROOT / "policies" / f"{name}.md").read_text()
+    assert state["motion"]["sha256"][:16] in card and f"--paths {suite}" in card
+    paths = json.loads((ROOT / "latentrl" / "tasks" / "paths" / f"{suite}.json").read_text())
+    (tmp_path / "first.json").write_text(json.dumps(paths[:1]))
+    out = tmp_path / "eval"
+    code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
+                 "--episodes", "1", "--max-steps", str(budget), "--deterministic", "--no-render", "--no-motions",
+                 "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    episode = report["suites"]["first"]["paths"][0]["episodes"][0]
+    # the last waypoint is 20 m ahead: a working policy ends far closer to it than it started
+    assert episode["final_dist_m"] < 10.0, episode
