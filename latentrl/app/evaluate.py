@@ -237,15 +237,20 @@ def evaluate(req: EvalRequest) -> int:
     return 0
 
 
+def _task_entries(task: str, file) -> list:
+    """The entries of a suite file of ``task``: command timelines (joystick) or timed paths (timed)."""
+    from latentrl.evaluation import joystick, timed
+
+    return joystick.load_timelines(file) if task == "joystick" else timed.load_timed_paths(file)
+
+
 def _task_suites(task: str, texts) -> tuple[str, ...]:
     """The shipped suites of ``task`` whose every text the policy was trained on (all of them if none is)."""
-    from latentrl.evaluation import joystick, timed
     from latentrl.resources import suites_folder
 
     known, fits = set(texts), []
     for name in TASK_SUITES[task]:
-        file = suites_folder(task) / f"{name}.json"
-        entries = joystick.load_timelines(file) if task == "joystick" else timed.load_timed_paths(file)
+        entries = _task_entries(task, suites_folder(task) / f"{name}.json")
         used = {e.text for e in entries} if task == "joystick" else {t for e in entries for t in e.texts}
         if used <= known:
             fits.append(name)
@@ -287,7 +292,7 @@ def evaluate_task(req: EvalRequest, env_cfg) -> int:
     module = joystick if task == "joystick" else timed
     settings = _settings(req)
     files = resolve_path_files(req.paths, task, _task_suites(task, env_cfg.texts))
-    entries = [joystick.load_timelines(f) if task == "joystick" else timed.load_timed_paths(f) for f in files]
+    entries = [_task_entries(task, f) for f in files]  # check every file before loading models
     req.policy = str(policy_file(req.policy))
     beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
     out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"

@@ -32,7 +32,8 @@ import torch
 from latentrl.envs.joystick import STEP_SECONDS, CommandTimeline, JoystickEnv, load_timelines, world_angle
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, end_of, episode_clip, rollout, run_each
+from latentrl.evaluation.episodes import end_of, rollout
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 

@@ -40,6 +40,7 @@ from latentrl.envs.path import FollowPathEnv, WaypointPath, load_paths
 from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
+from latentrl.evaluation.episodes import end_of, rollout
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, frames_after
 from latentrl.evaluation.skills import judge_clip
 from latentrl.motion.clip import MotionClip
@@ -138,35 +139,23 @@ def path_seed(seed: int, suite: str, index: int) -> int:
 
 
 def _rollout(env: FollowPathEnv, act: PolicyFn, max_steps: int, seed: int) -> dict[str, torch.Tensor]:
-    """Step the batch until every env is done or the budget is spent; per-env (CPU) outcome tensors.
+    """:func:`~latentrl.evaluation.episodes.rollout` of a path batch, also noting when each waypoint was reached.
 
     Returns ``steps`` (N,) primitives until done, ``success``/``diverged``/``lost`` (N,) bool and
     ``wp_step`` (N, W) the step at which each waypoint was reached (0 = never).
     """
-    torch.manual_seed(seed)
-    obs, _ = env.reset(seed=seed)
     n, dev = env.num_envs, env.device
-    width = max(len(p.waypoints) for p in env.paths)
-    done = torch.zeros(n, dtype=torch.bool, device=dev)
-    out = {k: torch.zeros(n, dtype=torch.bool, device=dev) for k in ("success", "diverged", "lost")}
-    steps = torch.full((n,), max_steps, dtype=torch.long, device=dev)
-    wp_step = torch.zeros(n, width, dtype=torch.long, device=dev)
+    wp_step = torch.zeros(n, max(len(p.waypoints) for p in env.paths), dtype=torch.long, device=dev)
     rows = torch.arange(n, device=dev)
-    for k in range(1, max_steps + 1):
-        obs, _, terminated, truncated, infos = env.step(act(obs))
-        live = ~done
+
+    def note_waypoints(k: int, infos: dict, live: torch.Tensor) -> None:
         reached = infos["waypoint_reached"] & live
         wp = (infos["waypoint_index"] - 1).clamp(min=0)  # the index after advancing, minus the one reached
         wp_step[rows[reached], wp[reached]] = k
-        out["success"] |= infos["is_success"] & live
-        out["diverged"] |= infos["diverged"] & live
-        ended = live & (terminated | truncated)
-        out["lost"] |= ended & terminated & ~infos["is_success"] & ~infos["diverged"]
-        steps = torch.where(ended, k, steps)
-        done |= ended
-        if bool(done.all()):
-            break
-    return {"steps": steps.cpu(), "wp_step": wp_step.cpu(), **{k: v.cpu() for k, v in out.items()}}
+
+    outcome = rollout(env, act, max_steps, seed, on_step=note_waypoints)
+    outcome["success"] = outcome.pop("complete")  # a path's completion is its success
+    return {**outcome, "wp_step": wp_step.cpu()}
 
 
 def _episode_motion(env: FollowPathEnv, i: int, steps: int) -> MotionClip:
@@ -174,13 +163,6 @@ def _episode_motion(env: FollowPathEnv, i: int, steps: int) -> MotionClip:
     clip = env.export_clip(i, episode=0).cut(steps)
     clip.meta.pop("from_reset", None)
     return clip
-
-
-def _end(outcome: dict[str, torch.Tensor], i: int) -> str:
-    for name in ("success", "diverged", "lost"):
-        if bool(outcome[name][i]):
-            return name
-    return "timeout"
 
 
 def run_path(
@@ -211,7 +193,7 @@ def run_path(
             path_index=index,
             episode=i,
             success=success,
-            end=_end(outcome, i),
+            end=end_of(outcome, i, complete="success"),
             steps=steps,
             reach_time_s=frames_after(steps) / FPS if success else settings.budget_s,
             waypoint_times_s=wp_times,

@@ -51,35 +51,6 @@ class TaskResult:
     wall_s: float
 
 
-def rollout(env, act: Callable[[torch.Tensor], torch.Tensor], budget: int, seed: int,
-            on_step: Callable[[int, dict, torch.Tensor], None] | None = None) -> dict[str, torch.Tensor]:
-    """Step a no-autoreset batch until every env ended or ``budget`` steps; per-env (CPU) outcomes.
-
-    ``on_step(k, infos, live)`` sees every step's infos (k from 1) with the (N,) mask of envs still
-    counting. Returns ``steps`` (N,) and ``complete``/``diverged``/``lost`` (N,) bool.
-    """
-    torch.manual_seed(seed)
-    obs, _ = env.reset(seed=seed)
-    n, dev = env.num_envs, env.device
-    done = torch.zeros(n, dtype=torch.bool, device=dev)
-    out = {k: torch.zeros(n, dtype=torch.bool, device=dev) for k in ("complete", "diverged", "lost")}
-    steps = torch.full((n,), budget, dtype=torch.long, device=dev)
-    for k in range(1, budget + 1):
-        obs, _, terminated, truncated, infos = env.step(act(obs))
-        live = ~done
-        if on_step is not None:
-            on_step(k, infos, live)
-        out["complete"] |= infos["is_success"] & live
-        out["diverged"] |= infos["diverged"] & live
-        ended = live & (terminated | truncated)
-        out["lost"] |= ended & terminated & ~infos["is_success"] & ~infos["diverged"]
-        steps = torch.where(ended, k, steps)
-        done |= ended
-        if bool(done.all()):
-            break
-    return {"steps": steps.cpu(), **{k: v.cpu() for k, v in out.items()}}
-
-
 def run_each(
     files: Sequence[str | Path], load: Callable[[Path], list], run_one: Callable[..., TaskResult], seed: int,
     progress: Callable[[TaskResult], None] | None = None,
@@ -101,13 +72,6 @@ def run_each(
                 progress(results[-1])
         out.append((file.stem, str(file), results))
     return out
-
-
-def end_of(outcome: dict[str, torch.Tensor], i: int) -> str:
-    for name in ("complete", "diverged", "lost"):
-        if bool(outcome[name][i]):
-            return name
-    return "timeout"
 
 
 def episode_clip(env, i: int, steps: int):

@@ -33,8 +33,9 @@ from latentrl.envs.joystick import STEP_SECONDS
 from latentrl.envs.timed import TimedPath, TimedPathEnv, load_timed_paths
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
+from latentrl.evaluation.episodes import end_of, rollout
 from latentrl.evaluation.results import prompts_label
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, end_of, episode_clip, rollout, run_each
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each
 from latentrl.motion.skeleton import FPS
 
 UNITS = {"success": "share", "arrival_err_s": "s", "late_s": "s", "reached": "share", "skate_cm_s": "cm/s",
