@@ -12,6 +12,7 @@ key still load.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -154,6 +155,11 @@ MAX_THREADS = 1024
 
 MAX_SEED = 2**32 - 1
 """Seeds lie in [0, 2**32 - 1]: numpy's ``np.random.seed`` and torch generators accept no more."""
+
+
+def is_finite_number(value: object) -> bool:
+    """A real number from a JSON or YAML file: an int or float, finite, and not a bool (``True`` is an int)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def seed_problem(value: object) -> str | None:

@@ -22,7 +22,7 @@ from typing import Any
 
 import torch
 
-from latentrl.config import require
+from latentrl.config import is_finite_number, require
 from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.goal import body_forward
 from latentrl.errors import DataError, closest
@@ -68,10 +68,6 @@ class CommandTimeline:
         return current
 
 
-def _number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
 def load_timelines(file: str | Path) -> list[CommandTimeline]:
     """Read a command-timeline file; errors name the file, entry index, command index and field (0-based)."""
     data = read_json_file(file, "command timeline file", MAX_FILE_BYTES, DataError)
@@ -108,7 +104,7 @@ def _parse_entry(item: Any, where: str) -> CommandTimeline:
         raise DataError(f"{where}: field 'text' must be a non-empty string, got {text!r:.80}")
     if prompt_problem(text) is not None:
         raise DataError(f"{where}: field 'text': {prompt_problem(text)}")
-    if not _number(duration) or not 0 < duration <= MAX_DURATION_S:
+    if not is_finite_number(duration) or not 0 < duration <= MAX_DURATION_S:
         raise DataError(f"{where}: field 'duration' must be seconds in (0, {MAX_DURATION_S:g}], got {duration!r:.80}")
     if not isinstance(commands, list) or not commands:
         raise DataError(f"{where}: field 'commands' must be a non-empty list of {{t, heading_deg, speed}}, "
@@ -120,13 +116,13 @@ def _parse_entry(item: Any, where: str) -> CommandTimeline:
         here = f"{where}, command {j}"
         _check_fields(command, _COMMAND_FIELDS, here)
         t, heading, speed = command["t"], command["heading_deg"], command["speed"]
-        if not _number(t) or (j == 0 and t != 0) or (j > 0 and not last < t < duration):
+        if not is_finite_number(t) or (j == 0 and t != 0) or (j > 0 and not last < t < duration):
             expected = "0 (the first command starts the episode)" if j == 0 else \
                 f"seconds after the previous command ({last:g}) and before the duration ({duration:g})"
             raise DataError(f"{here}: field 't' must be {expected}, got {t!r:.80}")
-        if not _number(heading) or abs(heading) > 1e6:
+        if not is_finite_number(heading) or abs(heading) > 1e6:
             raise DataError(f"{here}: field 'heading_deg' must be a finite number of degrees, got {heading!r:.80}")
-        if not _number(speed) or not 0 <= speed <= MAX_SPEED_M_S:
+        if not is_finite_number(speed) or not 0 <= speed <= MAX_SPEED_M_S:
             raise DataError(f"{here}: field 'speed' must be m/s in [0, {MAX_SPEED_M_S:g}], got {speed!r:.80}")
         parsed.append((float(t), float(heading), float(speed)))
         last = float(t)

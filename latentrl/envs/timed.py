@@ -11,7 +11,6 @@ A waypoint's arrival time is that of the first new frame whose pelvis lies withi
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from typing import Any
 
 import torch
 
-from latentrl.config import require
+from latentrl.config import is_finite_number, require
 from latentrl.envs.joystick import STEP_SECONDS
 from latentrl.envs.path import MAX_FILE_BYTES, FollowPathEnv, WaypointPath, parse_paths
 from latentrl.errors import DataError, closest
@@ -74,8 +73,7 @@ def _parse_times(times: Any, count: int, where: str) -> tuple[float, ...]:
         raise DataError(f"{where}: field 'goal_time' has {len(times)} entries for {count} waypoints")
     last = 0.0
     for j, t in enumerate(times):
-        ok = isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t)
-        if not ok or not last < t <= MAX_TIME_S:
+        if not is_finite_number(t) or not last < t <= MAX_TIME_S:
             raise DataError(f"{where}, waypoint {j}: field 'goal_time' must be seconds after the previous "
                             f"arrival ({last:g}) and at most {MAX_TIME_S:g}, got {t!r:.80}")
         last = float(t)

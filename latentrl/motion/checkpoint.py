@@ -18,7 +18,6 @@ containers and tensors only, so ``torch.load(weights_only=True)`` reads it.
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 from dataclasses import asdict, fields
 from importlib import resources
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from latentrl.config import is_finite_number
 from latentrl.errors import CheckpointError
 from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
 from latentrl.motion.diffusion import DiffusionConfig
@@ -206,7 +206,7 @@ def _checked(name: str, value: Any, default: Any, source: str) -> Any:
         if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_ARCH_INT:
             raise bad(f"an integer in [1, {MAX_ARCH_INT}]")
     elif isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not is_finite_number(value):
             raise bad("a finite number")
     elif isinstance(default, str):
         if not isinstance(value, str):
