@@ -388,6 +388,7 @@ class LatentMotionVectorEnv(VectorEnv):
                     s.world.rotation.index_copy(0, idx, fresh.world.rotation),
                     s.world.translation.index_copy(0, idx, fresh.world.translation),
                 ),
+                s.airborne_flags().index_copy(0, idx, fresh.airborne_flags()),
             )
         if randomize_steps:
             start = torch.randint(self.max_episode_steps, (len(idx),), generator=self._generator, device=self.device)
@@ -545,6 +546,7 @@ class LatentMotionVectorEnv(VectorEnv):
                 torch.where(d, old.world.rotation, new.world.rotation),
                 torch.where(diverged[:, None], old.world.translation, new.world.translation),
             ),
+            torch.where(diverged, old.airborne_flags(), new.airborne_flags()),
         )
 
     def _reached(self, future: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
@@ -601,7 +603,8 @@ class LatentMotionVectorEnv(VectorEnv):
             tensors = {name: value.clone() for name, value in vars(self).items() if torch.is_tensor(value)}
             tensors.update({"state.history": self._state.history.clone(),
                             "state.world.rotation": self._state.world.rotation.clone(),
-                            "state.world.translation": self._state.world.translation.clone()})
+                            "state.world.translation": self._state.world.translation.clone(),
+                            "state.airborne": self._state.airborne_flags().clone()})
             state["episode"] = tensors
         return state
 
@@ -619,6 +622,7 @@ class LatentMotionVectorEnv(VectorEnv):
             tensors["state.history"].to(self.device),
             WorldTransform(tensors["state.world.rotation"].to(self.device),
                            tensors["state.world.translation"].to(self.device)),
+            tensors["state.airborne"].to(self.device) if "state.airborne" in tensors else None,
         )
 
     # ------------------------------------------------------------------ history

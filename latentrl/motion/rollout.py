@@ -29,6 +29,9 @@ from latentrl.motion.vae import PrimitiveVAE
 
 #: Contact band of the floor snap (metres): see :meth:`MotionModel._snap_to_floor`; ``None`` turns it off.
 FLOOR_SNAP_M = 0.05
+#: Highest a primitive's lowest joint may be above the floor (metres). The generated data's highest is
+#: 0.129 m (a jump's flight, over every 8-frame window of the 200 default sequences).
+FLIGHT_CAP_M = 0.15
 
 
 class PrimitiveSample(NamedTuple):
@@ -44,6 +47,13 @@ class RolloutState(NamedTuple):
 
     history: torch.Tensor  # (B, 2, 276) unnormalized canonical history
     world: WorldTransform  # canonical -> world
+    airborne: torch.Tensor | None = None  # (B,) bool: the last primitive never came within the snap band
+
+    def airborne_flags(self) -> torch.Tensor:
+        """(B,) bool ``airborne``; all False where unknown (a fresh or hand-made state)."""
+        if self.airborne is not None:
+            return self.airborne
+        return torch.zeros(self.history.shape[0], dtype=torch.bool, device=self.history.device)
 
 
 class StepResult(NamedTuple):
@@ -273,13 +283,16 @@ class MotionModel(nn.Module):
         with torch.inference_mode():
             placement = state.world
             joints_world = placement.apply(joints_of(sample.future))
+            airborne = None
             if self.floor_snap is not None:
-                joints_world, placement = self._snap_to_floor(joints_world, placement)
+                joints_world, placement, airborne = self._snap_to_floor(joints_world, placement, state.airborne)
             history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
             world = placement.compose(rotation, origin)
-        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world), placement)
+        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
-    def _snap_to_floor(self, joints_world: torch.Tensor, world: WorldTransform) -> tuple[torch.Tensor, WorldTransform]:
+    def _snap_to_floor(
+        self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, WorldTransform, torch.Tensor]:
         """Keep the world floor at z = 0: shift each primitive so its lowest joint touches it.
 
         Why: the canonical frame has its origin at the pelvis, so the model never sees where the
@@ -287,16 +300,26 @@ class MotionModel(nn.Module):
         sinks or floats by decimetres in a minute). The shift changes only the world placement, never
         the model's input. A primitive whose lowest joint is below the floor is lifted; one within
         ``floor_snap`` metres above it (a foot on the floor) is lowered onto it; one higher up is in
-        the air (a jump or a hop's flight) and keeps its height. DART's ``rollout_mld.py`` has a
-        ``fix_floor`` option of the same kind.
+        the air (a jump or a hop's flight) and keeps its height, but never more than
+        :data:`FLIGHT_CAP_M`, and only for one primitive: one that follows an airborne primitive
+        (``airborne``) lands. In the generated data no two 8-frame windows in a row are airborne and
+        no lowest joint is above 0.129 m, so the rules bind only motion the data never shows
+        (policies learned to fly without them: a run policy's pelvis reached 4.96 m). DART's
+        ``rollout_mld.py`` has a ``fix_floor`` option of the same kind.
+
+        Returns the shifted joints, the shifted placement and the new (B,) ``airborne`` flags.
         """
         lowest = joints_world[..., 2].flatten(1).min(dim=1).values  # (B,)
-        shift = torch.where(lowest <= self.floor_snap, -lowest, torch.zeros_like(lowest))
+        if airborne is None:
+            airborne = torch.zeros_like(lowest, dtype=torch.bool)
+        land = (lowest <= self.floor_snap) | airborne
+        target = torch.where(land, torch.zeros_like(lowest), lowest.clamp(max=FLIGHT_CAP_M))
+        shift = target - lowest
         up = torch.tensor([0.0, 0.0, 1.0], dtype=shift.dtype, device=shift.device)
         offset = shift[:, None] * up  # (B, 3), z only
         joints_world = joints_world + offset[:, None, None, :]
         translation = world.translation + offset
-        return joints_world, WorldTransform(world.rotation, translation)
+        return joints_world, WorldTransform(world.rotation, translation), ~land
 
     def rollout(
         self,

@@ -72,16 +72,39 @@ def test_pelvis_delta_from_seed_matches(tiny_model):
 
 def test_floor_snap_lifts_sinking_lowers_hovering_and_keeps_flight(tiny_model):
     from latentrl.motion.canonical import WorldTransform
+    from latentrl.motion.rollout import FLIGHT_CAP_M
 
-    world = WorldTransform.identity(3)
-    joints = torch.zeros(3, 8, 22, 3)
+    world = WorldTransform.identity(4)
+    joints = torch.zeros(4, 8, 22, 3)
     joints[..., 2] = torch.linspace(0.0, 1.0, 22)  # lowest joint at 0, pelvis-ish joints above
-    lows = torch.tensor([-0.20, 0.03, 0.30])  # sunk, hovering within the band, in the air
+    lows = torch.tensor([-0.20, 0.03, 0.10, 0.60])  # sunk, within the band, a hop's flight, flying
     joints[..., 2] += lows[:, None, None]
-    snapped, new_world = tiny_model._snap_to_floor(joints, world)
-    assert torch.allclose(snapped[..., 2].amin(dim=(1, 2)), torch.tensor([0.0, 0.0, 0.30]), atol=1e-6)
-    assert torch.allclose(new_world.translation[:, 2], torch.tensor([0.20, -0.03, 0.0]), atol=1e-6)
+    snapped, new_world, airborne = tiny_model._snap_to_floor(joints, world)
+    expected = torch.tensor([0.0, 0.0, 0.10, FLIGHT_CAP_M])  # flight kept, but capped
+    assert torch.allclose(snapped[..., 2].amin(dim=(1, 2)), expected, atol=1e-6)
+    assert torch.allclose(new_world.translation[:, 2], expected - lows, atol=1e-6)
     assert torch.equal(snapped[..., :2], joints[..., :2]) and torch.equal(new_world.rotation, world.rotation)
+    assert airborne.tolist() == [False, False, True, True]
+
+
+def test_floor_snap_lands_a_second_airborne_primitive(tiny_model):
+    from latentrl.motion.canonical import WorldTransform
+
+    joints = torch.zeros(2, 8, 22, 3)
+    joints[..., 2] = torch.linspace(0.0, 1.0, 22) + 0.10  # both 10 cm up
+    before = torch.tensor([False, True])  # the second was airborne one primitive ago already
+    snapped, _, airborne = tiny_model._snap_to_floor(joints, WorldTransform.identity(2), before)
+    assert torch.allclose(snapped[..., 2].amin(dim=(1, 2)), torch.tensor([0.10, 0.0]), atol=1e-6)
+    assert airborne.tolist() == [True, False]
+
+
+def test_rollout_state_carries_airborne_flags(tiny_model):
+    state = tiny_model.initial_state(3, generator=torch.Generator().manual_seed(0))
+    assert state.airborne is None and state.airborne_flags().tolist() == [False] * 3
+    out = tiny_model.rollout_step(state, tiny_model.encode_text(["walk"] * 3), torch.randn(3, 1, 16))
+    assert out.state.airborne is not None and out.state.airborne.shape == (3,)
+    lowest = out.joints_world[..., 2].flatten(1).amin(dim=1)
+    assert torch.equal(out.state.airborne, lowest > 1e-6)  # landed primitives sit exactly on the floor
 
 
 def test_floor_snap_keeps_long_rollouts_on_the_floor_and_can_be_turned_off(tiny_model):
