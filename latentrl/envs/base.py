@@ -114,6 +114,8 @@ class LatentMotionVectorEnv(VectorEnv):
             :meth:`export_history` (one device-to-host copy per step; clear it to bound memory).
         record_features: also record world-frame 276-D features (costs a transform per step).
         render_mode: only ``None``; render exported histories with :mod:`latentrl.render`.
+        compile: run each step's tensor maths (:meth:`_motion_core`) as one
+            ``torch.compile(fullgraph=True)`` graph; the first step compiles (tens of seconds).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -147,6 +149,7 @@ class LatentMotionVectorEnv(VectorEnv):
         record_history: bool = False,
         record_features: bool = False,
         render_mode: str | None = None,
+        compile: bool = False,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -180,6 +183,10 @@ class LatentMotionVectorEnv(VectorEnv):
         self.divergence_limit = float(divergence_limit)
         self.random_initial_steps = bool(random_initial_steps)
         self.render_mode = None
+        self.compiled = bool(compile)
+        self._core = (
+            torch.compile(self._motion_core, fullgraph=True, dynamic=False) if self.compiled else self._motion_core
+        )
         self.rewards = RewardComposer(reward_config, reward_weights, terms=self.reward_terms)
         self._setup_texts(texts, text_weights)
         self._setup_spaces()
@@ -419,42 +426,54 @@ class LatentMotionVectorEnv(VectorEnv):
         truncated (N,) bool, infos)`` on ``device``.
         """
         state = self._require_state()
-        # no_grad rather than inference_mode: the model samples in inference mode internally, but
+        # no_grad rather than inference_mode (the model samples under no_grad too, which torch.compile needs):
         # what we return must be ordinary tensors that a trainer may feed to autograd
         # (inference tensors cannot be saved for backward).
         with torch.no_grad():
             noise, nonfinite = self._prepare_actions(actions)
-            out = self.motion.rollout_step(
-                state,
-                self._text_emb[self._text_idx],
-                noise.view(self.num_envs, *self.motion.latent_shape),
-                self.guidance_scale,
-            )
-            diverged = self._diverged(out.joints_world, out.state)
-            before = state.world.apply(joints_of(state.history))  # (N, 2, 22, 3)
-            future = torch.where(diverged[:, None, None, None], before[:, -1:], out.joints_world)
             goal = self.goal_world.clone()
-            reached = self._reached(future, goal) & ~diverged
-            reward, terms = self.rewards(
-                RewardInputs(
-                    torch.cat((before, future), 1),
-                    goal,
-                    reached,
-                    self._floor_scale[self._text_idx],
-                    self.floor_height,
-                    actions=noise,
-                    **self._reward_inputs(before, future, goal, reached),
-                )
+            out, future, reached, diverged, reward, terms, new_state = self._core(
+                state, self._text_emb[self._text_idx], noise, goal, self._floor_scale[self._text_idx]
             )
-            reward = torch.where(diverged, 0.0, reward)
-            terms = {k: torch.where(diverged, 0.0, v) for k, v in terms.items()}
             if self._history is not None:
                 feats = None
                 if self._history.record_features:
                     feats = features_to_world(out.future, out.placement, self.motion.pelvis_delta)
                 self._history.on_step(future, noise, self._text_idx, goal, feats)
-            self._state = self._keep_finite(out.state, state, diverged)
+            self._state = new_state
             return self._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
+
+    def _motion_core(
+        self, state: RolloutState, text: torch.Tensor, noise: torch.Tensor, goal: torch.Tensor, floor_scale: torch.Tensor
+    ) -> tuple:
+        """The tensor maths of a step: sample, decode and place the primitive, divergence, rewards.
+
+        Pure tensor code with no host syncs, so that ``compile=True`` runs it as one
+        ``torch.compile(fullgraph=True)`` graph (tests/envs/test_compiled_step.py checks there is no
+        graph break); counters, task updates, infos and autoreset stay in :meth:`_finish_step`.
+        Returns ``(step, future, reached, diverged, reward, terms, next_state)``.
+        """
+        out = self.motion.rollout_step(
+            state, text, noise.view(self.num_envs, *self.motion.latent_shape), self.guidance_scale
+        )
+        diverged = self._diverged(out.joints_world, out.state)
+        before = state.world.apply(joints_of(state.history))  # (N, 2, 22, 3)
+        future = torch.where(diverged[:, None, None, None], before[:, -1:], out.joints_world)
+        reached = self._reached(future, goal) & ~diverged
+        reward, terms = self.rewards(
+            RewardInputs(
+                torch.cat((before, future), 1),
+                goal,
+                reached,
+                floor_scale,
+                self.floor_height,
+                actions=noise,
+                **self._reward_inputs(before, future, goal, reached),
+            )
+        )
+        reward = torch.where(diverged, 0.0, reward)
+        terms = {k: torch.where(diverged, 0.0, v) for k, v in terms.items()}
+        return out, future, reached, diverged, reward, terms, self._keep_finite(out.state, state, diverged)
 
     def _finish_step(
         self,

@@ -181,7 +181,7 @@ class MotionModel(nn.Module):
                 f"noise must be ({b}, {self.latent_shape[0]}, {self.latent_shape[1]}), got {tuple(noise.shape)}"
             )
 
-    @torch.inference_mode()
+    @torch.no_grad()
     def sample_primitive(
         self,
         history: torch.Tensor,
@@ -280,7 +280,7 @@ class MotionModel(nn.Module):
         sample = self.sample_primitive(
             state.history, text_embedding, noise, guidance_scale, sampler, generator=generator
         )
-        with torch.inference_mode():
+        with torch.no_grad():
             placement = state.world
             joints_world = placement.apply(joints_of(sample.future))
             airborne = None
@@ -344,7 +344,7 @@ class MotionModel(nn.Module):
         if len(texts) != num_steps:
             raise ValueError(f"got {len(texts)} step prompts for {num_steps} steps")
         state = state or self.initial_state(batch, generator)
-        with torch.inference_mode():
+        with torch.no_grad():
             joints = [state.world.apply(joints_of(state.history))]
             feats = [features_to_world(state.history, state.world, self.pelvis_delta)]
         latents, noises = [], []
@@ -356,7 +356,7 @@ class MotionModel(nn.Module):
                 batch, *self.latent_shape, generator=generator,
                 device=generator.device if generator is not None else "cpu").to(self.device)
             out = self.rollout_step(state, emb, x_t, guidance_scale)
-            with torch.inference_mode():
+            with torch.no_grad():
                 feats.append(features_to_world(out.future, out.placement, self.pelvis_delta))
             joints.append(out.joints_world)
             latents.append(out.latent)

@@ -30,6 +30,14 @@ def test_bench_reports_both_kinds_and_the_ratio(tmp_path):
     for row in rows:
         assert row["vector"]["frames_per_s"] == 8 * row["vector"]["env_steps_per_s"]
         assert row["speedup"] == row["vector"]["env_steps_per_s"] / row["loop"]["env_steps_per_s"]
+        assert row["sampler"]["env_steps_per_s"] > 0  # the bare sampler, beside the env
+        assert row["env_share"] == 1.0 - row["vector"]["env_steps_per_s"] / row["sampler"]["env_steps_per_s"]
+
+
+def test_bare_sampler_timer_steps_the_model_from_its_seed_states():
+    from latentrl.app.bench.env import time_bare_sampler
+
+    assert time_bare_sampler(bench_model("tiny"), 3, "cpu", 2) > 0
 
 
 def test_bench_refuses_a_missing_model_before_timing_anything(tmp_path):

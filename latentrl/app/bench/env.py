@@ -4,7 +4,8 @@ For each model, device and env count N it times :meth:`ReachLocationEnv.step` on
 of N envs, and ``gymnasium.vector.SyncVectorEnv`` over N :class:`SingleEnv` wrappers (each a
 ``num_envs=1`` env sharing the same model), which is what a plain Gymnasium setup would do.
 Figures: env steps/s (N x vector steps/s), frames/s (8 per env step) and the speed ratio, all
-measured in the same run. Combinations whose estimated time exceeds ``max_seconds`` are skipped
+measured in the same run, beside the bare sampler's primitives/s at the same batch
+(``MotionModel.rollout_step`` alone, no env): their ratio is what the env adds per step. Combinations whose estimated time exceeds ``max_seconds`` are skipped
 with a note (estimated from the previous N of the same model, device and kind, which scales
 about linearly once the machine is saturated).
 """
@@ -109,6 +110,20 @@ def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int) 
     return mean_time(lambda: env.step(actions), steps, device)
 
 
+def time_bare_sampler(model: MotionModel, num_envs: int, device: str, steps: int) -> float:
+    """Seconds per ``rollout_step`` of ``num_envs`` rollouts: the motion model alone, without the env."""
+    generator = torch.Generator().manual_seed(0)
+    state = model.initial_state(num_envs, generator=generator)
+    text = model.encode_text(["walk"] * num_envs)
+    noise = torch.randn(num_envs, *model.latent_shape, generator=generator).to(device)
+    holder = [state]
+
+    def step() -> None:
+        holder[0] = model.rollout_step(holder[0], text, noise).state
+
+    return mean_time(step, steps, device)
+
+
 def _single(model: MotionModel, device: str) -> SingleEnv:
     return SingleEnv(ReachLocationEnv(1, motion=model, device=device, autoreset_mode=AutoresetMode.DISABLED))
 
@@ -170,7 +185,10 @@ def bench_env(args: EnvBenchRequest) -> int:
                     "device": device,
                     "num_envs": n,
                     "vector": _run_kind("vector", time_vector_env, model, name, device, n, args, last),
+                    "sampler": _run_kind("sampler", time_bare_sampler, model, name, device, n, args, last),
                 }
+                if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["sampler"]:
+                    row["env_share"] = 1.0 - row["vector"]["env_steps_per_s"] / row["sampler"]["env_steps_per_s"]
                 if args.baseline:
                     row["loop"] = _run_kind("loop", time_loop_env, model, name, device, n, args, last)
                     if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["loop"]:
@@ -195,6 +213,9 @@ def _line(name: str, row: dict) -> str:
         return f"{fig['env_steps_per_s']:9.1f} steps/s {fig['frames_per_s']:10.1f} frames/s"
 
     text = f"{name:>10} {row['device']:>5} N={row['num_envs']:>5}: batched {fmt(row['vector'])}"
+    text += f" | bare sampler {fmt(row['sampler'])}"
+    if "env_share" in row:
+        text += f" (env adds {100 * row['env_share']:.0f}%)"
     if "loop" in row:
         text += f" | loop {fmt(row['loop'])}"
     if "speedup" in row:
