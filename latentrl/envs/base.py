@@ -444,7 +444,8 @@ class LatentMotionVectorEnv(VectorEnv):
             return self._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
 
     def _motion_core(
-        self, state: RolloutState, text: torch.Tensor, noise: torch.Tensor, goal: torch.Tensor, floor_scale: torch.Tensor
+        self, state: RolloutState, text: torch.Tensor, noise: torch.Tensor, goal: torch.Tensor,
+        floor_scale: torch.Tensor,
     ) -> tuple:
         """The tensor maths of a step: sample, decode and place the primitive, divergence, rewards.
 

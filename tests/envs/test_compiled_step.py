@@ -4,7 +4,6 @@ import pytest
 import torch
 
 from tests.envs.conftest import actions
-from tests.envs.test_env_contract import make_task  # noqa: F401  (the per-task fixture)
 
 
 def _core_inputs(env):

@@ -5,9 +5,10 @@ of N envs, and ``gymnasium.vector.SyncVectorEnv`` over N :class:`SingleEnv` wrap
 ``num_envs=1`` env sharing the same model), which is what a plain Gymnasium setup would do.
 Figures: env steps/s (N x vector steps/s), frames/s (8 per env step) and the speed ratio, all
 measured in the same run, beside the bare sampler's primitives/s at the same batch
-(``MotionModel.rollout_step`` alone, no env): their ratio is what the env adds per step. Combinations whose estimated time exceeds ``max_seconds`` are skipped
-with a note (estimated from the previous N of the same model, device and kind, which scales
-about linearly once the machine is saturated).
+(``MotionModel.rollout_step`` alone, no env): their ratio is what the env adds per step.
+Combinations whose estimated time exceeds ``max_seconds`` are skipped with a note (estimated from
+the previous N of the same model, device and kind, which scales about linearly once the machine is
+saturated).
 """
 
 from __future__ import annotations
