@@ -186,6 +186,8 @@ def _bench_commands(sub) -> None:
     env.add_argument("--steps", type=_pos_int, default=5, help="timed steps per figure")
     env.add_argument("--max-seconds", type=_pos_float, default=120.0, help="skip combinations estimated to take longer")
     env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
+    env.add_argument("--compile", action="store_true",
+                     help="also time the env with compile=True (its first step compiles; not timed)")
     env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
     env.add_argument("--json", help="write all figures to this JSON file")
     env.set_defaults(func=_bench_env)

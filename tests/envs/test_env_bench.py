@@ -64,3 +64,14 @@ def test_standing_seed_is_canonical_and_on_its_feet():
     model = bench_model("tiny")
     assert model.seed_history is not None and model.text_encoder is not None
     assert model.pelvis_delta.shape == (3,) and torch.equal(pelvis_delta, model.pelvis_delta)
+
+
+def test_bench_times_the_compiled_env_beside_the_eager_one(tmp_path, monkeypatch):
+    """``--compile`` adds a compiled row and its ratio (traced with the eager backend here: no C++ build)."""
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: real(fn, **{**kw, "backend": "eager"}))
+    torch._dynamo.reset()
+    assert bench_env(bench_args(tmp_path, num_envs=[2], baseline=False, compile=True)) == 0
+    row = json.loads((tmp_path / "env.json").read_text())["models"]["tiny"]["results"][0]
+    assert row["compiled"]["env_steps_per_s"] > 0
+    assert row["compile_speedup"] == row["compiled"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]

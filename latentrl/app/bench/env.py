@@ -38,6 +38,7 @@ class EnvBenchRequest:
     steps: int = 5
     max_seconds: float = 120.0
     baseline: bool = True
+    compile: bool = False
     threads: int | None = None
     json: str | None = None
 
@@ -103,9 +104,9 @@ def tiny_model() -> MotionModel:
     )
 
 
-def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int) -> float:
-    """Seconds per step of one batched ReachLocation env of ``num_envs`` envs."""
-    env = ReachLocationEnv(num_envs, motion=model, device=device)
+def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int, compile: bool = False) -> float:
+    """Seconds per step of one batched ReachLocation env of ``num_envs`` envs (``compile``: its step compiled)."""
+    env = ReachLocationEnv(num_envs, motion=model, device=device, compile=compile)
     env.reset(seed=0)
     actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
     return mean_time(lambda: env.step(actions), steps, device)
@@ -161,7 +162,8 @@ def bench_env(args: EnvBenchRequest) -> int:
     ``args`` fields (``latentrl bench env`` flags): ``models`` (list: 'default', 'official',
     'tiny' or paths), ``num_envs`` (list of N), ``device`` (list or ``None`` = cpu plus cuda
     when present), ``steps`` (timed steps per figure, after one warm-up), ``max_seconds``
-    (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too),
+    (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too), ``compile``
+    (time the env with ``compile=True`` too; the warm-up step compiles and is not timed),
     ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``).
     """
     if args.threads:
@@ -188,6 +190,11 @@ def bench_env(args: EnvBenchRequest) -> int:
                     "vector": _run_kind("vector", time_vector_env, model, name, device, n, args, last),
                     "sampler": _run_kind("sampler", time_bare_sampler, model, name, device, n, args, last),
                 }
+                if getattr(args, "compile", False):
+                    timer = partial(time_vector_env, compile=True)
+                    row["compiled"] = _run_kind("compiled", timer, model, name, device, n, args, last)
+                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["compiled"]:
+                        row["compile_speedup"] = row["compiled"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
                 if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["sampler"]:
                     row["env_share"] = 1.0 - row["vector"]["env_steps_per_s"] / row["sampler"]["env_steps_per_s"]
                 if args.baseline:
@@ -217,6 +224,10 @@ def _line(name: str, row: dict) -> str:
     text += f" | bare sampler {fmt(row['sampler'])}"
     if "env_share" in row:
         text += f" (env adds {100 * row['env_share']:.0f}%)"
+    if "compiled" in row:
+        text += f" | compiled {fmt(row['compiled'])}"
+    if "compile_speedup" in row:
+        text += f" ({row['compile_speedup']:.2f}x eager)"
     if "loop" in row:
         text += f" | loop {fmt(row['loop'])}"
     if "speedup" in row:
