@@ -47,3 +47,21 @@ def test_shipped_policy_drives_its_first_path(name, tmp_path):
     episode = report["suites"]["first"]["paths"][0]["episodes"][0]
     # the last waypoint is 20 m ahead: a working policy ends far closer to it than it started
     assert episode["final_dist_m"] < 10.0, episode
+
+
+def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
+    """timed_walk_default (policies/timed_walk_default.md) on the first entry of tasks/timed/timed_walk.json."""
+    name = "timed_walk_default"
+    state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
+    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    assert "--paths timed_walk" in (ROOT / "policies" / f"{name}.md").read_text()
+    suite = json.loads((ROOT / "latentrl" / "tasks" / "timed" / "timed_walk.json").read_text())
+    (tmp_path / "first.json").write_text(json.dumps(suite[:1]))
+    out = tmp_path / "eval"
+    code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
+                 "--episodes", "1", "--deterministic", "--no-render", "--no-motions", "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["task"] == "timed"
+    metrics = report["suites"][0]["entries"][0]["metrics"]
+    assert metrics["reached"]["mean"] > 0.5, metrics  # most waypoints of the 9.5 s line reached
