@@ -19,12 +19,13 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_walk_default": ("dart_walk_long", 96),
     "reach_run_default": ("dart_run_long", 48),
     "reach_hop_left_default": ("dart_hop_long", 96),
+    "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m
 }
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
 def test_every_shipped_reach_policy_is_listed_here():
-    shipped = {p.stem for p in (ROOT / "policies").glob("reach_*.pt")}
+    shipped = {p.stem for p in (ROOT / "policies").glob("reach_*.pt")} | {"path_mixed_default"}
     assert shipped <= set(POLICIES), shipped - set(POLICIES)
     assert "reach_walk_default" in shipped
 
@@ -45,7 +46,7 @@ def test_shipped_policy_drives_its_first_path(name, tmp_path):
     assert code == 0
     report = json.loads((out / "report.json").read_text())
     episode = report["suites"]["first"]["paths"][0]["episodes"][0]
-    # the last waypoint is 20 m ahead: a working policy ends far closer to it than it started
+    # the last waypoint is 20 m (mixed: 30 m) ahead: a working policy ends far closer to it than it started
     assert episode["final_dist_m"] < 10.0, episode
 
 
