@@ -110,6 +110,7 @@ class GaussianDiffusion:
         else:
             self.model_log_variance = np.log(np.append(self.posterior_variance[1], betas[1:]))
         self._f32: dict[tuple[str, str], torch.Tensor] = {}
+        self.warm("cpu")
 
     def tables(self) -> dict[str, np.ndarray]:
         """The float64 tables, under DART's names (for inspection and parity checks)."""
@@ -127,6 +128,22 @@ class GaussianDiffusion:
         out = {n: getattr(self, n) for n in names}
         out["timestep_map"] = np.array(self.timestep_map)
         return out
+
+    #: The tables the samplers gather from (``_coef`` names).
+    COEFFICIENTS: tuple[str, ...] = (
+        "alphas_cumprod", "alphas_cumprod_prev", "model_log_variance", "posterior_mean_coef1",
+        "posterior_mean_coef2", "sqrt_alphas_cumprod", "sqrt_one_minus_alphas_cumprod", "sqrt_recip_alphas_cumprod",
+        "sqrt_recipm1_alphas_cumprod",
+    )
+
+    def warm(self, device: str | torch.device) -> None:
+        """Copy every table to ``device`` now, so that sampling never fills the cache.
+
+        Why: a compiled step (``compile=True`` envs) guards on this cache; a first call that fills it
+        would recompile the whole step once more on the next call.
+        """
+        for name in self.COEFFICIENTS:
+            self._coef(name, torch.device(device))
 
     def _coef(self, name: str, device: torch.device) -> torch.Tensor:
         """float32 copy of a table on ``device`` (the cast DART applies when it gathers values)."""

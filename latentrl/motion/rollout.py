@@ -263,7 +263,7 @@ class MotionModel(nn.Module):
         world = WorldTransform.identity(batch, self.device)
         lowest = joints_of(history)[..., 2].amin(dim=(1, 2))
         world = WorldTransform(world.rotation, torch.stack((torch.zeros_like(lowest),) * 2 + (-lowest,), dim=-1))
-        return RolloutState(history, world)
+        return RolloutState(history, world, torch.zeros(batch, dtype=torch.bool, device=self.device))
 
     def rollout_step(
         self,

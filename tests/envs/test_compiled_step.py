@@ -26,6 +26,18 @@ def test_every_task_step_core_traces_as_one_graph(make_task):
     assert traced[5].keys() == eager[5].keys()
 
 
+def test_every_task_steps_through_one_compiled_graph_without_recompiling(make_task):
+    """Autoresets, partial resets, new commands and waypoints change values, never the graph's guards."""
+    env = make_task(num_envs=3, max_episode_steps=2)
+    torch._dynamo.reset()
+    env._core = torch.compile(env._motion_core, fullgraph=True, backend="eager")
+    env.reset(seed=0)
+    env.step(actions(3, seed=0))  # compiles
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        for step in range(1, 5):  # truncations every 2 steps: same-step autoresets included
+            env.step(actions(3, seed=step))
+
+
 @pytest.mark.slow
 def test_compiled_env_matches_the_eager_env(make_reach):
     """The inductor-compiled step (what ``compile: true`` runs) reproduces the eager env step for step."""
