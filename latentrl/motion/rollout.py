@@ -283,15 +283,17 @@ class MotionModel(nn.Module):
         with torch.no_grad():
             placement = state.world
             joints_world = placement.apply(joints_of(sample.future))
-            airborne = None
+            airborne = state.airborne  # without the snap nothing lands: the flags pass through
             if self.floor_snap is not None:
-                joints_world, placement, airborne = self._snap_to_floor(joints_world, placement, state.airborne)
+                joints_world, placement, airborne = self._snap_to_floor(
+                    joints_world, placement, state.airborne_flags()
+                )
             history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
             world = placement.compose(rotation, origin)
         return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
     def _snap_to_floor(
-        self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor | None = None
+        self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor
     ) -> tuple[torch.Tensor, WorldTransform, torch.Tensor]:
         """Keep the world floor at z = 0: shift each primitive so its lowest joint touches it.
 
@@ -307,11 +309,10 @@ class MotionModel(nn.Module):
         (policies learned to fly without them: a run policy's pelvis reached 4.96 m). DART's
         ``rollout_mld.py`` has a ``fix_floor`` option of the same kind.
 
-        Returns the shifted joints, the shifted placement and the new (B,) ``airborne`` flags.
+        ``airborne`` is the (B,) flags of the previous primitive; returns the shifted joints, the shifted
+        placement and the new flags.
         """
         lowest = joints_world[..., 2].flatten(1).min(dim=1).values  # (B,)
-        if airborne is None:
-            airborne = torch.zeros_like(lowest, dtype=torch.bool)
         land = (lowest <= self.floor_snap) | airborne
         target = torch.where(land, torch.zeros_like(lowest), lowest.clamp(max=FLIGHT_CAP_M))
         shift = target - lowest

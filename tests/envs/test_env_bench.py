@@ -16,6 +16,7 @@ def bench_args(tmp_path, **kwargs) -> argparse.Namespace:
         "steps": 1,
         "max_seconds": 60.0,
         "baseline": True,
+        "compile": False,
         "threads": None,
         "json": str(tmp_path / "env.json"),
     }

@@ -79,7 +79,7 @@ def test_floor_snap_lifts_sinking_lowers_hovering_and_keeps_flight(tiny_model):
     joints[..., 2] = torch.linspace(0.0, 1.0, 22)  # lowest joint at 0, pelvis-ish joints above
     lows = torch.tensor([-0.20, 0.03, 0.10, 0.60])  # sunk, within the band, a hop's flight, flying
     joints[..., 2] += lows[:, None, None]
-    snapped, new_world, airborne = tiny_model._snap_to_floor(joints, world)
+    snapped, new_world, airborne = tiny_model._snap_to_floor(joints, world, torch.zeros(4, dtype=torch.bool))
     expected = torch.tensor([0.0, 0.0, 0.10, FLIGHT_CAP_M])  # flight kept, but capped
     assert torch.allclose(snapped[..., 2].amin(dim=(1, 2)), expected, atol=1e-6)
     assert torch.allclose(new_world.translation[:, 2], expected - lows, atol=1e-6)

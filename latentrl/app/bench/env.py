@@ -118,10 +118,10 @@ def time_bare_sampler(model: MotionModel, num_envs: int, device: str, steps: int
     state = model.initial_state(num_envs, generator=generator)
     text = model.encode_text(["walk"] * num_envs)
     noise = torch.randn(num_envs, *model.latent_shape, generator=generator).to(device)
-    holder = [state]
 
     def step() -> None:
-        holder[0] = model.rollout_step(holder[0], text, noise).state
+        nonlocal state
+        state = model.rollout_step(state, text, noise).state
 
     return mean_time(step, steps, device)
 
@@ -190,7 +190,7 @@ def bench_env(args: EnvBenchRequest) -> int:
                     "vector": _run_kind("vector", time_vector_env, model, name, device, n, args, last),
                     "sampler": _run_kind("sampler", time_bare_sampler, model, name, device, n, args, last),
                 }
-                if getattr(args, "compile", False):
+                if args.compile:
                     timer = partial(time_vector_env, compile=True)
                     row["compiled"] = _run_kind("compiled", timer, model, name, device, n, args, last)
                     if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["compiled"]:
