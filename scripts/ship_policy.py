@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 import yaml
 
-from latentrl.evaluation.report import results_table
+from latentrl.evaluation.report import DART_TABLE4, results_table
 from latentrl.evaluation.task_eval import results_table as task_results_table
 from latentrl.ppo.checkpoint import export_policy
 from latentrl.timing import hardware
@@ -82,8 +82,9 @@ def main() -> None:
             "",
             "Reach time counts failed (timed-out) episodes at the budget time "
             f"({s['budget_s']:.1f} s); 'reach time, successes' averages successful episodes only, which is what "
-            "DART's script reports. DART's row is its paper's Table 4, on its released BABEL model; ours runs "
-            "on the default model trained on synthetic locomotion.",
+            "DART's script reports."
+            + (" DART's row is its paper's Table 4, on its released BABEL model; ours runs on the default model "
+               "trained on synthetic locomotion." if any(suite in DART_TABLE4 for suite in report["suites"]) else ""),
             "",
         ]
     plot = ev / "paths.png"
