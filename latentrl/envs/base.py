@@ -184,9 +184,8 @@ class LatentMotionVectorEnv(VectorEnv):
         self.random_initial_steps = bool(random_initial_steps)
         self.render_mode = None
         self.compiled = bool(compile)
-        diffusion = getattr(self.motion, "diffusion", None)
-        if self.compiled and diffusion is not None:
-            diffusion.warm(self.motion.device)  # no cache fill inside the graph (it would recompile it)
+        if self.compiled:
+            self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
         self._core = (
             torch.compile(self._motion_core, fullgraph=True, dynamic=False) if self.compiled else self._motion_core
         )

@@ -1,8 +1,10 @@
 """Latent denoisers (DART's ``DenoiserTransformer`` and ``DenoiserMLP``) with DART's parameter names.
 
 A denoiser maps a noisy latent ``x_t`` (B, 1, D), the diffusion step, the normalized history
-(B, 2, 276) and a text embedding (B, E) to a prediction of the clean latent ``x_0``. It knows
-nothing of noise schedules or guidance: :mod:`latentrl.motion.diffusion` drives it.
+(B, 2, 276) and a text embedding (B, E) to a prediction of the clean latent ``x_0``: directly
+(DART's) or through ``v`` (``DenoiserConfig.prediction``; the only place it needs the noise schedule,
+handed over by :meth:`Denoiser.attach_schedule`). Guidance and the sampling loops are
+:mod:`latentrl.motion.diffusion`'s.
 
 Transformer tokens, in order: ``[time, text, history_0, history_1, noisy latent]``, each embedded
 to ``h_dim`` by its own Linear, plus sinusoidal positions 0..4 on **all** tokens; the last token
@@ -46,6 +48,13 @@ class DenoiserConfig:
     """Latent shape (tokens, width) = the VAE's ``latent_dim``."""
     cond_mask_prob: float = 0.1
     """Probability of dropping the text during training (classifier-free guidance)."""
+    prediction: str = "x0"
+    """What the network outputs: 'x0' (DART) or 'v' (``sqrt(acp) eps - sqrt(1 - acp) x0``, turned into x0
+    by :meth:`Denoiser.denoise`). Why 'v': at low noise an x0 network must copy ``x_t`` through every layer,
+    and a small one fails to, so its samples collapse toward the conditional mean (docs/motion.md)."""
+
+#: The denoiser outputs :class:`DenoiserConfig` knows.
+PREDICTIONS = ("x0", "v")
 
 
 class TimestepEmbedder(nn.Module):
@@ -65,6 +74,30 @@ class Denoiser(nn.Module):
     """Common interface: ``forward`` for training, ``condition`` + ``denoise`` for sampling."""
 
     config: DenoiserConfig
+
+    def attach_schedule(self, base_alphas_cumprod) -> None:
+        """Give a v-predicting denoiser the cumulative alphas of the base process, by original step index.
+
+        Non-persistent buffers: the schedule belongs to the diffusion config, saved beside the weights.
+        An x0 denoiser keeps them too but never reads them.
+        """
+        acp = torch.as_tensor(base_alphas_cumprod, dtype=torch.float32)
+        self.register_buffer("v_signal", acp.sqrt(), persistent=False)
+        self.register_buffer("v_noise", (1.0 - acp).sqrt(), persistent=False)
+
+    def denoise(self, x_t: torch.Tensor, timesteps: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """x_t (B, n, D) + step (B,) or () + :meth:`condition` tokens -> x0 prediction (B, n, D)."""
+        return self.x0_from_output(x_t, timesteps, self.predict(x_t, timesteps, cond))
+
+    def x0_from_output(self, x_t: torch.Tensor, timesteps: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+        """The network's output read as x0: itself, or ``sqrt(acp) x_t - sqrt(1 - acp) v``."""
+        if self.config.prediction == "x0":
+            return out
+        if getattr(self, "v_signal", None) is None:
+            raise RuntimeError("a v-predicting denoiser needs attach_schedule(...) before it denoises")
+        a = self.v_signal[timesteps].reshape(-1, 1, 1).to(out.dtype)
+        s = self.v_noise[timesteps].reshape(-1, 1, 1).to(out.dtype)
+        return a * x_t - s * out
 
     def mask_text(self, text: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         """Training-time text dropout for classifier-free guidance (rows zeroed with ``cond_mask_prob``)."""
@@ -103,8 +136,8 @@ class DenoiserTransformer(Denoiser):
         tokens = torch.cat((self.embed_text(text).unsqueeze(1), self.embed_history(history)), dim=1)
         return tokens + self.sequence_pos_encoder.rows(1 + tokens.shape[1])[1:]
 
-    def denoise(self, x_t: torch.Tensor, timesteps: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-        """x_t (B, n, D) + step (B,) or () + :meth:`condition` tokens -> x0 prediction (B, n, D)."""
+    def predict(self, x_t: torch.Tensor, timesteps: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """The network's raw output (x0 or v, ``config.prediction``), (B, n, D)."""
         b, n = x_t.shape[:2]
         pe = self.sequence_pos_encoder.rows(2 + cond.shape[1] + n - 1)
         time_tok = (self.embed_timestep(timesteps) + pe[0]).reshape(-1, 1, cond.shape[-1]).expand(b, 1, -1)
@@ -184,7 +217,7 @@ class DenoiserMLP(Denoiser):
         hist = history.reshape(history.shape[0], self.history_dim)
         return text @ w[:, h : h + e].T + hist @ w[:, h + e : h + e + self.history_dim].T + self.input_project.bias
 
-    def denoise(self, x_t: torch.Tensor, timesteps: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+    def predict(self, x_t: torch.Tensor, timesteps: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         b = x_t.shape[0]
         h = self.config.h_dim
         w = self.input_project.weight
@@ -195,6 +228,8 @@ class DenoiserMLP(Denoiser):
 
 def build_denoiser(config: DenoiserConfig) -> Denoiser:
     """The denoiser class named by ``config.model_type``."""
+    if config.prediction not in PREDICTIONS:
+        raise ValueError(f"prediction must be one of {list(PREDICTIONS)}, got {config.prediction!r}")
     if config.model_type == "transformer":
         return DenoiserTransformer(config)
     if config.model_type == "mlp":

@@ -84,6 +84,8 @@ class GaussianDiffusion:
         base_betas = betas_for_schedule(config.noise_schedule, config.diffusion_steps)
         self.timestep_map = space_timesteps(config.diffusion_steps, config.respacing)
         base_acp = np.cumprod(1.0 - base_betas)
+        self.base_alphas_cumprod = base_acp
+        """Cumulative alphas of the un-respaced process, by original step index (what the model sees)."""
         if len(self.timestep_map) == config.diffusion_steps:
             betas = base_betas
         else:  # respaced: recompute betas from the kept cumulative products (guided-diffusion)

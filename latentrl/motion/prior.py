@@ -47,6 +47,14 @@ class MotionPrior(Protocol):
         """Start states of ``batch`` rollouts (a seed history each, the world at the origin)."""
         ...
 
+    def prepare_compile(self) -> None:
+        """Build every tensor the model would cache lazily while sampling, now.
+
+        Why: a ``torch.compile``-d env step guards on such caches; one filled inside the graph would
+        recompile the whole step on the next call. A model without caches does nothing.
+        """
+        ...
+
     def rollout_step(self, state: RolloutState, text_embedding: torch.Tensor, noise: torch.Tensor,
                      guidance_scale: float | torch.Tensor = ..., sampler: str = "ddim",
                      generator: torch.Generator | None = None) -> StepResult:

@@ -108,6 +108,7 @@ class MotionModel(nn.Module):
         self.denoiser = denoiser.eval().requires_grad_(False)
         self.diffusion_config = diffusion_config
         self.diffusion = GaussianDiffusion(diffusion_config)
+        self.denoiser.attach_schedule(self.diffusion.base_alphas_cumprod)
         self.register_buffer("mean", normalizer.mean.clone())
         self.register_buffer("std", normalizer.std.clone())
         self.text_encoder = text_encoder
@@ -140,6 +141,10 @@ class MotionModel(nn.Module):
     @property
     def normalizer(self) -> Normalizer:
         return Normalizer(self.mean, self.std).to(self.device)
+
+    def prepare_compile(self) -> None:
+        """Copy the diffusion tables to the model's device now (:meth:`MotionPrior.prepare_compile`)."""
+        self.diffusion.warm(self.device)
 
     def set_respacing(self, respacing: str) -> None:
         """Visit fewer diffusion steps when sampling ('' = all, 'ddim5', ...)."""

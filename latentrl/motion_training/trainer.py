@@ -23,6 +23,7 @@ import torch
 from latentrl.config import MAX_THREADS, require, require_seed, to_dict, to_yaml
 from latentrl.datasets.locomotion import LocomotionConfig
 from latentrl.errors import CheckpointError, ConfigError, NonFiniteError
+from latentrl.motion.denoiser import PREDICTIONS
 from latentrl.motion_training.losses import (
     EMA,
     DenoiserTrainConfig,
@@ -103,6 +104,8 @@ class MotionTrainConfig:
             f"expected 'hashed-bow-<dim>' or 'minilm-l6-v2', got '{self.text_encoder}'",
         )
         dim = int(hashed) if hashed.isdigit() else 384
+        require(self.model.denoiser.prediction in PREDICTIONS, "model.denoiser.prediction",
+                f"expected one of {list(PREDICTIONS)}, got '{self.model.denoiser.prediction}'")
         require(self.model.denoiser.clip_dim == dim, "model.denoiser.clip_dim",
                 f"is {self.model.denoiser.clip_dim} but text encoder '{self.text_encoder}' gives {dim} dims")
 
@@ -143,6 +146,7 @@ class MotionTrainer:
         from latentrl.motion.diffusion import GaussianDiffusion
 
         self.diffusion = GaussianDiffusion(cfg.model.diffusion)
+        self.denoiser.attach_schedule(self.diffusion.base_alphas_cumprod)
         self.vae_ema = EMA(self.vae, cfg.vae_train.ema_decay)
         self.den_ema = EMA(self.denoiser, cfg.denoiser_train.ema_decay)
         self.vae_opt = make_optimizer(self.vae, cfg.vae_train)

@@ -119,3 +119,31 @@ def test_floor_snap_keeps_long_rollouts_on_the_floor_and_can_be_turned_off(tiny_
     finally:
         tiny_model.floor_snap = 0.05
     assert torch.allclose(free.joints_world[..., :2], roll.joints_world[..., :2], atol=1e-5)
+
+
+def test_v_prediction_reads_back_the_clean_latent():
+    """Known answer: for x_t = q_sample(x0, t, eps) the true v = sqrt(acp) eps - sqrt(1 - acp) x0 gives x0 back.
+
+    Checks that the denoiser's schedule buffers line up with the diffusion's steps (the model sees the
+    original step index).
+    """
+    from latentrl.motion.denoiser import DenoiserConfig, build_denoiser
+    from latentrl.motion.diffusion import DiffusionConfig, GaussianDiffusion
+
+    diffusion = GaussianDiffusion(DiffusionConfig(diffusion_steps=10))
+    den = build_denoiser(DenoiserConfig(h_dim=16, ff_size=32, num_layers=1, clip_dim=8, noise_shape=(1, 4),
+                                        prediction="v"))
+    g = torch.Generator().manual_seed(0)
+    x0, eps = torch.randn(10, 1, 4, generator=g), torch.randn(10, 1, 4, generator=g)
+    t = torch.arange(10)
+    with pytest.raises(RuntimeError, match="attach_schedule"):
+        den.x0_from_output(x0, t, x0)
+    den.attach_schedule(diffusion.base_alphas_cumprod)
+    x_t = diffusion.q_sample(x0, t, eps)
+    acp = torch.as_tensor(diffusion.alphas_cumprod, dtype=torch.float32).reshape(-1, 1, 1)
+    v = acp.sqrt() * eps - (1 - acp).sqrt() * x0
+    assert torch.allclose(den.x0_from_output(x_t, t, v), x0, atol=1e-5)
+    # one step index for the whole batch (what the sampler passes) reads the same row
+    assert torch.allclose(den.x0_from_output(x_t[3:4], torch.tensor(3), v[3:4]), x0[3:4], atol=1e-5)
+    with pytest.raises(ValueError, match="prediction must be one of"):
+        build_denoiser(DenoiserConfig(prediction="eps"))
