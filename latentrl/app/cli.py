@@ -170,6 +170,8 @@ def _bench_commands(sub) -> None:
     roll.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads (default: torch's)")
     roll.add_argument("--amp", nargs="+", choices=["bf16", "fp16"],
                       help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16)")
+    roll.add_argument("--compile", action="store_true",
+                      help="also time the sampler under torch.compile(fullgraph=True) with frozen weights")
     roll.add_argument("--dart-src", default=None,
                       help="extracted zkf1997/DART tree; runs ../shared/tools/dart_peer_bench.py side by side")
     roll.add_argument("--dart-python", default=None, help="python of the environment able to import DART")

@@ -1,0 +1,21 @@
+"""``latentrl bench rollout``: its rows and its compiled figure (small batches, the embedded model)."""
+
+import json
+
+import torch
+
+from latentrl.app.bench.rollout import RolloutBenchRequest, bench_rollout
+
+
+def test_compile_adds_a_compiled_row_that_matches_the_eager_sampler(tmp_path, monkeypatch):
+    """Traced with the eager backend (no C++ build in the fast suite): one graph, same numbers."""
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: real(fn, **{**kw, "backend": "eager"}))
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[2], models=["default"], device=["cpu"], repeats=1, compile=True, json=str(out))
+    assert bench_rollout(req) == 0
+    rows = json.loads(out.read_text())["models"]["default"]["results"]
+    eager, compiled = rows
+    assert "compiled" not in eager and compiled["compiled"] is True
+    assert compiled["batch"] == eager["batch"] == 2 and compiled["primitives_per_s"] > 0
+    assert compiled["max_abs_diff_vs_eager"] < 1e-4
