@@ -258,6 +258,8 @@ ROWS = [
     ("motion-train-device", ["motion", "train", "{MTINY}", "--set", "device=cuda:7"],
      r"device: 'cuda:7' (requested|does)"),
     ("motion-train-resume-nothing", ["motion", "train", "--resume", "nowhere"], r"--resume nowhere: no config\.yaml"),
+    ("motion-train-vae-from-missing", ["motion", "train", "{MTINY}", "--run-dir", "{fx}/vae_from_run", "--vae-from",
+                                       "nowhere.pt"], r"nowhere\.pt"),
     ("export-bvh-missing", ["motion", "export-bvh", "missing.npz"], r"motion file not found: missing\.npz"),
     ("export-bvh-junk", ["motion", "export-bvh", "{fx}/junk.npz"], r"junk\.npz: not a readable motion \.npz"),
     ("export-bvh-bad-shape", ["motion", "export-bvh", "{fx}/badshape.npz"],

@@ -109,6 +109,8 @@ def _motion_commands(sub) -> None:
     train.add_argument("--run-dir", help="run directory (default: runs/motion-<time>)")
     train.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its last checkpoint")
     train.add_argument("--out", help="where to write the model (default: <run_dir>/motion_model.pt)")
+    train.add_argument("--vae-from", metavar="MODEL.pt",
+                       help="take this trained model's VAE and train only the denoiser (same model.vae and data)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     train.set_defaults(func=_motion_train)
 

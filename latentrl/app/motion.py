@@ -47,6 +47,7 @@ class MotionTrainRequest:
     run_dir: str | None = None
     resume: str | None = None
     out: str | None = None
+    vae_from: str | None = None
     progress: bool = True
 
 
@@ -168,6 +169,8 @@ def train(req: MotionTrainRequest) -> int:
         if req.overrides:
             raise ConfigError(f"--set {req.overrides[0]}: a resumed run keeps its own config.yaml; "
                               "start a new run instead")
+        if req.vae_from:
+            raise ConfigError(f"--vae-from {req.vae_from}: a resumed run keeps the VAE it has; start a new run instead")
         cfg = load_config(MotionTrainConfig, cfg_path)
     else:
         if not req.config:
@@ -196,6 +199,8 @@ def train(req: MotionTrainRequest) -> int:
             ckpt = run_dir / "checkpoints" / "state.pt"
             if req.resume and ckpt.is_file():
                 trainer.load_checkpoint(ckpt)
+            if req.vae_from:
+                trainer.start_from_vae(req.vae_from)
             check_free_space(run_dir, trainer.disk_estimate(), "run directory")
         except BaseException:
             lock.release()

@@ -152,6 +152,7 @@ class MotionTrainer:
         self.vae_opt = make_optimizer(self.vae, cfg.vae_train)
         self.den_opt = make_optimizer(self.denoiser, cfg.denoiser_train)
         self.stage, self.step, self.elapsed = "vae", 0, 0.0
+        self.vae_from: dict | None = None
         from latentrl.monitor import Monitor
 
         self.monitor = Monitor(self.run_dir)
@@ -226,6 +227,31 @@ class MotionTrainer:
         self.generator.set_state(state["generator"])
         torch.set_rng_state(state["torch_rng"])
 
+    def start_from_vae(self, path: str | Path) -> None:
+        """Take the VAE of a trained model file and train only the denoiser from step 0.
+
+        Why: denoiser experiments (DART trains its two stages apart too) then cost only the denoiser
+        stage. A latent means something only under the VAE and the normalization it was trained with,
+        so both must be this run's: same ``model.vae`` config, same data statistics.
+        """
+        from latentrl.motion.checkpoint import file_sha256, load_motion_model
+
+        model = load_motion_model(path)
+        theirs, ours = to_dict(model.vae.config), to_dict(self.cfg.model.vae)
+        if theirs != ours:
+            diff = sorted(k for k in ours if theirs.get(k) != ours[k])
+            raise ConfigError(f"--vae-from {path}: its VAE differs from this config's model.vae in {diff} "
+                              f"({', '.join(f'{k}: {theirs.get(k)} vs {ours[k]}' for k in diff)})")
+        same = torch.allclose(model.mean, self.normalizer.mean.cpu()) and torch.allclose(
+            model.std, self.normalizer.std.cpu())
+        if not same:
+            raise ConfigError(f"--vae-from {path}: it was trained on other data (its normalization differs from "
+                              "this run's); use the data and seed it was trained with")
+        for module in (self.vae, self.vae_ema.module):
+            module.load_state_dict(model.vae.state_dict())
+        self.stage, self.step = "denoiser", 0
+        self.vae_from = {"path": str(path), "sha256": file_sha256(path)}
+
     # ------------------------------------------------------------------ loops
     def _log(self, prefix: str, step: int, terms: dict, lr: float, bar) -> None:
         self.monitor.log_motion_stage(prefix, step, {**terms, "learning_rate": lr})
@@ -288,6 +314,8 @@ class MotionTrainer:
             "texts": self.dataset.texts,
             "latent_std": float(self.vae_ema.module.latent_std),
         }
+        if self.vae_from:
+            meta["vae_from"] = self.vae_from
         save_motion_model(model, self.out, meta=meta)
         self.monitor.close()
         return self.out

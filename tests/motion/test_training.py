@@ -105,13 +105,21 @@ def test_config_errors_name_the_field(tmp_path):
         load_config(MotionTrainConfig, TINY, ["model.denoiser.prediction=eps"])
 
 
-def test_v_prediction_trains_saves_and_reloads(tmp_path):
-    """A v-predicting denoiser trains, and the saved model samples the same after loading.
+def test_v_prediction_trains_on_a_given_vae_saves_and_reloads(trained, tmp_path):
+    """A v-predicting denoiser trains on the VAE of a finished run (``--vae-from``), and the saved model
+    samples the same after loading.
 
     The schedule buffers are not saved (the diffusion config is): loading must re-attach them.
     """
-    trainer = MotionTrainer(tiny_config(**{"model.denoiser.prediction": "v"}), tmp_path / "v", progress=False)
+    _, first = trained
+    run = tmp_path / "v"
+    trainer = MotionTrainer(tiny_config(**{"model.denoiser.prediction": "v"}), run, progress=False)
+    trainer.start_from_vae(first)
     out = trainer.run()
+    assert not any(line.startswith("vae step") for line in (run / "train.log").read_text().splitlines())
+    source, saved = torch.load(first, weights_only=True), torch.load(out, weights_only=True)
+    assert all(torch.equal(source["vae_state"][k], saved["vae_state"][k]) for k in source["vae_state"])
+    assert saved["meta"]["vae_from"]["path"] == str(first)
     model = load_motion_model(out)
     assert model.denoiser.config.prediction == "v"
     assert "v_signal" not in torch.load(out, weights_only=True)["denoiser_state"]
@@ -122,6 +130,16 @@ def test_v_prediction_trains_saves_and_reloads(tmp_path):
     a = model.sample_primitive(history, text, noise).future
     b = built.sample_primitive(history, text, noise).future
     assert torch.isfinite(a).all() and torch.allclose(a, b, atol=1e-5)
+
+
+def test_vae_from_refuses_another_vae_or_other_data(trained, tmp_path):
+    _, first = trained
+    other_shape = MotionTrainer(tiny_config(**{"model.vae.h_dim": 48}), tmp_path / "shape", progress=False)
+    with pytest.raises(ConfigError, match=r"--vae-from .*model.vae in \['h_dim'\] \(h_dim: 32 vs 48\)"):
+        other_shape.start_from_vae(first)
+    other_data = MotionTrainer(tiny_config(**{"data.locomotion.num_sequences": 5}), tmp_path / "data", progress=False)
+    with pytest.raises(ConfigError, match="trained on other data"):
+        other_data.start_from_vae(first)
 
 
 def test_rollout_probability_schedule():
