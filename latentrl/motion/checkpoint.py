@@ -59,6 +59,9 @@ EMBEDDED_MODELS = {
     "default-v2": "default_motion.pt",
     # the first release (configs/motion/v1.yaml), kept for comparison and for policies trained on it
     "default-v1": "default_motion_v1.pt",
+    # v2's recipe with a v-predicting denoiser (configs/motion/v3.yaml): hops steer twice as far, walking and
+    # running less; opt-in until the shipped policies are retrained on it (docs/benchmarks.md, "v3")
+    "default-v3": "default_motion_v3.pt",
 }
 
 
@@ -93,7 +96,7 @@ def load_motion_model(
 
     Args:
         source: ``"default"`` (the embedded model; ``"default-v2"`` is another name for it),
-            ``"default-v1"`` (the first release), a latentrl
+            ``"default-v1"`` (the first release), ``"default-v3"`` (the v-prediction candidate), a latentrl
             ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt``
             (with ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
