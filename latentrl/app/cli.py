@@ -237,8 +237,9 @@ def _eval_commands(sub) -> None:
                     help="step budget per episode, in primitives of 8 frames (DART: 256 = 68.3 s); "
                          "episodes that do not finish count as failures")
     ev.add_argument("--deterministic", action="store_true", help="take the policy's mean action (default: sample)")
-    ev.add_argument("--motion", default="default",
-                    help="the motion model the policy was trained on: 'default', a model file or a DART checkpoint")
+    ev.add_argument("--motion", default=None,
+                    help="the motion model the policy was trained on: 'default', a model file or a DART checkpoint "
+                         "(default: the one named in the policy's stored config)")
     ev.add_argument("--allow-motion-mismatch", action="store_true",
                     help="evaluate on a motion model other than the policy's (experts)")
     ev.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")

@@ -41,7 +41,8 @@ class EvalRequest:
     episodes: int = 32
     max_steps: int = 256
     deterministic: bool = False
-    motion: str = "default"
+    motion: str | None = None
+    """None: the model named in the policy's stored env config (``"default"`` when it names none)."""
     allow_motion_mismatch: bool = False
     device: str | None = None
     seed: int = 0
@@ -208,6 +209,8 @@ def evaluate(req: EvalRequest) -> int:
     from latentrl.timing import hardware
 
     env = _stored_env(str(policy_file(req.policy)))
+    if req.motion is None:  # the model the policy was trained with: no flag to repeat
+        req.motion = (env.motion if env is not None else None) or "default"
     if env is not None and env.task in TASK_SUITES:
         return evaluate_task(req, env)
     settings = _settings(req)

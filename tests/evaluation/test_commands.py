@@ -78,6 +78,22 @@ def test_policy_from_another_motion_model_is_refused(eval_files, tmp_path, capsy
     assert code == 2 and "trained on motion model" in capsys.readouterr().err
 
 
+def test_eval_takes_the_motion_model_the_policy_names(eval_files, tmp_path):
+    """Without --motion, eval loads the model named in the policy's stored env config (not 'default')."""
+    import torch
+
+    from latentrl.motion.checkpoint import file_sha256
+
+    state = torch.load(eval_files["policy"], weights_only=True)
+    state["config"] = {"env": {"motion": str(eval_files["motion"])}}
+    policy = tmp_path / "named.pt"
+    torch.save(state, policy)
+    out = tmp_path / "o"
+    assert main(["eval", str(policy), "--paths", str(write_paths(tmp_path, [NEAR])), "--episodes", "1",
+                 "--max-steps", "2", "--device", "cpu", "--out", str(out), "--no-render", "--no-motions"]) == 0
+    assert json.loads((out / "report.json").read_text())["motion"]["sha256"] == file_sha256(eval_files["motion"])
+
+
 def test_suite_names_resolve_to_shipped_files(tmp_path):
     files = resolve_path_files(["sharp_turns", "dart_walk_long.json"])
     assert [f.name for f in files] == ["sharp_turns.json", "dart_walk_long.json"]
