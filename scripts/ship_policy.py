@@ -34,6 +34,7 @@ def main() -> None:
     ap.add_argument("--text", required=True)
     ap.add_argument("--task", default="Reach goals", help="what the policy does, e.g. 'Follow joystick commands'")
     ap.add_argument("--notes", help="markdown file appended to the card")
+    ap.add_argument("--motion-name", default="default", help="the embedded motion model it was trained on")
     args = ap.parse_args()
     run, ev = Path(args.run_dir), Path(args.eval_dir)
     state = torch.load(run / "final.pt", weights_only=True)
@@ -41,11 +42,14 @@ def main() -> None:
     report = json.loads((ev / "report.json").read_text())
     s = report["settings"]
     hw = hardware()
+    ours = "default model" if args.motion_name == "default" else f"`{args.motion_name}` model"
     threads = yaml.safe_load((run / "config.yaml").read_text()).get("threads", "?")
     card = [
         f"# {args.name}",
         "",
-        f"{args.task} with **\"{args.text}\"** on the embedded default motion model (`--motion default`, "
+        f"{args.task} with **\"{args.text}\"** on the embedded "
+        + ("default motion model" if args.motion_name == "default" else f"motion model `{args.motion_name}`")
+        + f" (`--motion {args.motion_name}`, "
         f"sha256 `{state['motion']['sha256'][:16]}`).",
         "",
         "| | |",
@@ -83,8 +87,8 @@ def main() -> None:
             "Reach time counts failed (timed-out) episodes at the budget time "
             f"({s['budget_s']:.1f} s); 'reach time, successes' averages successful episodes only, which is what "
             "DART's script reports."
-            + (" DART's row is its paper's Table 4, on its released BABEL model; ours runs on the default model "
-               "trained on synthetic locomotion." if any(suite in DART_TABLE4 for suite in report["suites"]) else ""),
+            + (f" DART's row is its paper's Table 4, on its released BABEL model; ours runs on the {ours} trained on "
+               "synthetic locomotion." if any(suite in DART_TABLE4 for suite in report["suites"]) else ""),
             "",
         ]
     plot = ev / "paths.png"

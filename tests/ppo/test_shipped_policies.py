@@ -20,7 +20,9 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_run_default": ("dart_run_long", 48),
     "reach_hop_left_default": ("dart_hop_long", 96),
     "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m
+    "reach_hop_left_v3": ("dart_hop_long", 64),
 }
+MOTION = {"reach_hop_left_v3": "default-v3"}  # the embedded model each policy was trained on (else "default")
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
@@ -34,7 +36,9 @@ def test_every_shipped_reach_policy_is_listed_here():
 def test_shipped_policy_drives_its_first_path(name, tmp_path):
     suite, budget = POLICIES[name]
     state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
-    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    motion = MOTION.get(name, "default")
+    assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
+    assert state["config"]["env"]["motion"] == motion  # what eval loads when --motion is not given
     card = (ROOT / "policies" / f"{name}.md").read_text()
     assert state["motion"]["sha256"][:16] in card and f"--paths {suite}" in card
     paths = json.loads((ROOT / "latentrl" / "tasks" / "paths" / f"{suite}.json").read_text())
@@ -54,7 +58,9 @@ def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
     """timed_walk_default (policies/timed_walk_default.md) on the first entry of tasks/timed/timed_walk.json."""
     name = "timed_walk_default"
     state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
-    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    motion = MOTION.get(name, "default")
+    assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
+    assert state["config"]["env"]["motion"] == motion  # what eval loads when --motion is not given
     assert "--paths timed_walk" in (ROOT / "policies" / f"{name}.md").read_text()
     suite = json.loads((ROOT / "latentrl" / "tasks" / "timed" / "timed_walk.json").read_text())
     (tmp_path / "first.json").write_text(json.dumps(suite[:1]))
