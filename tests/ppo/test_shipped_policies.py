@@ -21,8 +21,10 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_hop_left_default": ("dart_hop_long", 96),
     "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m
     "reach_hop_left_v3": ("dart_hop_long", 64),
+    "reach_run_v3": ("dart_run_long", 160),  # it circles back to waypoints it overshoots: 36 s on path 0
 }
-MOTION = {"reach_hop_left_v3": "default-v3"}  # the embedded model each policy was trained on (else "default")
+# the embedded model each policy was trained on (else "default")
+MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3"}
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
