@@ -276,7 +276,8 @@ def _viewer_commands(sub) -> None:
 
     play = sub.add_parser("play", help="steer a reach policy live in the browser: click on the floor to set the goal")
     play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach policy")
-    play.add_argument("--motion", default="default", help="the motion model the policy was trained on")
+    play.add_argument("--motion", default=None,
+                      help="the motion model the policy was trained on (default: the one its stored config names)")
     play.add_argument("--allow-motion-mismatch", action="store_true", help="run on another motion model (experts)")
     play.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
     play.add_argument("--text", help="prompt to start with (default: the policy's training text)")
@@ -305,7 +306,8 @@ def _export_commands(sub) -> None:
     onnx.add_argument("--batch", type=_pos_int, default=1, help="characters per call, fixed in the graph (default 1)")
     onnx.add_argument("--text", help="bake this prompt in (default: the graph takes a text_embedding input)")
     onnx.add_argument("--opset", type=int, default=17, help="ONNX opset version, >= 17 (default 17)")
-    onnx.add_argument("--motion", default="default", help="the motion model the policy was trained on")
+    onnx.add_argument("--motion", default=None,
+                      help="the motion model the policy was trained on (default: the one its stored config names)")
     onnx.add_argument("--allow-motion-mismatch", action="store_true",
                       help="export with a motion model other than the policy's (experts)")
     onnx.set_defaults(func=_export_onnx)

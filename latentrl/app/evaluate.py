@@ -187,30 +187,18 @@ def _progress(result: PathResult) -> None:
           f"reached{reach}{skill} ({result.wall_s:.0f} s)", flush=True)
 
 
-def _stored_env(policy: str):
-    """The ``EnvConfig`` stored in a policy checkpoint, or None (no config, or a file ``_load`` will refuse)."""
-    from latentrl.envs.config import stored_env_config
-    from latentrl.errors import LatentRLError
-    from latentrl.ppo.checkpoint import read_checkpoint
-
-    try:
-        return stored_env_config(read_checkpoint(policy, map_location="cpu").get("config"))
-    except (LatentRLError, OSError):
-        return None
-
-
 def evaluate(req: EvalRequest) -> int:
     """``latentrl eval``: run the suites, measure speed, write the report, plot and motions."""
     from latentrl.envs import load_paths
     from latentrl.evaluation import plots, report
     from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
+    from latentrl.evaluation.trained import stored_env, trained_motion
     from latentrl.preflight import NewOutput, check_writable
     from latentrl.resources import is_packaged, policy_file
     from latentrl.timing import hardware
 
-    env = _stored_env(str(policy_file(req.policy)))
-    if req.motion is None:  # the model the policy was trained with: no flag to repeat
-        req.motion = (env.motion if env is not None else None) or "default"
+    env = stored_env(policy_file(req.policy))
+    req.motion = trained_motion(policy_file(req.policy), req.motion)  # no flag to repeat
     if env is not None and env.task in TASK_SUITES:
         return evaluate_task(req, env)
     settings = _settings(req)

@@ -332,8 +332,11 @@ def max_difference(step: ControllerStep, session, inputs: Sequence[torch.Tensor]
 
 
 def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: str | None = None,
-                   opset: int = DEFAULT_OPSET, motion: str = "default", allow_motion_mismatch: bool = False) -> int:
-    """``latentrl export onnx``: write the controller, check it (``onnx.checker``, onnxruntime), print one line."""
+                   opset: int = DEFAULT_OPSET, motion: str | None = None, allow_motion_mismatch: bool = False) -> int:
+    """``latentrl export onnx``: write the controller, check it (``onnx.checker``, onnxruntime), print one line.
+
+    ``motion`` None: the motion model named in the policy's stored config.
+    """
     _require_extra()
     from latentrl.preflight import check_output_file
 
@@ -348,7 +351,9 @@ def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: st
     check_output_file(out)
     if not Path(policy).is_file():
         raise CheckpointError(f"policy checkpoint not found: {policy}")
-    step, info = load_controller(policy, motion, batch, text, allow_motion_mismatch)
+    from latentrl.evaluation.trained import trained_motion
+
+    step, info = load_controller(policy, trained_motion(policy, motion), batch, text, allow_motion_mismatch)
     example = step.example_inputs(next(iter(info["texts"].values()), None))
     t0 = time.perf_counter()
     path = export_onnx(step, out, example, opset, controller_metadata(step, info, opset))

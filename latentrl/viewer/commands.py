@@ -29,13 +29,14 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
     return serve_until_interrupted(server, "view", host, player.stop)
 
 
-def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str = "default",
+def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str | None = None,
                  device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
                  allow_motion_mismatch: bool = False) -> int:
     """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list.
 
     The text list is ``text`` (if given), the policy's training texts, then every prompt the motion
-    model's text table knows; the first is where the page starts.
+    model's text table knows; the first is where the page starts. ``motion`` None: the model named in
+    the policy's stored config.
     """
     import torch
 
@@ -46,6 +47,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
         raise CheckpointError(f"{policy}: no such policy checkpoint (give a .pt written by latentrl train)")
     require_viser()
     check_port(host, port)  # before the models load
+    from latentrl.evaluation.trained import trained_motion
     from latentrl.motion.checkpoint import load_motion_model
     from latentrl.ppo import load_policy
     from latentrl.ppo.checkpoint import check_shapes
@@ -54,6 +56,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
 
     device = device or ("cuda" if torch.cuda.is_available() else "cpu")
     check_device(device, "--device")
+    motion = trained_motion(policy, motion)
     model = load_motion_model(motion, device=device)
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)

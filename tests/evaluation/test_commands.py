@@ -110,3 +110,21 @@ def test_export_bvh_command(evaluated, tmp_path):
     assert main(["motion", "export-bvh", str(motion), "--out", str(out)]) == 0
     back = load_bvh(out)
     assert np.abs(back["joints"] - load_motion_npz(motion)["joints"]).max() < 1e-3 and back["fps"] == pytest.approx(30)
+
+
+def test_play_and_export_take_the_motion_model_the_policy_names(eval_files, tmp_path):
+    """eval, play and export onnx share one rule: --motion, else the policy's stored env.motion, else 'default'."""
+    import torch
+
+    from latentrl.evaluation.trained import trained_motion
+    from latentrl.resources import policy_file
+
+    assert trained_motion(policy_file("reach_hop_left_v3")) == "default-v3"
+    assert trained_motion(policy_file("reach_walk_default")) == "default"
+    assert trained_motion(policy_file("reach_hop_left_v3"), "my_model.pt") == "my_model.pt"
+    state = torch.load(eval_files["policy"], weights_only=True)
+    state.pop("config", None)
+    bare = tmp_path / "bare.pt"
+    torch.save(state, bare)
+    assert trained_motion(bare) == "default"
+    assert trained_motion(tmp_path / "missing.pt") == "default"  # the loaders then name the missing file
