@@ -221,6 +221,8 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--json", help="write all figures to this JSON file")
     motion.add_argument("--no-floor-snap", action="store_true",
                         help="measure the model alone, without the rollout's floor snap")
+    motion.add_argument("--foot-lock", action="store_true",
+                        help="roll out with the foot lock (planted feet do not slide; docs/motion.md)")
     motion.set_defaults(func=_bench_motion)
 
 

@@ -116,6 +116,8 @@ class LatentMotionVectorEnv(VectorEnv):
         render_mode: only ``None``; render exported histories with :mod:`latentrl.render`.
         compile: run each step's tensor maths (:meth:`_motion_core`) as one
             ``torch.compile(fullgraph=True)`` graph; the first step compiles (tens of seconds).
+        foot_lock: keep planted feet from sliding (:func:`latentrl.motion.rollout.lock_feet`): the body
+            moves by its steps, not by sliding feet.
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -150,6 +152,7 @@ class LatentMotionVectorEnv(VectorEnv):
         record_features: bool = False,
         render_mode: str | None = None,
         compile: bool = False,
+        foot_lock: bool = False,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -183,6 +186,7 @@ class LatentMotionVectorEnv(VectorEnv):
         self.divergence_limit = float(divergence_limit)
         self.random_initial_steps = bool(random_initial_steps)
         self.render_mode = None
+        self.foot_lock = bool(foot_lock)
         self.compiled = bool(compile)
         if self.compiled:
             self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
@@ -457,7 +461,8 @@ class LatentMotionVectorEnv(VectorEnv):
         Returns ``(step, future, reached, diverged, reward, terms, next_state)``.
         """
         out = self.motion.rollout_step(
-            state, text, noise.view(self.num_envs, *self.motion.latent_shape), self.guidance_scale
+            state, text, noise.view(self.num_envs, *self.motion.latent_shape), self.guidance_scale,
+            **({"foot_lock": True} if self.foot_lock else {}),  # priors without a lock keep working unlocked
         )
         diverged = self._diverged(out.joints_world, out.state)
         before = state.world.apply(joints_of(state.history))  # (N, 2, 22, 3)

@@ -212,6 +212,9 @@ class EnvConfig:
     """'error' stops on NaN/inf actions; 'zero' replaces them and reports it."""
     compile: bool = False
     """Run each step's tensor maths (sampler, decode, placement, rewards) as one torch.compile graph."""
+    foot_lock: bool = False
+    """Keep planted feet from sliding: the body is shifted back under a foot on the floor, frame by frame
+    (docs/motion.md, "Foot lock"). Off by default: the shipped policies were trained without it."""
     reach: ReachConfig = field(default_factory=ReachConfig)
     """Arguments of the reach task."""
     path: PathConfig = field(default_factory=PathConfig)
@@ -258,7 +261,7 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
                   text_weights=cfg.text_weights, device=device, guidance_scale=cfg.guidance_scale,
                   action_bound=cfg.action_bound, random_initial_steps=cfg.random_initial_steps,
                   reward_weights=dict(cfg.reward_weights) or None, reward_config=cfg.rewards,
-                  nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile)
+                  nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile, foot_lock=cfg.foot_lock)
     if cfg.max_episode_steps is not None:
         common["max_episode_steps"] = cfg.max_episode_steps
     common.update(extra)

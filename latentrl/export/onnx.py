@@ -112,7 +112,8 @@ class ControllerStep(nn.Module):
 
     def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, guidance_scale: float = 5.0,
                  action_bound: float = 4.0, observe_next: bool = False, text_embedding: torch.Tensor | None = None,
-                 goal_angle_clip_deg: float = 60.0, goal_dist_clip: float = 5.0, floor_height: float = 0.0):
+                 goal_angle_clip_deg: float = 60.0, goal_dist_clip: float = 5.0, floor_height: float = 0.0,
+                 foot_lock: bool = False):
         super().__init__()
         if int(batch) < 1:
             raise ConfigError(f"--batch must be >= 1, got {batch}")
@@ -122,6 +123,7 @@ class ControllerStep(nn.Module):
         self.observe_next = bool(observe_next)
         self.goal_angle_clip_deg, self.goal_dist_clip = float(goal_angle_clip_deg), float(goal_dist_clip)
         self.floor_height = float(floor_height)
+        self.foot_lock = bool(foot_lock)  # the training env's (a traced constant)
         self.baked_text = text_embedding is not None
         if self.baked_text:
             emb = torch.as_tensor(text_embedding, dtype=torch.float32).reshape(1, model.text_dim)
@@ -176,7 +178,8 @@ class ControllerStep(nn.Module):
         goals = [named["goal"], *([named["next_goal"]] if self.observe_next else [])]
         action = self.policy(self.observe(state, goals, text)).mean.clamp(-self.action_bound, self.action_bound)
         noise = action.reshape(self.batch, *self.model.latent_shape)
-        step = self.post_step(self.model.rollout_step(state, text, noise, self.guidance_scale))
+        step = self.model.rollout_step(state, text, noise, self.guidance_scale, foot_lock=self.foot_lock)
+        step = self.post_step(step)
         nxt = step.state
         return action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation
 
@@ -237,7 +240,7 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     baked = model.encode_text([text]) if text else None
     step = ControllerStep(policy, model, batch, guidance_scale=float(env_cfg.get("guidance_scale", 5.0)),
                           action_bound=float(env_cfg.get("action_bound", 4.0)), observe_next=goal_size == 8,
-                          text_embedding=baked)
+                          text_embedding=baked, foot_lock=bool(env_cfg.get("foot_lock", False)))
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
             "motion": ident, "texts": texts, "text": text, "trained_texts": trained}

@@ -57,6 +57,9 @@ class MotionPrior(Protocol):
 
     def rollout_step(self, state: RolloutState, text_embedding: torch.Tensor, noise: torch.Tensor,
                      guidance_scale: float | torch.Tensor = ..., sampler: str = "ddim",
-                     generator: torch.Generator | None = None) -> StepResult:
-        """One primitive from ``noise`` (B, *latent_shape) for every rollout, placed in the world."""
+                     generator: torch.Generator | None = None, foot_lock: bool | None = None) -> StepResult:
+        """One primitive from ``noise`` (B, *latent_shape) for every rollout, placed in the world.
+
+        ``foot_lock``: keep planted feet from sliding (None: the model's default, off).
+        """
         ...

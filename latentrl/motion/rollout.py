@@ -21,9 +21,11 @@ from torch import nn
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError, TextError
 from latentrl.motion.canonical import WorldTransform, canonicalize, features_to_world
+from latentrl.motion.contacts import foot_positions, skate_weights
 from latentrl.motion.denoiser import Denoiser
 from latentrl.motion.diffusion import DiffusionConfig, GaussianDiffusion
-from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, Normalizer, joints_of
+from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, SLICES, Normalizer, joints_of
+from latentrl.motion.skeleton import FOOT_JOINTS, NUM_JOINTS
 from latentrl.motion.text import TextEncoder
 from latentrl.motion.vae import PrimitiveVAE
 
@@ -32,6 +34,9 @@ FLOOR_SNAP_M = 0.05
 #: Highest a primitive's lowest joint may be above the floor (metres). The generated data's highest is
 #: 0.129 m (a jump's flight, over every 8-frame window of the 200 default sequences).
 FLIGHT_CAP_M = 0.15
+#: The foot lock divides by the feet's summed contact weight, but never by less than this: a foot barely
+#: touching (weight near 0) is corrected in proportion to its weight instead of locked outright.
+LOCK_MIN_WEIGHT = 0.5
 
 
 class PrimitiveSample(NamedTuple):
@@ -118,6 +123,8 @@ class MotionModel(nn.Module):
         self.info = dict(info or {})
         self.amp_dtype: torch.dtype | None = None
         self.floor_snap: float | None = FLOOR_SNAP_M
+        self.foot_lock = False
+        """Keep feet on the floor from sliding (:func:`lock_feet`); off by default, envs turn it on (``foot_lock``)."""
         self._text_cache: dict[str, torch.Tensor] = {}
 
     # ------------------------------------------------------------------ properties
@@ -278,8 +285,12 @@ class MotionModel(nn.Module):
         guidance_scale: float | torch.Tensor = GUIDANCE_SCALE,
         sampler: str = "ddim",
         generator: torch.Generator | None = None,
+        foot_lock: bool | None = None,
     ) -> StepResult:
-        """Sample one primitive, place it in the world, and re-canonicalize its last 2 frames."""
+        """Sample one primitive, place it in the world, and re-canonicalize its last 2 frames.
+
+        ``foot_lock``: apply :func:`lock_feet` (None: the model's :attr:`foot_lock` setting).
+        """
         if self.pelvis_delta is None:
             raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")
         sample = self.sample_primitive(
@@ -295,7 +306,12 @@ class MotionModel(nn.Module):
                 )
             history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
             world = placement.compose(rotation, origin)
-        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
+            future = sample.future
+            if self.foot_lock if foot_lock is None else foot_lock:
+                before = state.world.apply(joints_of(state.history[:, -1])[:, list(FOOT_JOINTS)])
+                joints_world, future, shift = lock_feet(future, joints_world, placement, before)
+                world = WorldTransform(world.rotation, world.translation + shift)
+        return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
     def _snap_to_floor(
         self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor
@@ -370,3 +386,46 @@ class MotionModel(nn.Module):
             state = out.state
         return Rollout(torch.cat(joints, dim=1), torch.cat(feats, dim=1), torch.stack(noises), torch.stack(latents),
                        state)
+
+
+def lock_feet(
+    future: torch.Tensor, joints_world: torch.Tensor, placement: WorldTransform, before: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Slide the whole body back under a planted foot, frame by frame (the *foot lock*).
+
+    Why: the model's feet slide while on the floor (walk ~10 cm/s, docs/benchmarks.md), and a policy
+    learns to use that slide to travel (a hop policy moved at 1.56 m/s on feet sliding at 16 cm/s).
+    Games extract root motion from the planted foot; this does the same after sampling. Each frame's
+    horizontal displacement of the foot joints (10, 11) is weighted by DART's contact ramp (1 on the
+    floor, 0 from 3 cm up, the weight of its skate metric) and the body is shifted by minus the weighted
+    mean, so a single planted foot stays where it landed; the shifts accumulate over the primitive and
+    carry into the next one. Like the floor snap, it never changes the model's input: only the world
+    placement of the frames, and the returned features in step with it. The next state's history is the
+    unshifted last two frames placed with the last frame's shift, so its first frame sits one frame's
+    correction (millimetres) away from where it was drawn.
+
+    Args:
+        future: (B, 8, 276) canonical features of the primitive.
+        joints_world: (B, 8, 22, 3) its joints in the world (floor snap applied).
+        placement: the canonical -> world transform that placed them (rotation about z only).
+        before: (B, 2, 3) world foot joints of the frame before the primitive.
+
+    Returns:
+        ``(joints_world, future, shift)``: both shifted, and (B, 3) world shift of the last frame (what
+        the next primitive's placement adds).
+    """
+    feet = torch.cat((before[:, None], foot_positions(joints_world)), dim=1)  # (B, 9, 2, 3)
+    weight = skate_weights(feet[..., 2])  # (B, 8, 2)
+    slide = feet[:, 1:, :, :2] - feet[:, :-1, :, :2]  # (B, 8, 2, 2)
+    step = -(weight[..., None] * slide).sum(dim=2) / weight.sum(dim=2).clamp(min=LOCK_MIN_WEIGHT)[..., None]
+    shift = torch.nn.functional.pad(step.cumsum(dim=1), (0, 1))  # (B, 8, 3) world, z = 0
+    joints_world = joints_world + shift[:, :, None, :]
+    local = shift @ placement.rotation  # the same shifts in the canonical frame (R^T v)
+    local_delta = torch.cat((local[:, 1:], local[:, -1:]), dim=1) - local  # delta k = frame k+1 - frame k
+    repeat = (1, 1, NUM_JOINTS)
+    edit = torch.zeros_like(future)
+    edit[..., SLICES["transl"]] = local
+    edit[..., SLICES["joints"]] = local.repeat(repeat)
+    edit[..., SLICES["transl_delta"]] = local_delta
+    edit[..., SLICES["joints_delta"]] = local_delta.repeat(repeat)
+    return joints_world, future + edit, shift[:, -1]

@@ -149,3 +149,30 @@ def test_bad_arguments_exit_2(args, pattern, capsys, tmp_path):
     code = main(["export", "onnx", str(WALK_POLICY), "--out", str(tmp_path / "c.onnx"), *args])
     assert code == 2 and pattern in capsys.readouterr().err
     assert not (tmp_path / "c.onnx").exists()
+
+
+def test_foot_lock_of_the_training_env_is_part_of_the_graph(tmp_path):
+    """A policy trained with ``foot_lock: true`` exports the lock: onnxruntime matches the locked torch env."""
+    from latentrl.motion import load_motion_model
+
+    policy = load_policy(WALK_POLICY).policy
+    model = load_motion_model("default")
+    step = ControllerStep(policy, model, 2, text_embedding=model.encode_text(["walk"]), foot_lock=True)
+    path = export_onnx(step, tmp_path / "locked.onnx", opset=17, metadata=controller_metadata(step, {}, 17))
+    session = onnx_session(path)
+    names = [i.name for i in session.get_inputs()]
+    env = ReachLocationEnv(2, motion=model, texts=["walk"], autoreset_mode="Disabled", foot_lock=True)
+    free = ReachLocationEnv(2, motion=model, texts=["walk"], autoreset_mode="Disabled")
+    obs, _ = env.reset(seed=3)
+    free.reset(seed=3)
+    for _ in range(3):
+        action, frames, *state = run_session(session, [*_state_feeds(env._state), env.goal_world.clone()], names)
+        with torch.no_grad():
+            expected = policy.act(obs, deterministic=True).action
+        obs, *_ = env.step(expected)
+        free.step(expected)
+        # the last frame: the next state's history frame 0 is placed with the last frame's lock shift
+        assert (frames[:, -1] - env.history_world()[:, -1]).abs().max() < 1e-5
+        for ours, torch_value in zip(state, _state_feeds(env._state)):
+            assert (ours - torch_value).abs().max() < 1e-5
+    assert (env.history_world() - free.history_world())[..., :2].abs().max() > 1e-3  # the lock did move the body

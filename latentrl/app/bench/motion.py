@@ -25,6 +25,7 @@ class MotionBenchRequest:
     seed: int = 0
     json: str | None = None
     no_floor_snap: bool = False
+    foot_lock: bool = False
 
 
 # --------------------------------------------------------------------------- motion quality
@@ -196,6 +197,7 @@ def bench_motion(args: MotionBenchRequest) -> int:
     model = load_motion_model(args.motion)
     if args.no_floor_snap:
         model.floor_snap = None
+    model.foot_lock = bool(args.foot_lock)
     steps = max(1, round(args.seconds * FPS / FUTURE_LENGTH))
     ref = _data_reference(model)
     out = {
@@ -205,6 +207,8 @@ def bench_motion(args: MotionBenchRequest) -> int:
         "sha256": model.info.get("sha256"),
         "seconds": args.seconds,
         "batch": args.batch,
+        "floor_snap": model.floor_snap,
+        "foot_lock": model.foot_lock,
         "probes": {},
     }
     print(
