@@ -144,7 +144,7 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
               "config_hash": meta.get("config_hash"), "trained_on": meta.get("motion")}
     env = stored_env_config(meta.get("config"))
     if env is not None:
-        settings.guidance_scale, settings.action_bound = env.guidance_scale, env.action_bound
+        settings.take_training_env(env)
         if env.seed_history:  # episodes start from the seeds the policy was trained on
             attach_seed_history(model, env.seed_history)
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next

@@ -132,8 +132,7 @@ def make_env(motion, timeline: CommandTimeline, num_envs: int, settings: EvalSet
     """The evaluation env: every env follows ``timeline``, no autoreset, the policy's guidance and bound."""
     return JoystickEnv(num_envs, motion=motion, commands=[timeline], command_assignment="by_env",
                        texts=(timeline.text,), device=settings.device, max_episode_steps=timeline_steps(timeline),
-                       autoreset_mode="Disabled", guidance_scale=settings.guidance_scale,
-                       action_bound=settings.action_bound, record_history=record_history)
+                       autoreset_mode="Disabled", record_history=record_history, **settings.motion_kwargs())
 
 
 def timeline_steps(timeline: CommandTimeline) -> int:

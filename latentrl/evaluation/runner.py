@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import FollowPathEnv, WaypointPath, load_paths
 from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
@@ -126,9 +125,8 @@ def make_env(
         device=settings.device,
         max_episode_steps=max_steps or settings.max_steps,
         autoreset_mode="Disabled",
-        guidance_scale=settings.guidance_scale,
-        action_bound=settings.action_bound,
         success_threshold=settings.success_threshold,
+        **settings.motion_kwargs(),
         record_history=record_history,
     )
 
@@ -255,13 +253,13 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
     (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ..., and ``segment_skill_match``;
     undefined ones left out),
     the ``eval/trajectories`` figure, and ``stop`` once ``success_rate >= eval_cfg.success_target``.
-    ``env_cfg`` gives ``guidance_scale``, ``action_bound`` and, for path policies, ``observe_next``. Files and texts are
-    checked now, not at the first evaluation. The trainer restores its random streams afterwards.
+    ``env_cfg`` gives ``guidance_scale``, ``action_bound``, ``foot_lock`` and, for path policies,
+    ``observe_next``. Files and texts are checked now, not at the first evaluation. The trainer restores its
+    random streams afterwards.
     """
     settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
-                            deterministic=eval_cfg.deterministic, device=str(device),
-                            guidance_scale=getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE),
-                            action_bound=getattr(env_cfg, "action_bound", ACTION_BOUND))
+                            deterministic=eval_cfg.deterministic, device=str(device))
+    settings.take_training_env(env_cfg)
     settings.validate()
     for _, paths in load_suites(files, eval_cfg.text):
         make_env(motion, paths, 1, settings)  # unknown prompts fail here (TextError), before training starts

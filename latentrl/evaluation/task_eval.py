@@ -174,13 +174,11 @@ def training_hook(run: Callable[[Callable, Any], list], env_cfg: Any, eval_cfg: 
     Settings come from ``eval_cfg`` (episodes, max_steps, deterministic) and ``env_cfg`` (guidance,
     action bound); the run stops once the mean of ``success`` reaches ``eval_cfg.success_target``.
     """
-    from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
     from latentrl.evaluation.config import EvalSettings
 
     settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
-                            deterministic=eval_cfg.deterministic, device=str(device),
-                            guidance_scale=getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE),
-                            action_bound=getattr(env_cfg, "action_bound", ACTION_BOUND))
+                            deterministic=eval_cfg.deterministic, device=str(device))
+    settings.take_training_env(env_cfg)
     settings.validate()
     target = getattr(eval_cfg, "success_target", None)
 

@@ -80,8 +80,8 @@ def make_env(motion, path: TimedPath, num_envs: int, settings: EvalSettings, obs
     return TimedPathEnv(num_envs, motion=motion, paths=[path], path_assignment="by_env", observe_next=observe_next,
                         texts=(path.texts[0],), device=settings.device,
                         max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
-                        guidance_scale=settings.guidance_scale, action_bound=settings.action_bound,
-                        success_threshold=settings.success_threshold, record_history=record_history)
+                        success_threshold=settings.success_threshold, record_history=record_history,
+                        **settings.motion_kwargs())
 
 
 def budget(path: TimedPath, settings: EvalSettings, criteria: TimingCriteria) -> int:

@@ -85,13 +85,31 @@ def test_eval_takes_the_motion_model_the_policy_names(eval_files, tmp_path):
     from latentrl.motion.checkpoint import file_sha256
 
     state = torch.load(eval_files["policy"], weights_only=True)
-    state["config"] = {"env": {"motion": str(eval_files["motion"])}}
+    state["config"] = {"env": {"motion": str(eval_files["motion"]), "foot_lock": True, "guidance_scale": 3.0}}
     policy = tmp_path / "named.pt"
     torch.save(state, policy)
     out = tmp_path / "o"
     assert main(["eval", str(policy), "--paths", str(write_paths(tmp_path, [NEAR])), "--episodes", "1",
                  "--max-steps", "2", "--device", "cpu", "--out", str(out), "--no-render", "--no-motions"]) == 0
-    assert json.loads((out / "report.json").read_text())["motion"]["sha256"] == file_sha256(eval_files["motion"])
+    report = json.loads((out / "report.json").read_text())
+    assert report["motion"]["sha256"] == file_sha256(eval_files["motion"])
+    # the motion is stepped as in training: guidance and foot lock come from the stored env config too
+    assert report["settings"]["foot_lock"] is True and report["settings"]["guidance_scale"] == 3.0
+
+
+def test_eval_envs_take_the_training_envs_foot_lock(tiny_model):
+    from latentrl.envs import load_paths
+    from latentrl.envs.config import EnvConfig
+    from latentrl.evaluation.config import EvalSettings
+    from latentrl.evaluation.runner import make_env as path_env
+
+    settings = EvalSettings()
+    settings.take_training_env(EnvConfig(foot_lock=True, action_bound=3.0))
+    assert settings.motion_kwargs() == {"guidance_scale": 5.0, "action_bound": 3.0, "foot_lock": True}
+    paths = load_paths(resolve_path_files(["sharp_turns"])[0])[:1]
+    assert path_env(tiny_model, paths, 1, settings).foot_lock
+    settings.take_training_env(None)  # a checkpoint without a stored env: the env defaults
+    assert settings.motion_kwargs() == {"guidance_scale": 5.0, "action_bound": 4.0, "foot_lock": False}
 
 
 def test_suite_names_resolve_to_shipped_files(tmp_path):
