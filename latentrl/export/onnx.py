@@ -268,7 +268,8 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
                 "diffusion_steps": step.model.diffusion.num_timesteps,
                 "action_bound": step.action_bound, "goal_angle_clip_deg": step.goal_angle_clip_deg,
                 "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
-                "observe_next": step.observe_next, "text": info.get("text") if step.baked_text else None}
+                "foot_lock": step.foot_lock, "observe_next": step.observe_next,
+                "text": info.get("text") if step.baked_text else None}
     meta = {
         "latentrl.format": FORMAT,
         "latentrl.contract": contract,

@@ -418,7 +418,8 @@ def lock_feet(
     weight = skate_weights(feet[..., 2])  # (B, 8, 2)
     slide = feet[:, 1:, :, :2] - feet[:, :-1, :, :2]  # (B, 8, 2, 2)
     step = -(weight[..., None] * slide).sum(dim=2) / weight.sum(dim=2).clamp(min=LOCK_MIN_WEIGHT)[..., None]
-    shift = torch.nn.functional.pad(step.cumsum(dim=1), (0, 1))  # (B, 8, 3) world, z = 0
+    moved = step.cumsum(dim=1)
+    shift = torch.cat((moved, torch.zeros_like(moved[..., :1])), dim=-1)  # (B, 8, 3) world, z = 0
     joints_world = joints_world + shift[:, :, None, :]
     local = shift @ placement.rotation  # the same shifts in the canonical frame (R^T v)
     local_delta = torch.cat((local[:, 1:], local[:, -1:]), dim=1) - local  # delta k = frame k+1 - frame k

@@ -113,7 +113,9 @@ def test_live_control_walks_to_the_goal(server):
 
     model = load_motion_model("default")
     policy = load_policy(POLICY).policy
-    env = SteeredReachEnv(1, motion=model, texts=["walk", "run"], max_episode_steps=10**9, autoreset_mode="Disabled")
+    # as `latentrl play` builds it: the policy's training env settings (the shipped walk runs with the foot lock)
+    env = SteeredReachEnv(1, motion=model, texts=["walk", "run"], max_episode_steps=10**9, autoreset_mode="Disabled",
+                          foot_lock=True)
     live = LiveController(server, env, policy, "test", "walk", seed=0)
     start = live.pelvis().copy()
     goal = floor_point((0.0, -4.0, 3.0), (0.3, 0.8, -0.5))  # a click ray in front of the start pose, to the right
