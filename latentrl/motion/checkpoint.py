@@ -62,6 +62,9 @@ EMBEDDED_MODELS = {
     # v2's recipe with a v-predicting denoiser (configs/motion/v3.yaml): hops steer twice as far, walking and
     # running less; opt-in until the shipped policies are retrained on it (docs/benchmarks.md, "v3")
     "default-v3": "default_motion_v3.pt",
+    # v3's VAE with a denoiser whose decoded-motion consistency losses weigh 1,000, not 10,000 (configs/motion/v4.yaml):
+    # the most steerable model measured, sliding more; opt-in (docs/benchmarks.md, "v4")
+    "default-v4": "default_motion_v4.pt",
 }
 
 
@@ -96,9 +99,9 @@ def load_motion_model(
 
     Args:
         source: ``"default"`` (the embedded model; ``"default-v2"`` is another name for it),
-            ``"default-v1"`` (the first release), ``"default-v3"`` (the v-prediction candidate), a latentrl
-            ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt``
-            (with ``args.yaml`` beside it).
+            ``"default-v1"`` (the first release), ``"default-v3"`` (the v-prediction candidate),
+            ``"default-v4"`` (the steerable candidate), a latentrl ``.pt`` file or a folder holding
+            ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
         device: where the model runs.
         seed_history: (K, 2, 276) canonical seed histories, or a ``.npz``/``.pt`` file holding
