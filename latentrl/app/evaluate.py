@@ -192,13 +192,14 @@ def evaluate(req: EvalRequest) -> int:
     from latentrl.envs import load_paths
     from latentrl.evaluation import plots, report
     from latentrl.evaluation.runner import fit_policy, measure_speed, policy_fn, run_suites
-    from latentrl.evaluation.trained import stored_env, trained_motion
+    from latentrl.evaluation.trained import motion_of, stored_env
     from latentrl.preflight import NewOutput, check_writable
     from latentrl.resources import is_packaged, policy_file
     from latentrl.timing import hardware
 
     env = stored_env(policy_file(req.policy))
-    req.motion = trained_motion(policy_file(req.policy), req.motion)  # no flag to repeat
+    if req.motion is None:  # the model the policy was trained with: no flag to repeat
+        req.motion = motion_of(env)
     if env is not None and env.task in TASK_SUITES:
         return evaluate_task(req, env)
     settings = _settings(req)

@@ -21,9 +21,11 @@ def stored_env(policy: str | Path):
         return None
 
 
+def motion_of(env) -> str:
+    """The motion model a stored ``EnvConfig`` names ('default' when there is none)."""
+    return (env.motion if env is not None else None) or "default"
+
+
 def trained_motion(policy: str | Path, given: str | None = None) -> str:
     """``given`` when the user named a motion model; else the one the policy's stored env names, else 'default'."""
-    if given is not None:
-        return given
-    env = stored_env(policy)
-    return (env.motion if env is not None else None) or "default"
+    return given if given is not None else motion_of(stored_env(policy))

@@ -25,7 +25,7 @@ from latentrl.motion.contacts import foot_positions, skate_weights
 from latentrl.motion.denoiser import Denoiser
 from latentrl.motion.diffusion import DiffusionConfig, GaussianDiffusion
 from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, SLICES, Normalizer, joints_of
-from latentrl.motion.skeleton import FOOT_JOINTS, NUM_JOINTS
+from latentrl.motion.skeleton import NUM_JOINTS
 from latentrl.motion.text import TextEncoder
 from latentrl.motion.vae import PrimitiveVAE
 
@@ -308,7 +308,7 @@ class MotionModel(nn.Module):
             world = placement.compose(rotation, origin)
             future = sample.future
             if self.foot_lock if foot_lock is None else foot_lock:
-                before = state.world.apply(joints_of(state.history[:, -1])[:, list(FOOT_JOINTS)])
+                before = state.world.apply(foot_positions(joints_of(state.history[:, -1])))
                 joints_world, future, shift = lock_feet(future, joints_world, placement, before)
                 world = WorldTransform(world.rotation, world.translation + shift)
         return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
