@@ -214,8 +214,8 @@ class EnvConfig:
     """Run each step's tensor maths (sampler, decode, placement, rewards) as one torch.compile graph."""
     foot_lock: bool = False
     """Keep planted feet from sliding: the body is shifted back under a foot on the floor, frame by frame
-    (docs/motion.md, "Foot lock"). Off by default: most shipped policies were trained without it (reach_walk_default
-    and reach_run_v4 use it)."""
+    (docs/motion.md, "Foot lock"). Off by default: most shipped policies were trained without it (docs/motion.md lists
+    those that use it)."""
     reach: ReachConfig = field(default_factory=ReachConfig)
     """Arguments of the reach task."""
     path: PathConfig = field(default_factory=PathConfig)
