@@ -31,10 +31,13 @@ MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reac
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
-def test_every_shipped_reach_policy_is_listed_here():
-    shipped = {p.stem for p in (ROOT / "policies").glob("reach_*.pt")} | {"path_mixed_default"}
-    assert shipped <= set(POLICIES), shipped - set(POLICIES)
-    assert "reach_walk_default" in shipped
+TASK_POLICIES = {"timed_walk_default", "joystick_walk_default"}  # tested by their own tests below
+
+
+def test_every_shipped_policy_is_tested_here():
+    shipped = {p.stem for p in (ROOT / "policies").glob("*.pt")}
+    assert shipped <= set(POLICIES) | TASK_POLICIES, shipped - set(POLICIES) - TASK_POLICIES
+    assert {"reach_walk_default", "path_mixed_default"} | TASK_POLICIES <= shipped
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -77,3 +80,25 @@ def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
     assert report["task"] == "timed"
     metrics = report["suites"][0]["entries"][0]["metrics"]
     assert metrics["reached"]["mean"] > 0.5, metrics  # most waypoints of the 9.5 s line reached
+
+
+def test_shipped_joystick_policy_follows_the_first_timeline(tmp_path):
+    """joystick_walk_default (policies/joystick_walk_default.md) on the first timeline of joystick_walk.json."""
+    name = "joystick_walk_default"
+    state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
+    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    assert state["config"]["env"]["motion"] == "default"
+    assert state["config"]["env"]["foot_lock"] is True  # the card's skate figure is measured with the lock
+    assert "--paths joystick_walk" in (ROOT / "policies" / f"{name}.md").read_text()
+    suite = json.loads((ROOT / "latentrl" / "tasks" / "joystick" / "joystick_walk.json").read_text())
+    (tmp_path / "first.json").write_text(json.dumps(suite[:1]))
+    out = tmp_path / "eval"
+    code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
+                 "--episodes", "1", "--deterministic", "--no-render", "--no-motions", "--out", str(out)])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["task"] == "joystick"
+    metrics = report["suites"][0]["entries"][0]["metrics"]
+    # the card measures 11.3 deg and 0.09 m/s on this timeline (32 stochastic episodes); the timeline turns
+    # by 90 deg at each of its 4 command changes, so a policy that ignores them lands far above these bounds
+    assert metrics["heading_err_deg"]["mean"] < 30.0 and metrics["speed_err_m_s"]["mean"] < 0.3, metrics
