@@ -69,6 +69,7 @@ def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
     motion = MOTION.get(name, "default")
     assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
     assert state["config"]["env"]["motion"] == motion  # what eval loads when --motion is not given
+    assert state["config"]["env"]["foot_lock"] is True  # the card's skate figure is measured with the lock
     assert "--paths timed_walk" in (ROOT / "policies" / f"{name}.md").read_text()
     suite = json.loads((ROOT / "latentrl" / "tasks" / "timed" / "timed_walk.json").read_text())
     (tmp_path / "first.json").write_text(json.dumps(suite[:1]))
