@@ -62,44 +62,34 @@ def test_shipped_policy_drives_its_first_path(name, tmp_path):
     assert episode["final_dist_m"] < 10.0, episode
 
 
-def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
-    """timed_walk_default (policies/timed_walk_default.md) on the first entry of tasks/timed/timed_walk.json."""
-    name = "timed_walk_default"
+def _first_entry_metrics(name: str, task: str, suite: str, tmp_path) -> dict:
+    """Check a task policy's file and card, evaluate it on the first entry of tasks/<task>/<suite>.json
+    (one deterministic episode) and return that entry's metrics."""
     state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
-    motion = MOTION.get(name, "default")
-    assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
-    assert state["config"]["env"]["motion"] == motion  # what eval loads when --motion is not given
+    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    assert state["config"]["env"]["motion"] == "default"  # what eval loads when --motion is not given
     assert state["config"]["env"]["foot_lock"] is True  # the card's skate figure is measured with the lock
-    assert "--paths timed_walk" in (ROOT / "policies" / f"{name}.md").read_text()
-    suite = json.loads((ROOT / "latentrl" / "tasks" / "timed" / "timed_walk.json").read_text())
-    (tmp_path / "first.json").write_text(json.dumps(suite[:1]))
+    assert f"--paths {suite}" in (ROOT / "policies" / f"{name}.md").read_text()
+    entries = json.loads((ROOT / "latentrl" / "tasks" / task / f"{suite}.json").read_text())
+    (tmp_path / "first.json").write_text(json.dumps(entries[:1]))
     out = tmp_path / "eval"
     code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
                  "--episodes", "1", "--deterministic", "--no-render", "--no-motions", "--out", str(out)])
     assert code == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["task"] == "timed"
-    metrics = report["suites"][0]["entries"][0]["metrics"]
+    assert report["task"] == task
+    return report["suites"][0]["entries"][0]["metrics"]
+
+
+def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
+    """timed_walk_default (policies/timed_walk_default.md) on the first entry of tasks/timed/timed_walk.json."""
+    metrics = _first_entry_metrics("timed_walk_default", "timed", "timed_walk", tmp_path)
     assert metrics["reached"]["mean"] > 0.5, metrics  # most waypoints of the 9.5 s line reached
 
 
 def test_shipped_joystick_policy_follows_the_first_timeline(tmp_path):
     """joystick_walk_default (policies/joystick_walk_default.md) on the first timeline of joystick_walk.json."""
-    name = "joystick_walk_default"
-    state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
-    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
-    assert state["config"]["env"]["motion"] == "default"
-    assert state["config"]["env"]["foot_lock"] is True  # the card's skate figure is measured with the lock
-    assert "--paths joystick_walk" in (ROOT / "policies" / f"{name}.md").read_text()
-    suite = json.loads((ROOT / "latentrl" / "tasks" / "joystick" / "joystick_walk.json").read_text())
-    (tmp_path / "first.json").write_text(json.dumps(suite[:1]))
-    out = tmp_path / "eval"
-    code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
-                 "--episodes", "1", "--deterministic", "--no-render", "--no-motions", "--out", str(out)])
-    assert code == 0
-    report = json.loads((out / "report.json").read_text())
-    assert report["task"] == "joystick"
-    metrics = report["suites"][0]["entries"][0]["metrics"]
+    metrics = _first_entry_metrics("joystick_walk_default", "joystick", "joystick_walk", tmp_path)
     # the card measures 11.3 deg and 0.09 m/s on this timeline (32 stochastic episodes); the timeline turns
     # by 90 deg at each of its 4 command changes, so a policy that ignores them lands far above these bounds
     assert metrics["heading_err_deg"]["mean"] < 30.0 and metrics["speed_err_m_s"]["mean"] < 0.3, metrics
