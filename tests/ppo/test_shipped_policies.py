@@ -41,43 +41,37 @@ def test_every_shipped_policy_is_tested_here():
     assert {"reach_walk_default", "path_mixed_default"} | TASK_POLICIES <= shipped
 
 
-@pytest.mark.parametrize("name", SHIPPED)
-def test_shipped_policy_drives_its_first_path(name, tmp_path):
-    suite, budget = POLICIES[name]
+def _evaluate_first_entry(name: str, task_dir: str, suite: str, tmp_path, *eval_args: str) -> tuple[dict, dict]:
+    """Check policies/<name>.pt and its card against the model it was trained on, evaluate it on the first
+    entry of tasks/<task_dir>/<suite>.json (one deterministic episode), and return (checkpoint, report)."""
     state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
     motion = MOTION.get(name, "default")
     assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
     assert state["config"]["env"]["motion"] == motion  # what eval loads when --motion is not given
     card = (ROOT / "policies" / f"{name}.md").read_text()
     assert state["motion"]["sha256"][:16] in card and f"--paths {suite}" in card
-    paths = json.loads((ROOT / "latentrl" / "tasks" / "paths" / f"{suite}.json").read_text())
-    (tmp_path / "first.json").write_text(json.dumps(paths[:1]))
+    entries = json.loads((ROOT / "latentrl" / "tasks" / task_dir / f"{suite}.json").read_text())
+    (tmp_path / "first.json").write_text(json.dumps(entries[:1]))
     out = tmp_path / "eval"
     code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
-                 "--episodes", "1", "--max-steps", str(budget), "--deterministic", "--no-render", "--no-motions",
-                 "--out", str(out)])
+                 "--episodes", "1", *eval_args, "--deterministic", "--no-render", "--no-motions", "--out", str(out)])
     assert code == 0
-    report = json.loads((out / "report.json").read_text())
+    return state, json.loads((out / "report.json").read_text())
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_drives_its_first_path(name, tmp_path):
+    suite, budget = POLICIES[name]
+    _, report = _evaluate_first_entry(name, "paths", suite, tmp_path, "--max-steps", str(budget))
     episode = report["suites"]["first"]["paths"][0]["episodes"][0]
     # the last waypoint is 20 m (mixed: 30 m) ahead: a working policy ends far closer to it than it started
     assert episode["final_dist_m"] < 10.0, episode
 
 
 def _first_entry_metrics(name: str, task: str, suite: str, tmp_path) -> dict:
-    """Check a task policy's file and card, evaluate it on the first entry of tasks/<task>/<suite>.json
-    (one deterministic episode) and return that entry's metrics."""
-    state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
-    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
-    assert state["config"]["env"]["motion"] == "default"  # what eval loads when --motion is not given
+    """A task policy (trained with the foot lock) on the first entry of tasks/<task>/<suite>.json: its metrics."""
+    state, report = _evaluate_first_entry(name, task, suite, tmp_path)
     assert state["config"]["env"]["foot_lock"] is True  # the card's skate figure is measured with the lock
-    assert f"--paths {suite}" in (ROOT / "policies" / f"{name}.md").read_text()
-    entries = json.loads((ROOT / "latentrl" / "tasks" / task / f"{suite}.json").read_text())
-    (tmp_path / "first.json").write_text(json.dumps(entries[:1]))
-    out = tmp_path / "eval"
-    code = main(["eval", str(ROOT / "policies" / f"{name}.pt"), "--paths", str(tmp_path / "first.json"),
-                 "--episodes", "1", "--deterministic", "--no-render", "--no-motions", "--out", str(out)])
-    assert code == 0
-    report = json.loads((out / "report.json").read_text())
     assert report["task"] == task
     return report["suites"][0]["entries"][0]["metrics"]
 
