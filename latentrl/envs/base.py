@@ -234,6 +234,7 @@ class LatentMotionVectorEnv(VectorEnv):
             require(prompt_problem(text) is None, "texts", str(prompt_problem(text)))
         self._text_emb = self.motion.encode_text(list(self.texts)).to(self.device, torch.float32)
         self._floor_scale = self.rewards.floor_scales(self.texts).to(self.device)
+        self._skill_code = self.rewards.skill_codes(self.texts).to(self.device)
         self._sample_texts_from = torch.tensor([self.texts.index(t) for t in texts], device=self.device)
         if text_weights is None:
             self._text_weights = torch.ones(len(texts), device=self.device)
@@ -438,9 +439,7 @@ class LatentMotionVectorEnv(VectorEnv):
         with torch.no_grad():
             noise, nonfinite = self._prepare_actions(actions)
             goal = self.goal_world.clone()
-            out, future, reached, diverged, reward, terms, new_state = self._core(
-                state, self._text_emb[self._text_idx], noise, goal, self._floor_scale[self._text_idx]
-            )
+            out, future, reached, diverged, reward, terms, new_state = self._core(state, self._text_idx, noise, goal)
             if self._history is not None:
                 feats = None
                 if self._history.record_features:
@@ -450,8 +449,7 @@ class LatentMotionVectorEnv(VectorEnv):
             return self._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
 
     def _motion_core(
-        self, state: RolloutState, text: torch.Tensor, noise: torch.Tensor, goal: torch.Tensor,
-        floor_scale: torch.Tensor,
+        self, state: RolloutState, text_idx: torch.Tensor, noise: torch.Tensor, goal: torch.Tensor
     ) -> tuple:
         """The tensor maths of a step: sample, decode and place the primitive, divergence, rewards.
 
@@ -461,7 +459,7 @@ class LatentMotionVectorEnv(VectorEnv):
         Returns ``(step, future, reached, diverged, reward, terms, next_state)``.
         """
         out = self.motion.rollout_step(
-            state, text, noise.view(self.num_envs, *self.motion.latent_shape), self.guidance_scale,
+            state, self._text_emb[text_idx], noise.view(self.num_envs, *self.motion.latent_shape), self.guidance_scale,
             **({"foot_lock": True} if self.foot_lock else {}),  # priors without a lock keep working unlocked
         )
         diverged = self._diverged(out.joints_world, out.state)
@@ -473,9 +471,10 @@ class LatentMotionVectorEnv(VectorEnv):
                 torch.cat((before, future), 1),
                 goal,
                 reached,
-                floor_scale,
+                self._floor_scale[text_idx],
                 self.floor_height,
                 actions=noise,
+                skill=self._skill_code[text_idx],
                 **self._reward_inputs(before, future, goal, reached),
             )
         )

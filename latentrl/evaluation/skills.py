@@ -3,25 +3,18 @@
 A path policy that handles every skill must not just reach the waypoints: while waypoint k is the
 goal, its text conditions the motion, and the motion should look like that text. Success and reach
 time cannot tell a policy that runs where it should run from one that walks everywhere, so each
-*segment* (the stretch of an episode while waypoint k is the goal) is judged on its own, with the
-metric kernels of :mod:`~latentrl.evaluation.metrics`:
-
-- "run" family (run, jog, ...): mean horizontal pelvis speed >= :data:`RUN_MIN_SPEED_M_S`;
-- "walk" family: speed within :data:`WALK_SPEED_M_S`;
-- "hop on left leg": the left foot alone on the floor in >= :data:`HOP_STANCE_MIN_SHARE` of the
-  frames and the right foot alone in <= :data:`HOP_OTHER_MAX_SHARE`; mirrored for the right leg;
-- any other text is not judged (reported with ``skill`` null).
+*segment* (the stretch of an episode while waypoint k is the goal) is judged on its own by the rule of
+:mod:`latentrl.rewards.skills` (run and walk by mean pelvis speed, hops by single-foot contact; the
+``skill`` reward term trains toward the same rule), with the metric kernels of
+:mod:`~latentrl.evaluation.metrics`.
 
 The first :data:`TRANSITION_S` of a segment are left out (the motion is still changing skill), and
-segments shorter than :data:`MIN_SEGMENT_S` are not measured at all. The thresholds are rough
-(the default model walks at about 0.85-1.2 m/s and runs at 3.2-4.2 m/s): they separate the skills,
-they do not grade them.
+segments shorter than :data:`MIN_SEGMENT_S` are not measured at all.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -31,55 +24,21 @@ import numpy as np
 from latentrl.evaluation import metrics as M
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
+from latentrl.rewards.skills import (  # noqa: F401  (the rule's names, re-exported for the judge's readers)
+    CONTACT_HEIGHT_M,
+    HOP_OTHER_MAX_SHARE,
+    HOP_STANCE_MIN_SHARE,
+    RUN_MIN_SPEED_M_S,
+    SKILLS,
+    WALK_SPEED_M_S,
+    matches,
+    skill_of,
+)
 
 TRANSITION_S = 0.5
 """Seconds at the start of a segment that are not judged: the motion is still switching skill."""
 MIN_SEGMENT_S = 1.0
 """Segments shorter than this (whole segment, transition included) are not measured."""
-RUN_MIN_SPEED_M_S = 2.0
-"""A "run" segment matches at this mean horizontal pelvis speed or faster."""
-WALK_SPEED_M_S = (0.5, 2.0)
-"""A "walk" segment matches within [min, max) m/s: slower is standing, faster is running."""
-HOP_STANCE_MIN_SHARE = 0.4
-"""A "hop on left leg" segment needs the left foot alone on the floor in at least this share of frames..."""
-HOP_OTHER_MAX_SHARE = 0.1
-"""...and the right foot alone in at most this share (mirrored for the right leg)."""
-CONTACT_HEIGHT_M = 0.05
-"""A foot joint is on the floor within this height (:func:`~latentrl.evaluation.metrics.foot_contact_shares`)."""
-
-SKILLS = ("run", "walk", "hop_left", "hop_right")
-"""The skill families that are judged."""
-_RUN_WORDS = {"run", "runs", "running", "jog", "jogs", "jogging", "sprint", "sprints", "sprinting"}
-_WALK_WORDS = {"walk", "walks", "walking"}
-
-
-def skill_of(text: str) -> str | None:
-    """The judged family of a prompt (:data:`SKILLS`), or None when the rule has nothing to say about it.
-
-    Hops are recognised first ("hop on left leg" -> ``hop_left``), then running words, then walking
-    words; a hop that names no side, or both, is not judged.
-    """
-    words = set(re.findall(r"[a-z]+", str(text).lower()))
-    if words & {"hop", "hops", "hopping"}:
-        left, right = "left" in words, "right" in words
-        return "hop_left" if left and not right else "hop_right" if right and not left else None
-    if words & _RUN_WORDS:
-        return "run"
-    if words & _WALK_WORDS:
-        return "walk"
-    return None
-
-
-def matches(skill: str | None, speed_m_s: float, left_only: float, right_only: float) -> bool | None:
-    """Whether measured values fit ``skill`` by the rule of the module docstring; None if it is not judged."""
-    if skill == "run":
-        return speed_m_s >= RUN_MIN_SPEED_M_S
-    if skill == "walk":
-        return WALK_SPEED_M_S[0] <= speed_m_s < WALK_SPEED_M_S[1]
-    if skill in ("hop_left", "hop_right"):
-        stance, other = (left_only, right_only) if skill == "hop_left" else (right_only, left_only)
-        return stance >= HOP_STANCE_MIN_SHARE and other <= HOP_OTHER_MAX_SHARE
-    return None
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ name            weight   term
 ``rotation``    10.0     -(1 - cos) of the hip-axis yaw change per frame
 ``jerk``        0        -(largest third difference of any joint), metres per frame^3
 ``prior``       0        -max(0, mean square of the action (latent noise) - 1): noise far from N(0, I)
+``skill``       0        -(how far the step is from its text's skill rule: speed band, single support)
 ``heading``     1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
 ``speed``       1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
 ``pace``        1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
@@ -46,12 +47,13 @@ from latentrl.errors import closest
 from latentrl.motion.representation import HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.rewards import terms
+from latentrl.rewards.skills import skill_code
 
 #: DART's terms (ReachLocation and FollowPath compute these), in reporting order.
 DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
 
 #: Terms every task computes besides its own (weight 0 unless a config sets one).
-COMMON_TERMS: tuple[str, ...] = ("prior",)
+COMMON_TERMS: tuple[str, ...] = ("prior", "skill")
 
 #: Every term name, in reporting order: DART's, then the terms of the Joystick and TimedPath tasks.
 TERM_NAMES: tuple[str, ...] = (*DART_TERMS, "heading", "speed", "pace", "timing", *COMMON_TERMS)
@@ -70,6 +72,7 @@ DEFAULT_WEIGHTS: dict[str, float] = {
     "pace": 1.0,
     "timing": 1.0,
     "prior": 0.0,
+    "skill": 0.0,
 }
 
 
@@ -97,6 +100,8 @@ class RewardInputs:
     """TimedPath: (N,) arrival time - goal time of the waypoint reached in the step, seconds (0 elsewhere)."""
     actions: torch.Tensor | None = None
     """(N, D) the step's action (latent noise) after clamping to the action bound."""
+    skill: torch.Tensor | None = None
+    """(N,) long: each env's text as a skill code (:func:`latentrl.rewards.skills.skill_code`)."""
 
     def step_seconds(self) -> float:
         """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
@@ -228,6 +233,12 @@ def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     return terms.noise_prior(x.need("actions", "prior"))
 
 
+def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.skill_fidelity` of the step against its text's skill rule (the evaluation's contact height)."""
+    height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2] - x.floor_height
+    return terms.skill_fidelity(*x.pelvis_before_after(), height, x.need("skill", "skill"), x.step_seconds())
+
+
 _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
     "dist": _dist,
     "success": _success,
@@ -241,6 +252,7 @@ _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
     "pace": _pace,
     "timing": _timing,
     "prior": _prior,
+    "skill": _skill,
 }
 
 
@@ -283,6 +295,11 @@ class RewardComposer:
         return torch.tensor(
             [cfg.floor_scale ** sum(w in t.lower() for w in cfg.floor_scale_words) for t in texts], dtype=torch.float32
         )
+
+    @staticmethod
+    def skill_codes(texts: Sequence[str]) -> torch.Tensor:
+        """(K,) long :func:`~latentrl.rewards.skills.skill_code` per text (what the ``skill`` term judges)."""
+        return torch.tensor([skill_code(t) for t in texts], dtype=torch.long)
 
     def __call__(self, inputs: RewardInputs) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Returns ``(total (N,), {name: (N,) unweighted term})``, float32."""

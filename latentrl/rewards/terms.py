@@ -14,6 +14,7 @@ Frame windows (``F`` = 8 new frames per step, ``H`` = 2 history frames):
 - ``foot_skate``, ``yaw_rate``: the ``F`` transitions from the last history frame through the
   new frames, i.e. ``F + 1`` frames.
 - ``jerk``: all ``H + F`` frames.
+- ``skill_fidelity``: the pelvis before and after the step (speed) and the ``F`` new frames (contacts).
 - ``heading_tracking``, ``speed_tracking``, ``pace_tracking`` (Joystick, TimedPath): the pelvis
   before and after the step, as ``goal_progress``; velocities are that displacement over the
   step's duration (``F / 30`` s), which averages out the sway of a gait cycle.
@@ -28,6 +29,7 @@ from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.motion.contacts import foot_positions as _foot_positions
 from latentrl.motion.contacts import weighted_foot_slide
 from latentrl.motion.skeleton import LEFT_HIP, RIGHT_HIP
+from latentrl.rewards import skills as S
 
 __all__ = [
     "arrival_timing",
@@ -39,6 +41,7 @@ __all__ = [
     "jerk",
     "moving_orientation",
     "pace_tracking",
+    "skill_fidelity",
     "speed_tracking",
     "success",
     "yaw_rate",
@@ -274,3 +277,50 @@ def noise_prior(noise: torch.Tensor) -> torch.Tensor:
     latent-space RL papers' "stay near the prior" penalty, in its simplest form).
     """
     return -(noise.float().pow(2).mean(dim=-1) - 1.0).clamp(min=0.0)
+
+
+def skill_fidelity(
+    pelvis_before: torch.Tensor,
+    pelvis_after: torch.Tensor,
+    feet_height: torch.Tensor,
+    skill: torch.Tensor,
+    step_seconds: float,
+    threshold: float = S.CONTACT_HEIGHT_M,
+) -> torch.Tensor:
+    """``skill``: minus how far the step is from passing the skill rule of its text (:mod:`latentrl.rewards.skills`).
+
+    With ``v`` the step's horizontal pelvis speed (m/s) and the shares of the new frames with one foot alone
+    on the floor (within ``threshold``):
+
+    - walk (code 2): ``-(max(0, 0.5 - v) + max(0, v - 2.0))``, metres per second outside the walk band;
+    - run (code 1): ``-max(0, 2.0 - v)``;
+    - hop on left leg (code 3): ``-(max(0, 0.4 - left alone) + max(0, right alone - 0.1))``; mirrored (code 4);
+    - not judged (code 0): 0.
+
+    0 whenever the step passes the rule the evaluation judges segments by, so a policy that already does
+    what its text says pays nothing; a multi-skill path policy that steps through a hop segment does.
+
+    Args:
+        pelvis_before, pelvis_after: (N, 3) pelvis before and after the step, world.
+        feet_height: (N, F, 2) left and right foot joint heights above the floor over the new frames.
+        skill: (N,) long, :func:`latentrl.rewards.skills.skill_code` of each env's text.
+        step_seconds: the step's duration (F / 30 s).
+        threshold: contact height, metres.
+
+    Returns:
+        (N,) <= 0.
+    """
+    speed = _xy_distance(pelvis_after, pelvis_before) / step_seconds
+    walk_lo, walk_hi = S.WALK_SPEED_M_S
+    walk = -(F.relu(walk_lo - speed) + F.relu(speed - walk_hi))
+    run = -F.relu(S.RUN_MIN_SPEED_M_S - speed)
+    down = feet_height <= threshold  # (N, F, 2)
+    left_only = (down[..., 0] & ~down[..., 1]).float().mean(dim=1)
+    right_only = (down[..., 1] & ~down[..., 0]).float().mean(dim=1)
+
+    def hop(stance: torch.Tensor, other: torch.Tensor) -> torch.Tensor:
+        return -(F.relu(S.HOP_STANCE_MIN_SHARE - stance) + F.relu(other - S.HOP_OTHER_MAX_SHARE))
+
+    none = torch.zeros_like(speed)
+    per_code = torch.stack((none, run, walk, hop(left_only, right_only), hop(right_only, left_only)), 1)
+    return per_code.gather(1, skill.long().clamp(0, len(S.SKILLS))[:, None])[:, 0]

@@ -9,7 +9,7 @@ from tests.envs.conftest import actions
 def _core_inputs(env):
     state = env._state
     noise, _ = env._prepare_actions(actions(env.num_envs))
-    return state, env._text_emb[env._text_idx], noise, env.goal_world.clone(), env._floor_scale[env._text_idx]
+    return state, env._text_idx, noise, env.goal_world.clone()
 
 
 def test_every_task_step_core_traces_as_one_graph(make_task):

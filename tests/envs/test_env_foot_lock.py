@@ -13,7 +13,7 @@ def test_foot_lock_step_core_traces_as_one_graph(make_reach):
     core = torch.compile(env._motion_core, fullgraph=True, backend="eager")
     state = env._state
     noise, _ = env._prepare_actions(actions(3))
-    inputs = (state, env._text_emb[env._text_idx], noise, env.goal_world.clone(), env._floor_scale[env._text_idx])
+    inputs = (state, env._text_idx, noise, env.goal_world.clone())
     with torch.no_grad():
         torch.testing.assert_close(core(*inputs)[1], env._motion_core(*inputs)[1])
 
