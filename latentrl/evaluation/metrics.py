@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from latentrl.constants import CONTACT_HEIGHT_M
-from latentrl.motion.contacts import foot_positions, skate_weights, weighted_foot_slide
+from latentrl.motion.contacts import contact_shares, foot_positions, skate_weights, weighted_foot_slide
 from latentrl.motion.heading import hip_yaw_rad
 from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
 
@@ -111,14 +111,7 @@ def foot_contact_shares(joints, floor: float = 0.0, threshold: float = 0.05) -> 
     A foot joint is in contact within ``threshold`` of the floor. Returns
     ``{"left_only", "right_only", "both", "none"}``, each (...).
     """
-    z = _t(joints)[..., list(FOOT_JOINTS), 2] - floor
-    left, right = z[..., 0] <= threshold, z[..., 1] <= threshold
-    return {
-        "left_only": (left & ~right).float().mean(dim=-1),
-        "right_only": (right & ~left).float().mean(dim=-1),
-        "both": (left & right).float().mean(dim=-1),
-        "none": (~left & ~right).float().mean(dim=-1),
-    }
+    return contact_shares(_t(joints)[..., list(FOOT_JOINTS), 2] - floor, threshold)
 
 
 def single_foot_contact_fraction(joints, floor: float = 0.0, threshold: float = 0.05) -> torch.Tensor:

@@ -47,6 +47,21 @@ def weighted_foot_slide(
     return step * skate_weights(feet[..., 2] - floor, threshold)
 
 
+def contact_shares(heights: torch.Tensor, threshold: float) -> dict[str, torch.Tensor]:
+    """(..., T, 2) left and right foot heights above the floor -> shares of the T frames by feet down.
+
+    A foot is down within ``threshold`` (inclusive). Returns ``{"left_only", "right_only", "both", "none"}``,
+    each (...). The skill rule's kernel: the evaluation judges segments with it, the ``skill`` reward pays by it.
+    """
+    left, right = heights[..., 0] <= threshold, heights[..., 1] <= threshold
+    return {
+        "left_only": (left & ~right).float().mean(dim=-1),
+        "right_only": (right & ~left).float().mean(dim=-1),
+        "both": (left & right).float().mean(dim=-1),
+        "none": (~left & ~right).float().mean(dim=-1),
+    }
+
+
 def foot_contacts(joints: torch.Tensor, floor: float = 0.0, threshold: float = CONTACT_HEIGHT_M) -> torch.Tensor:
     """(..., T, 22, 3) world joints -> (..., T, 2) bool: left and right foot joint lower than ``threshold``."""
     return foot_positions(joints)[..., 2] - floor < threshold

@@ -26,8 +26,8 @@ import torch
 import torch.nn.functional as F
 
 from latentrl.constants import CONTACT_HEIGHT_M
+from latentrl.motion.contacts import contact_shares, weighted_foot_slide
 from latentrl.motion.contacts import foot_positions as _foot_positions
-from latentrl.motion.contacts import weighted_foot_slide
 from latentrl.motion.skeleton import LEFT_HIP, RIGHT_HIP
 from latentrl.rewards import skills as S
 
@@ -314,9 +314,8 @@ def skill_fidelity(
     walk_lo, walk_hi = S.WALK_SPEED_M_S
     walk = -(F.relu(walk_lo - speed) + F.relu(speed - walk_hi))
     run = -F.relu(S.RUN_MIN_SPEED_M_S - speed)
-    down = feet_height <= threshold  # (N, F, 2)
-    left_only = (down[..., 0] & ~down[..., 1]).float().mean(dim=1)
-    right_only = (down[..., 1] & ~down[..., 0]).float().mean(dim=1)
+    shares = contact_shares(feet_height, threshold)
+    left_only, right_only = shares["left_only"], shares["right_only"]
 
     def hop(stance: torch.Tensor, other: torch.Tensor) -> torch.Tensor:
         return -(F.relu(S.HOP_STANCE_MIN_SHARE - stance) + F.relu(other - S.HOP_OTHER_MAX_SHARE))
