@@ -8,6 +8,9 @@ DART's definitions (``evaluation/goal_reach.py``, ``evaluation/inbetween.py``):
 - foot skate: displacement of the foot joints (10, 11) between consecutive frames, weighted by
   ``2 - 2^clamp(h / 0.03, 0, 1)`` with ``h`` the higher of the two frames' foot heights (weight 1
   on the floor, 0 above 3 cm), averaged over transitions and feet, times fps -> m/s.
+  Its horizontal part (``skate_xy``: the same weights on the xy displacement only) separates sliding
+  from the vertical travel of a foot lifting off and touching down inside the 3 cm band, which DART's
+  3D displacement also counts (most of a locked walk's skate, docs/evaluation.md).
 - floor distance: mean over frames of ``|min(z_left_foot, z_right_foot)|`` -> m.
 - jerk: mean L2 norm of the third finite difference of all joints (m/s^3).
 
@@ -42,14 +45,16 @@ def foot_skate_weights(heights: torch.Tensor, threshold: float = SKATE_THRESHOLD
     return skate_weights(heights, threshold)
 
 
-def foot_skate_per_transition(joints, floor: float = 0.0, threshold: float = SKATE_THRESHOLD_M) -> torch.Tensor:
-    """(..., T, 22, 3) -> (..., T-1, 2) weighted foot displacement in metres per frame."""
-    return weighted_foot_slide(foot_positions(_t(joints)), floor, threshold)
+def foot_skate_per_transition(
+    joints, floor: float = 0.0, threshold: float = SKATE_THRESHOLD_M, horizontal: bool = False
+) -> torch.Tensor:
+    """(..., T, 22, 3) -> (..., T-1, 2) weighted foot displacement in metres per frame (xy only if ``horizontal``)."""
+    return weighted_foot_slide(foot_positions(_t(joints)), floor, threshold, horizontal=horizontal)
 
 
-def foot_skate_cm_s(joints, fps: float = 30.0, floor: float = 0.0) -> torch.Tensor:
-    """DART's skate metric in cm/s: (..., T, 22, 3) -> (...)."""
-    return foot_skate_per_transition(joints, floor).mean(dim=(-1, -2)) * fps * 100.0
+def foot_skate_cm_s(joints, fps: float = 30.0, floor: float = 0.0, horizontal: bool = False) -> torch.Tensor:
+    """DART's skate metric in cm/s: (..., T, 22, 3) -> (...); ``horizontal``: its xy part (``skate_xy``)."""
+    return foot_skate_per_transition(joints, floor, horizontal=horizontal).mean(dim=(-1, -2)) * fps * 100.0
 
 
 def foot_floor_distance_cm(joints, floor: float = 0.0) -> torch.Tensor:
@@ -131,6 +136,7 @@ def mean_ci95(values) -> dict[str, float]:
 # --------------------------------------------------------------------------- evaluation protocol
 EPISODE_METRICS: dict[str, str] = {
     "skate_cm_s": "cm/s",
+    "skate_xy_cm_s": "cm/s",
     "floor_cm": "cm",
     "jerk": "m/s^3",
     "penetration_mm": "mm",
@@ -149,6 +155,7 @@ def episode_metrics(joints, fps: float = 30.0, floor: float = 0.0) -> dict[str, 
     j = _t(joints)
     return {
         "skate_cm_s": float(foot_skate_cm_s(j, fps, floor)),
+        "skate_xy_cm_s": float(foot_skate_cm_s(j, fps, floor, horizontal=True)),
         "floor_cm": float(foot_floor_distance_cm(j, floor)),
         "jerk": float(jerk(j, fps)),
         "penetration_mm": float(closd_penetration_mm(j, floor)),

@@ -37,6 +37,7 @@ METRICS: dict[str, tuple[str, str]] = {
     "reach_time_s": ("reach time", "s"),
     "reach_time_success_s": ("reach time, successes", "s"),
     "skate_cm_s": ("skate", "cm/s"),
+    "skate_xy_cm_s": ("skate, xy part", "cm/s"),
     "floor_cm": ("floor", "cm"),
     "jerk": ("jerk", "m/s³"),
     "penetration_mm": ("penetration", "mm"),

@@ -39,6 +39,21 @@ def test_skate_counts_only_feet_in_contact():
     assert float(M.foot_skate_cm_s(slide(body(foot_heights=(0.10, 0.10)), 0.5))) == 0.0
 
 
+def test_skate_xy_part_separates_sliding_from_lifting():
+    # Sliding on the floor: all of DART's skate is horizontal.
+    j = slide(body(), 0.5)
+    assert float(M.foot_skate_cm_s(j, horizontal=True)) == pytest.approx(float(M.foot_skate_cm_s(j)), rel=1e-5)
+    # The left foot rising 1 mm per frame from the floor (inside the 3 cm band), nothing sliding: DART's
+    # skate counts the lift (0.1 cm per frame times the contact weight), its xy part is 0.
+    lift = body()
+    lift[:, 10, 2] = torch.arange(31) * 0.001
+    weights = M.foot_skate_weights(lift[:, [10, 11], 2])[:, 0]
+    expected = float(weights.mean()) * 0.1 * FPS / 2  # cm per frame times fps, averaged over both feet
+    assert float(M.foot_skate_cm_s(lift)) == pytest.approx(expected, rel=1e-4)
+    assert float(M.foot_skate_cm_s(lift, horizontal=True)) == 0.0
+    assert set(M.episode_metrics(lift)) == set(M.EPISODE_METRICS)
+
+
 def test_skate_weight_is_dart_exponential_ramp():
     # At 1.5 cm (half the 3 cm threshold) the weight is 2 - 2^0.5.
     w = M.foot_skate_weights(torch.full((2, 2), 0.015))

@@ -18,8 +18,8 @@ PATH = WaypointPath(((0.0, 3.0, 0.0), (4.0, 3.0, 0.0)), ("walk", "run"))
 def episode(i: int, reach: float | None, skate: float = 1.0, suite: str = "s", path: int = 0) -> EpisodeResult:
     """A successful episode reaching the end at ``reach`` s, or (None) a timeout at the budget time."""
     ok = reach is not None
-    metrics = {"skate_cm_s": skate, "floor_cm": 2.0, "jerk": 30.0, "penetration_mm": 0.0, "floating_mm": 1.0,
-               "skating_mm": 0.5}
+    metrics = {"skate_cm_s": skate, "skate_xy_cm_s": skate / 2, "floor_cm": 2.0, "jerk": 30.0,
+               "penetration_mm": 0.0, "floating_mm": 1.0, "skating_mm": 0.5}
     return EpisodeResult(suite, path, i, ok, "success" if ok else "timeout", 4 if ok else 10,
                          reach if ok else SETTINGS.budget_s, [1.0, reach], 0.1 if ok else 2.0, metrics,
                          np.zeros((5, 2)))
