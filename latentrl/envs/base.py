@@ -44,7 +44,7 @@ from latentrl.motion.canonical import WorldTransform, features_to_world
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.prior import MotionPrior
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import RolloutState
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT, RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, RewardComposer, RewardConfig, RewardInputs
@@ -118,6 +118,8 @@ class LatentMotionVectorEnv(VectorEnv):
             ``torch.compile(fullgraph=True)`` graph; the first step compiles (tens of seconds).
         foot_lock: keep planted feet from sliding (:func:`latentrl.motion.rollout.lock_feet`): the body
             moves by its steps, not by sliding feet.
+        foot_lock_min_weight: the summed contact weight from which the lock pins a foot fully (the
+            lock's ``min_weight``; 0.5 as before, 0.05 pins any foot inside DART's 3 cm band).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -153,6 +155,7 @@ class LatentMotionVectorEnv(VectorEnv):
         render_mode: str | None = None,
         compile: bool = False,
         foot_lock: bool = False,
+        foot_lock_min_weight: float = LOCK_MIN_WEIGHT,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -168,6 +171,7 @@ class LatentMotionVectorEnv(VectorEnv):
             ("success_threshold", success_threshold),
             ("terminate_distance", terminate_distance),
             ("divergence_limit", divergence_limit),
+            ("foot_lock_min_weight", foot_lock_min_weight),
         ):
             require(value > 0, name, f"must be > 0, got {value}")
         self.num_envs = int(num_envs)
@@ -187,6 +191,7 @@ class LatentMotionVectorEnv(VectorEnv):
         self.random_initial_steps = bool(random_initial_steps)
         self.render_mode = None
         self.foot_lock = bool(foot_lock)
+        self.foot_lock_min_weight = float(foot_lock_min_weight)
         self.compiled = bool(compile)
         if self.compiled:
             self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
@@ -460,7 +465,8 @@ class LatentMotionVectorEnv(VectorEnv):
         """
         out = self.motion.rollout_step(
             state, self._text_emb[text_idx], noise.view(self.num_envs, *self.motion.latent_shape), self.guidance_scale,
-            **({"foot_lock": True} if self.foot_lock else {}),  # priors without a lock keep working unlocked
+            # priors without a lock keep working unlocked
+            **({"foot_lock": True, "lock_min_weight": self.foot_lock_min_weight} if self.foot_lock else {}),
         )
         diverged = self._diverged(out.joints_world, out.state)
         before = state.world.apply(joints_of(state.history))  # (N, 2, 22, 3)

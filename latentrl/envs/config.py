@@ -26,6 +26,7 @@ from typing import Any
 from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
 from latentrl.errors import ConfigError, closest
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import TERM_NAMES, RewardConfig
@@ -216,6 +217,10 @@ class EnvConfig:
     """Keep planted feet from sliding: the body is shifted back under a foot on the floor, frame by frame
     (docs/motion.md, "Foot lock"). Off by default: most shipped policies were trained without it (docs/motion.md lists
     those that use it)."""
+    foot_lock_min_weight: float = LOCK_MIN_WEIGHT
+    """With ``foot_lock``: the summed contact weight (DART's skate ramp, 1 on the floor, 0 from 3 cm up) from which
+    a foot is pinned fully; below it the correction scales with the weight. 0.05 pins any foot inside the 3 cm band
+    (docs/motion.md)."""
     reach: ReachConfig = field(default_factory=ReachConfig)
     """Arguments of the reach task."""
     path: PathConfig = field(default_factory=PathConfig)
@@ -238,6 +243,8 @@ class EnvConfig:
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
+        require(0.0 < self.foot_lock_min_weight <= 2.0, "foot_lock_min_weight",
+                f"must be in (0, 2] (a summed contact weight), got {self.foot_lock_min_weight}")
         for name in self.reward_weights:
             require(name in TERM_NAMES, "reward_weights",
                     f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")
@@ -262,7 +269,8 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
                   text_weights=cfg.text_weights, device=device, guidance_scale=cfg.guidance_scale,
                   action_bound=cfg.action_bound, random_initial_steps=cfg.random_initial_steps,
                   reward_weights=dict(cfg.reward_weights) or None, reward_config=cfg.rewards,
-                  nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile, foot_lock=cfg.foot_lock)
+                  nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile, foot_lock=cfg.foot_lock,
+                  foot_lock_min_weight=cfg.foot_lock_min_weight)
     if cfg.max_episode_steps is not None:
         common["max_episode_steps"] = cfg.max_episode_steps
     common.update(extra)

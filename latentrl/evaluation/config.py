@@ -14,6 +14,7 @@ from typing import Any
 
 from latentrl.config import require, require_seed
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, SUCCESS_RADIUS_M
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.skeleton import FPS
 
 
@@ -77,16 +78,20 @@ class EvalSettings:
     """Actions are clamped to +/- this inside the env; the policy's training value."""
     foot_lock: bool = False
     """Keep planted feet from sliding (docs/motion.md, "Foot lock"); the policy's training value."""
+    foot_lock_min_weight: float = LOCK_MIN_WEIGHT
+    """The contact weight from which the lock pins a foot fully; the policy's training value."""
 
     def take_training_env(self, env_cfg: Any) -> None:
         """Step the motion as the policy's training env did: its guidance, action bound and foot lock."""
         self.guidance_scale = float(getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE))
         self.action_bound = float(getattr(env_cfg, "action_bound", ACTION_BOUND))
         self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
+        self.foot_lock_min_weight = float(getattr(env_cfg, "foot_lock_min_weight", LOCK_MIN_WEIGHT))
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""
-        return {"guidance_scale": self.guidance_scale, "action_bound": self.action_bound, "foot_lock": self.foot_lock}
+        return {"guidance_scale": self.guidance_scale, "action_bound": self.action_bound, "foot_lock": self.foot_lock,
+                "foot_lock_min_weight": self.foot_lock_min_weight}
 
     def validate(self) -> None:
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")

@@ -59,7 +59,7 @@ from latentrl.envs.goal import goal_features
 from latentrl.errors import CheckpointError, ConfigError, TextError
 from latentrl.motion.canonical import WorldTransform
 from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import MotionModel, RolloutState, StepResult
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT, MotionModel, RolloutState, StepResult
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS, PELVIS
 
 FORMAT = "latentrl.onnx-controller/1"
@@ -113,7 +113,7 @@ class ControllerStep(nn.Module):
     def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, guidance_scale: float = 5.0,
                  action_bound: float = 4.0, observe_next: bool = False, text_embedding: torch.Tensor | None = None,
                  goal_angle_clip_deg: float = 60.0, goal_dist_clip: float = 5.0, floor_height: float = 0.0,
-                 foot_lock: bool = False):
+                 foot_lock: bool = False, foot_lock_min_weight: float = LOCK_MIN_WEIGHT):
         super().__init__()
         if int(batch) < 1:
             raise ConfigError(f"--batch must be >= 1, got {batch}")
@@ -124,6 +124,7 @@ class ControllerStep(nn.Module):
         self.goal_angle_clip_deg, self.goal_dist_clip = float(goal_angle_clip_deg), float(goal_dist_clip)
         self.floor_height = float(floor_height)
         self.foot_lock = bool(foot_lock)  # the training env's (a traced constant)
+        self.foot_lock_min_weight = float(foot_lock_min_weight)
         self.baked_text = text_embedding is not None
         if self.baked_text:
             emb = torch.as_tensor(text_embedding, dtype=torch.float32).reshape(1, model.text_dim)
@@ -178,7 +179,8 @@ class ControllerStep(nn.Module):
         goals = [named["goal"], *([named["next_goal"]] if self.observe_next else [])]
         action = self.policy(self.observe(state, goals, text)).mean.clamp(-self.action_bound, self.action_bound)
         noise = action.reshape(self.batch, *self.model.latent_shape)
-        step = self.model.rollout_step(state, text, noise, self.guidance_scale, foot_lock=self.foot_lock)
+        step = self.model.rollout_step(state, text, noise, self.guidance_scale, foot_lock=self.foot_lock,
+                                       lock_min_weight=self.foot_lock_min_weight)
         step = self.post_step(step)
         nxt = step.state
         return action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation
@@ -240,7 +242,8 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     baked = model.encode_text([text]) if text else None
     step = ControllerStep(policy, model, batch, guidance_scale=float(env_cfg.get("guidance_scale", 5.0)),
                           action_bound=float(env_cfg.get("action_bound", 4.0)), observe_next=goal_size == 8,
-                          text_embedding=baked, foot_lock=bool(env_cfg.get("foot_lock", False)))
+                          text_embedding=baked, foot_lock=bool(env_cfg.get("foot_lock", False)),
+                          foot_lock_min_weight=float(env_cfg.get("foot_lock_min_weight", LOCK_MIN_WEIGHT)))
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
             "motion": ident, "texts": texts, "text": text, "trained_texts": trained}
@@ -268,7 +271,8 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
                 "diffusion_steps": step.model.diffusion.num_timesteps,
                 "action_bound": step.action_bound, "goal_angle_clip_deg": step.goal_angle_clip_deg,
                 "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
-                "foot_lock": step.foot_lock, "observe_next": step.observe_next,
+                "foot_lock": step.foot_lock, "foot_lock_min_weight": step.foot_lock_min_weight,
+                "observe_next": step.observe_next,
                 "text": info.get("text") if step.baked_text else None}
     meta = {
         "latentrl.format": FORMAT,

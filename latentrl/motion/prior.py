@@ -57,9 +57,11 @@ class MotionPrior(Protocol):
 
     def rollout_step(self, state: RolloutState, text_embedding: torch.Tensor, noise: torch.Tensor,
                      guidance_scale: float | torch.Tensor = ..., sampler: str = "ddim",
-                     generator: torch.Generator | None = None, foot_lock: bool | None = None) -> StepResult:
+                     generator: torch.Generator | None = None, foot_lock: bool | None = None,
+                     lock_min_weight: float = ...) -> StepResult:
         """One primitive from ``noise`` (B, *latent_shape) for every rollout, placed in the world.
 
-        ``foot_lock``: keep planted feet from sliding (None: the model's default, off).
+        ``foot_lock``: keep planted feet from sliding (None: the model's default, off); ``lock_min_weight``:
+        the contact weight from which the lock pins a foot fully.
         """
         ...

@@ -35,7 +35,8 @@ FLOOR_SNAP_M = 0.05
 #: 0.129 m (a jump's flight, over every 8-frame window of the 200 default sequences).
 FLIGHT_CAP_M = 0.15
 #: The foot lock divides by the feet's summed contact weight, but never by less than this: a foot barely
-#: touching (weight near 0) is corrected in proportion to its weight instead of locked outright.
+#: touching (weight near 0) is corrected in proportion to its weight instead of locked outright. The envs'
+#: ``foot_lock_min_weight`` overrides it (0.05 pins any foot inside DART's 3 cm band: docs/motion.md).
 LOCK_MIN_WEIGHT = 0.5
 
 
@@ -286,10 +287,12 @@ class MotionModel(nn.Module):
         sampler: str = "ddim",
         generator: torch.Generator | None = None,
         foot_lock: bool | None = None,
+        lock_min_weight: float = LOCK_MIN_WEIGHT,
     ) -> StepResult:
         """Sample one primitive, place it in the world, and re-canonicalize its last 2 frames.
 
-        ``foot_lock``: apply :func:`lock_feet` (None: the model's :attr:`foot_lock` setting).
+        ``foot_lock``: apply :func:`lock_feet` (None: the model's :attr:`foot_lock` setting) with
+        ``lock_min_weight`` as its ``min_weight``.
         """
         if self.pelvis_delta is None:
             raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")
@@ -309,7 +312,7 @@ class MotionModel(nn.Module):
             future = sample.future
             if self.foot_lock if foot_lock is None else foot_lock:
                 before = state.world.apply(foot_positions(joints_of(state.history[:, -1])))
-                joints_world, future, shift = lock_feet(future, joints_world, placement, before)
+                joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight)
                 world = WorldTransform(world.rotation, world.translation + shift)
         return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
@@ -389,7 +392,11 @@ class MotionModel(nn.Module):
 
 
 def lock_feet(
-    future: torch.Tensor, joints_world: torch.Tensor, placement: WorldTransform, before: torch.Tensor
+    future: torch.Tensor,
+    joints_world: torch.Tensor,
+    placement: WorldTransform,
+    before: torch.Tensor,
+    min_weight: float = LOCK_MIN_WEIGHT,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Slide the whole body back under a planted foot, frame by frame (the *foot lock*).
 
@@ -409,6 +416,10 @@ def lock_feet(
         joints_world: (B, 8, 22, 3) its joints in the world (floor snap applied).
         placement: the canonical -> world transform that placed them (rotation about z only).
         before: (B, 2, 3) world foot joints of the frame before the primitive.
+        min_weight: the summed contact weight from which a frame's slide is undone fully; below it the
+            correction scales with the weight (:data:`LOCK_MIN_WEIGHT`). Why it matters: DART's skate
+            counts a foot up to 3 cm high, and at 0.5 a foot in the band's upper half still slides (a run's
+            skate 3.7 cm/s, 1.7 of it horizontal; at 0.05: 2.8 and 0.5, docs/motion.md).
 
     Returns:
         ``(joints_world, future, shift)``: both shifted, and (B, 3) world shift of the last frame (what
@@ -417,7 +428,7 @@ def lock_feet(
     feet = torch.cat((before[:, None], foot_positions(joints_world)), dim=1)  # (B, 9, 2, 3)
     weight = skate_weights(feet[..., 2])  # (B, 8, 2)
     slide = feet[:, 1:, :, :2] - feet[:, :-1, :, :2]  # (B, 8, 2, 2)
-    step = -(weight[..., None] * slide).sum(dim=2) / weight.sum(dim=2).clamp(min=LOCK_MIN_WEIGHT)[..., None]
+    step = -(weight[..., None] * slide).sum(dim=2) / weight.sum(dim=2).clamp(min=min_weight)[..., None]
     moved = step.cumsum(dim=1)
     shift = torch.cat((moved, torch.zeros_like(moved[..., :1])), dim=-1)  # (B, 8, 3) world, z = 0
     joints_world = joints_world + shift[:, :, None, :]

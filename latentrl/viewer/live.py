@@ -28,7 +28,7 @@ TRAIL_FRAMES = 6000
 START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
 """Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
 ENV_FIELDS = ("guidance_scale", "action_bound", "obs_goal_angle_clip_deg", "obs_goal_dist_clip", "success_threshold",
-              "foot_lock")
+              "foot_lock", "foot_lock_min_weight")
 """Env settings taken from the policy's training config, so the policy sees what it was trained on."""
 
 

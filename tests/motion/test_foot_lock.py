@@ -61,6 +61,10 @@ def test_feet_in_the_air_are_left_alone_and_a_touching_foot_is_corrected_in_prop
     future, world, placement, before = primitive(left_z=0.02, right_z=0.2)
     _, _, shift = lock_feet(future, world, placement, before)
     assert shift[0, 1].item() == pytest.approx(-0.08 * weight / 0.5, abs=1e-6)
+    # with a lower minimum weight the same touching foot is pinned fully
+    locked, _, shift = lock_feet(future, world, placement, before, min_weight=0.05)
+    assert weight > 0.05 and shift[0, 1].item() == pytest.approx(-0.08, abs=1e-6)
+    assert torch.allclose(locked[0, :, LEFT, :2], before[0, 0, :2].expand(8, 2), atol=1e-6)
 
 
 def test_rollout_with_the_lock_keeps_the_model_input_and_slides_less():
