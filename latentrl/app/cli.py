@@ -244,6 +244,9 @@ def _eval_commands(sub) -> None:
                          "(default: the one named in the policy's stored config)")
     ev.add_argument("--allow-motion-mismatch", action="store_true",
                     help="evaluate on a motion model other than the policy's (experts)")
+    ev.add_argument("--foot-lock-min-weight", type=float, default=None, metavar="W",
+                    help="with the policy's foot lock on: pin a foot fully from this contact weight (default: the "
+                         "policy's training value; 0.05 pins any foot inside DART's 3 cm band, docs/motion.md)")
     ev.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
     ev.add_argument("--seed", type=_seed, default=0, help="base random seed (seed histories and action noise)")
     ev.add_argument("--out", help="output folder (default: eval-<policy name> beside the policy)")

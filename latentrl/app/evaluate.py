@@ -44,6 +44,9 @@ class EvalRequest:
     motion: str | None = None
     """None: the model named in the policy's stored env config (``"default"`` when it names none)."""
     allow_motion_mismatch: bool = False
+    foot_lock_min_weight: float | None = None
+    """None: the policy's training value. Else the foot lock pins from this contact weight (a deployment choice
+    that differs from training; the report's settings record it)."""
     device: str | None = None
     seed: int = 0
     out: str | None = None
@@ -54,7 +57,8 @@ class EvalRequest:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
         args = ["eval", self.policy]
         options = (("--paths", self.paths), ("--episodes", self.episodes), ("--max-steps", self.max_steps),
-                   ("--motion", self.motion), ("--device", self.device), ("--out", self.out),
+                   ("--motion", self.motion), ("--foot-lock-min-weight", self.foot_lock_min_weight),
+                   ("--device", self.device), ("--out", self.out),
                    ("--render", self.render))
         for flag, value in options:
             if value is not None:
@@ -112,6 +116,9 @@ def _settings(req: EvalRequest, device: str | None = None) -> EvalSettings:
         raise ConfigError(f"--{field_name.replace('_', '-')}: {message}") from None
     if req.render < 0:
         raise ConfigError(f"--render must be >= 0, got {req.render}")
+    if req.foot_lock_min_weight is not None and not 0.0 < req.foot_lock_min_weight <= 2.0:
+        raise ConfigError(f"--foot-lock-min-weight must be in (0, 2] (a summed contact weight), "
+                          f"got {req.foot_lock_min_weight}")
     return settings
 
 
@@ -147,6 +154,8 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
         settings.take_training_env(env)
         if env.seed_history:  # episodes start from the seeds the policy was trained on
             attach_seed_history(model, env.seed_history)
+    if req.foot_lock_min_weight is not None:
+        settings.foot_lock_min_weight = float(req.foot_lock_min_weight)
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 

@@ -408,6 +408,8 @@ def report_markdown(report: dict[str, Any]) -> str:
         f"- motion model: `{mot.get('source')}` (sha256 `{str(mot.get('sha256'))[:12]}`)",
         f"- {s['episodes']} episodes per path, budget {s['max_steps']} primitives ({s['budget_s']:.1f} s), {mode}, "
         f"seed {s['seed']}, device {s['device']}, latentrl {report.get('latentrl_version')}, {report.get('created')}",
+        f"- motion stepped with guidance {s.get('guidance_scale')}, action bound {s.get('action_bound')}, foot lock "
+        + (f"on (full from contact weight {s.get('foot_lock_min_weight', 0.5)})" if s.get("foot_lock") else "off"),
         "",
         "## Results",
         "",

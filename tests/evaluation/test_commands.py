@@ -95,6 +95,13 @@ def test_eval_takes_the_motion_model_the_policy_names(eval_files, tmp_path):
     assert report["motion"]["sha256"] == file_sha256(eval_files["motion"])
     # the motion is stepped as in training: guidance and foot lock come from the stored env config too
     assert report["settings"]["foot_lock"] is True and report["settings"]["guidance_scale"] == 3.0
+    assert report["settings"]["foot_lock_min_weight"] == 0.5  # the env default, stored config silent
+    # a deployment setting that differs from training is taken and recorded; a bad one is a flag error
+    assert main(["eval", str(policy), "--paths", str(write_paths(tmp_path, [NEAR])), "--episodes", "1",
+                 "--max-steps", "2", "--device", "cpu", "--out", str(out), "--no-render", "--no-motions",
+                 "--foot-lock-min-weight", "0.05"]) == 0
+    assert json.loads((out / "report.json").read_text())["settings"]["foot_lock_min_weight"] == 0.05
+    assert main(["eval", str(policy), "--foot-lock-min-weight", "0", "--device", "cpu"]) == 2
 
 
 def test_eval_envs_take_the_training_envs_foot_lock(tiny_model):
