@@ -43,7 +43,11 @@ def main() -> None:
     s = report["settings"]
     hw = hardware()
     ours = "default model" if args.motion_name == "default" else f"`{args.motion_name}` model"
-    threads = yaml.safe_load((run / "config.yaml").read_text()).get("threads", "?")
+    run_cfg = yaml.safe_load((run / "config.yaml").read_text())
+    threads = run_cfg.get("threads", "?")
+    trained_w = (run_cfg.get("env") or {}).get("foot_lock_min_weight", 0.5)
+    lock_flag = ("" if s.get("foot_lock_min_weight", trained_w) == trained_w
+                 else f" --foot-lock-min-weight {s['foot_lock_min_weight']:g}")  # evaluated unlike it trained
     card = [
         f"# {args.name}",
         "",
@@ -78,7 +82,7 @@ def main() -> None:
     else:
         card += [
             f"| evaluation | `latentrl eval policies/{out.name} --paths {' '.join(report['suites'])} "
-            f"--episodes {s['episodes']} --max-steps {s['max_steps']}` (stochastic actions, like DART) |",
+            f"--episodes {s['episodes']} --max-steps {s['max_steps']}{lock_flag}` (stochastic actions, like DART) |",
             "",
             "## Evaluation",
             "",
