@@ -19,6 +19,7 @@ import yaml
 
 from latentrl.evaluation.report import DART_TABLE4, results_table
 from latentrl.evaluation.task_eval import results_table as task_results_table
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.ppo.checkpoint import export_policy
 from latentrl.timing import hardware
 
@@ -45,7 +46,7 @@ def main() -> None:
     ours = "default model" if args.motion_name == "default" else f"`{args.motion_name}` model"
     run_cfg = yaml.safe_load((run / "config.yaml").read_text())
     threads = run_cfg.get("threads", "?")
-    trained_w = (run_cfg.get("env") or {}).get("foot_lock_min_weight", 0.5)
+    trained_w = (run_cfg.get("env") or {}).get("foot_lock_min_weight", LOCK_MIN_WEIGHT)
     lock_flag = ("" if s.get("foot_lock_min_weight", trained_w) == trained_w
                  else f" --foot-lock-min-weight {s['foot_lock_min_weight']:g}")  # evaluated unlike it trained
     card = [

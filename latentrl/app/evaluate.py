@@ -25,6 +25,7 @@ from typing import Any
 from latentrl.errors import ConfigError, DataError
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.results import EpisodeResult, PathResult
+from latentrl.motion.rollout import lock_min_weight_problem
 
 DEFAULT_SUITES = ("dart_walk_long", "dart_run_long", "dart_hop_long")
 """What ``latentrl eval`` runs without ``--paths``: DART's Table 4 suites."""
@@ -116,9 +117,8 @@ def _settings(req: EvalRequest, device: str | None = None) -> EvalSettings:
         raise ConfigError(f"--{field_name.replace('_', '-')}: {message}") from None
     if req.render < 0:
         raise ConfigError(f"--render must be >= 0, got {req.render}")
-    if req.foot_lock_min_weight is not None and not 0.0 < req.foot_lock_min_weight <= 2.0:
-        raise ConfigError(f"--foot-lock-min-weight must be in (0, 2] (a summed contact weight), "
-                          f"got {req.foot_lock_min_weight}")
+    if req.foot_lock_min_weight is not None and (problem := lock_min_weight_problem(req.foot_lock_min_weight)):
+        raise ConfigError(f"--foot-lock-min-weight {problem}")
     return settings
 
 

@@ -26,7 +26,7 @@ from typing import Any
 from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
 from latentrl.errors import ConfigError, closest
-from latentrl.motion.rollout import LOCK_MIN_WEIGHT
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT, lock_min_weight_problem
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import TERM_NAMES, RewardConfig
@@ -243,8 +243,8 @@ class EnvConfig:
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
-        require(0.0 < self.foot_lock_min_weight <= 2.0, "foot_lock_min_weight",
-                f"must be in (0, 2] (a summed contact weight), got {self.foot_lock_min_weight}")
+        problem = lock_min_weight_problem(self.foot_lock_min_weight)
+        require(problem is None, "foot_lock_min_weight", str(problem))
         for name in self.reward_weights:
             require(name in TERM_NAMES, "reward_weights",
                     f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")

@@ -27,6 +27,7 @@ from latentrl.evaluation import metrics as M
 from latentrl.evaluation import skills as K
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.results import PathResult, SuiteResult
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.skeleton import FPS
 
 FORMAT = "latentrl.eval/1"
@@ -409,7 +410,8 @@ def report_markdown(report: dict[str, Any]) -> str:
         f"- {s['episodes']} episodes per path, budget {s['max_steps']} primitives ({s['budget_s']:.1f} s), {mode}, "
         f"seed {s['seed']}, device {s['device']}, latentrl {report.get('latentrl_version')}, {report.get('created')}",
         f"- motion stepped with guidance {s.get('guidance_scale')}, action bound {s.get('action_bound')}, foot lock "
-        + (f"on (full from contact weight {s.get('foot_lock_min_weight', 0.5)})" if s.get("foot_lock") else "off"),
+        + (f"on (full from contact weight {s.get('foot_lock_min_weight', LOCK_MIN_WEIGHT)})"
+           if s.get("foot_lock") else "off"),
         "",
         "## Results",
         "",

@@ -40,6 +40,13 @@ FLIGHT_CAP_M = 0.15
 LOCK_MIN_WEIGHT = 0.5
 
 
+def lock_min_weight_problem(value: float) -> str | None:
+    """Why ``value`` cannot be the lock's ``min_weight`` (outside (0, 2], two feet's summed weight), or None."""
+    if not 0.0 < value <= 2.0:
+        return f"must be in (0, 2] (a summed contact weight), got {value}"
+    return None
+
+
 class PrimitiveSample(NamedTuple):
     """Result of sampling one primitive."""
 

@@ -1,8 +1,11 @@
 """``foot_lock`` in the envs: the config field reaches the rollout, the step stays one graph, feet slide less."""
 
+import pytest
 import torch
 
 from latentrl.envs.config import EnvConfig, build
+from latentrl.errors import ConfigError
+from latentrl.evaluation.metrics import foot_skate_cm_s
 from tests.envs.conftest import actions
 
 
@@ -38,8 +41,6 @@ def test_config_field_locks_the_feet_of_the_default_model():
 def test_min_weight_reaches_the_rollout_and_pins_more():
     """``foot_lock_min_weight`` 0.05 against 0.5 on the v4 run (a foot often high in the 3 cm band): same seed and
     actions, the horizontal skate left is smaller."""
-    from latentrl.evaluation.metrics import foot_skate_cm_s
-
     slide = {}
     for w in (0.5, 0.05):
         env = build(EnvConfig(num_envs=8, motion="default-v4", texts=["run"], foot_lock=True, foot_lock_min_weight=w),
@@ -54,9 +55,5 @@ def test_min_weight_reaches_the_rollout_and_pins_more():
 
 
 def test_min_weight_out_of_range_is_a_config_error():
-    import pytest
-
-    from latentrl.errors import ConfigError
-
     with pytest.raises(ConfigError, match="foot_lock_min_weight"):
         EnvConfig(foot_lock_min_weight=0.0).validate()
