@@ -41,13 +41,13 @@ from typing import NamedTuple
 
 import torch
 
-from latentrl.config import require
+from latentrl.config import is_finite_number, require
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import closest
 from latentrl.motion.representation import HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.rewards import terms
-from latentrl.rewards.skills import skill_code
+from latentrl.rewards.skills import SKILLS, skill_code
 
 #: DART's terms (ReachLocation and FollowPath compute these), in reporting order.
 DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
@@ -136,6 +136,14 @@ class RewardConfig:
     """The multiplier for those texts."""
     timing_tolerance: float = 1.0
     """TimedPath's ``timing`` bonus falls linearly from 1 (on time) to 0 at this arrival error, seconds."""
+    skill_scale: dict[str, float] = field(default_factory=dict)
+    """Multiplier of the ``skill`` term per judged family (:data:`latentrl.rewards.skills.SKILLS`), e.g.
+    ``{hop_left: 10}``; families left out keep 1. The hop penalty is a share of frames (at most ~1.4 a step)
+    while walk and run pay in m/s, so a multi-skill policy can need a larger weight on its hops alone."""
+
+    def skill_multipliers(self) -> tuple[float, ...]:
+        """The ``skill`` term's multiplier per skill code: 1 for code 0 (not judged), then one per family."""
+        return (1.0, *(float(self.skill_scale.get(name, 1.0)) for name in SKILLS))
 
     def validate(self) -> None:
         """Unknown term names, non-finite weights and negative thresholds are errors."""
@@ -153,6 +161,11 @@ class RewardConfig:
         require(isinstance(self.timing_tolerance, (int, float)) and math.isfinite(self.timing_tolerance)
                 and self.timing_tolerance > 0, "timing_tolerance",
                 f"must be a finite number of seconds > 0, got {self.timing_tolerance!r}")
+        for name, scale in self.skill_scale.items():
+            require(name in SKILLS, "skill_scale",
+                    f"unknown skill family '{name}'{closest(name, SKILLS)}; known: {', '.join(SKILLS)}")
+            require(is_finite_number(scale) and scale >= 0, f"skill_scale.{name}",
+                    f"must be a finite number >= 0, got {scale!r}")
         for name in ("contact_threshold", "floor_scale"):
             value = getattr(self, name)
             require(
@@ -236,7 +249,13 @@ def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.skill_fidelity` of the step against its text's skill rule (the evaluation's contact height)."""
     height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2] - x.floor_height
-    return terms.skill_fidelity(*x.pelvis_before_after(), height, x.need("skill", "skill"), x.step_seconds())
+    code = x.need("skill", "skill")
+    value = terms.skill_fidelity(*x.pelvis_before_after(), height, code, x.step_seconds())
+    multipliers = cfg.skill_multipliers()
+    if all(m == 1.0 for m in multipliers):
+        return value
+    scale = torch.tensor(multipliers, dtype=value.dtype, device=value.device)
+    return value * scale[code.long().clamp(0, len(SKILLS))]
 
 
 _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {

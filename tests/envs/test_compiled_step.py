@@ -3,6 +3,7 @@
 import pytest
 import torch
 
+from latentrl.rewards import RewardConfig
 from tests.envs.conftest import actions
 
 
@@ -36,6 +37,19 @@ def test_every_task_steps_through_one_compiled_graph_without_recompiling(make_ta
     with torch._dynamo.config.patch(error_on_recompile=True):
         for step in range(1, 5):  # truncations every 2 steps: same-step autoresets included
             env.step(actions(3, seed=step))
+
+
+def test_a_scaled_skill_term_keeps_one_graph(make_reach):
+    """``rewards.skill_scale`` (a per-family multiplier of the ``skill`` term) adds no graph break."""
+    env = make_reach(3, reward_weights={"skill": 1.0}, reward_config=RewardConfig(skill_scale={"run": 3.0}))
+    env.reset(seed=0)
+    torch._dynamo.reset()
+    core = torch.compile(env._motion_core, fullgraph=True, backend="eager")
+    with torch.no_grad():
+        traced = core(*_core_inputs(env))
+        eager = env._motion_core(*_core_inputs(env))
+    torch.testing.assert_close(traced[4], eager[4])
+    torch.testing.assert_close(traced[5]["skill"], eager[5]["skill"])
 
 
 @pytest.mark.slow

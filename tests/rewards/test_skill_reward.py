@@ -3,8 +3,9 @@
 import pytest
 import torch
 
+from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
-from latentrl.rewards import RewardComposer, RewardInputs, terms
+from latentrl.rewards import RewardComposer, RewardConfig, RewardInputs, terms
 from latentrl.rewards.skills import SKILLS, matches, skill_code, skill_of
 
 STEP_S = 8 / 30
@@ -84,6 +85,29 @@ def test_composer_reads_the_feet_of_the_new_frames_and_weights_the_term():
     total_on, _ = RewardComposer(weights={"skill": 2.0}, terms=("dist", "skill"))(x)
     assert torch.allclose(values["skill"], torch.tensor([0.0, -0.4]))
     assert torch.allclose(total_on - total_off, torch.tensor([0.0, -0.8]))
+
+
+def test_skill_scale_multiplies_the_term_of_one_family_only():
+    """``skill_scale: {hop_left: 10}`` makes the hop's miss 10x dearer and leaves walk, run and unjudged texts."""
+    joints = torch.zeros(4, 10, 22, 3)
+    joints[:, :, PELVIS, 0] = torch.linspace(0, 0.2 * 9 / 30, 10)  # 0.2 m/s: too slow to walk or run
+    joints[:, :, PELVIS, 2] = 0.9
+    joints[:, :, list(FOOT_JOINTS), 2] = 0.2
+    joints[:, 2:6, FOOT_JOINTS[0], 2] = 0.0
+    joints[:, 6:, FOOT_JOINTS[1], 2] = 0.0
+    codes = RewardComposer.skill_codes(["walk", "run", "hop on left leg", "wave"])
+    x = RewardInputs(joints, torch.zeros(4, 3), torch.zeros(4, dtype=torch.bool), torch.ones(4), skill=codes)
+    _, plain = RewardComposer(terms=("skill",))(x)
+    _, scaled = RewardComposer(RewardConfig(skill_scale={"hop_left": 10}), terms=("skill",))(x)
+    assert torch.allclose(plain["skill"], torch.tensor([-0.3, -1.8, -0.4, 0.0]), atol=1e-5)
+    assert torch.allclose(scaled["skill"], torch.tensor([-0.3, -1.8, -4.0, 0.0]), atol=1e-5)
+
+
+@pytest.mark.parametrize("scale, match", [({"hop_leftt": 2.0}, "did you mean 'hop_left'"),
+                                          ({"run": -1.0}, "skill_scale.run"), ({"walk": float("nan")}, "finite")])
+def test_skill_scale_rejects_unknown_families_and_bad_numbers(scale, match):
+    with pytest.raises(ConfigError, match=match):
+        RewardComposer(RewardConfig(skill_scale=scale), terms=("skill",))
 
 
 def test_skill_term_without_skill_codes_names_what_is_missing():
