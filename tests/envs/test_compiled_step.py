@@ -13,15 +13,19 @@ def _core_inputs(env):
     return state, env._text_idx, noise, env.goal_world.clone()
 
 
-def test_every_task_step_core_traces_as_one_graph(make_task):
-    """fullgraph=True raises on any graph break; the eager backend checks the trace without compiling C++."""
-    env = make_task(num_envs=3)
+def _trace_one_graph(env) -> tuple:
+    """The env's step core traced with fullgraph=True (raises on any graph break) and run eagerly, after a reset.
+
+    The eager backend checks the trace without compiling C++."""
     env.reset(seed=0)
     torch._dynamo.reset()
     core = torch.compile(env._motion_core, fullgraph=True, backend="eager")
     with torch.no_grad():
-        traced = core(*_core_inputs(env))
-        eager = env._motion_core(*_core_inputs(env))
+        return core(*_core_inputs(env)), env._motion_core(*_core_inputs(env))
+
+
+def test_every_task_step_core_traces_as_one_graph(make_task):
+    traced, eager = _trace_one_graph(make_task(num_envs=3))
     torch.testing.assert_close(traced[4], eager[4])  # reward
     torch.testing.assert_close(traced[1], eager[1])  # world joints of the new frames
     assert traced[5].keys() == eager[5].keys()
@@ -42,12 +46,7 @@ def test_every_task_steps_through_one_compiled_graph_without_recompiling(make_ta
 def test_a_scaled_skill_term_keeps_one_graph(make_reach):
     """``rewards.skill_scale`` (a per-family multiplier of the ``skill`` term) adds no graph break."""
     env = make_reach(3, reward_weights={"skill": 1.0}, reward_config=RewardConfig(skill_scale={"run": 3.0}))
-    env.reset(seed=0)
-    torch._dynamo.reset()
-    core = torch.compile(env._motion_core, fullgraph=True, backend="eager")
-    with torch.no_grad():
-        traced = core(*_core_inputs(env))
-        eager = env._motion_core(*_core_inputs(env))
+    traced, eager = _trace_one_graph(env)
     torch.testing.assert_close(traced[4], eager[4])
     torch.testing.assert_close(traced[5]["skill"], eager[5]["skill"])
 
