@@ -11,8 +11,9 @@ a ``latentrl motion train`` run's ``data/``), over the last history frame and th
   where the metric counts feet that merely lift or land;
 
 for the data itself (``data``), the VAE's reconstruction of each data primitive from its posterior mean
-(``vae``), and one DDIM sample per primitive from the data history with N(0, I) noise at guidance 5
-(``sampled``). A model whose reconstruction already skates cannot be fixed by its denoiser or its policies.
+(``vae``, with ``joint_error_cm``: its mean joint position error against the data's future frames), and one
+DDIM sample per primitive from the data history with N(0, I) noise at guidance 5 (``sampled``). A model
+whose reconstruction already skates cannot be fixed by its denoiser or its policies.
 """
 
 from __future__ import annotations
@@ -53,8 +54,9 @@ def probe(model, motion: torch.Tensor, text: str) -> dict[str, dict[str, float]]
         recon = model.vae.decode(mean, history_n, future_n.shape[1], scale_latent=False) * model.std + model.mean
         noise = torch.randn(motion.shape[0], *model.latent_shape, generator=torch.Generator().manual_seed(1))
         sampled = model.sample_primitive(history, model.encode_text([text] * motion.shape[0]), noise, 5.0).future
+    error_cm = (joints_of(recon) - joints_of(motion[:, HISTORY_LENGTH:])).norm(dim=-1).mean() * 100.0
     return {"data": figures(motion, floor),
-            "vae": figures(torch.cat((history, recon), 1), floor),
+            "vae": {**figures(torch.cat((history, recon), 1), floor), "joint_error_cm": float(error_cm)},
             "sampled": figures(torch.cat((history, sampled), 1), floor)}
 
 
