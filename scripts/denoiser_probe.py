@@ -54,23 +54,37 @@ def probe(model, motion: torch.Tensor, text_index: torch.Tensor, texts: list[str
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("models", nargs="+", help="motion model files or names ('default')")
+def probe_inputs(doc: str, primitives: int) -> tuple[argparse.Namespace, PrimitiveDataset, torch.Tensor, torch.Tensor]:
+    """The probes' shared command line (MODELS, ``--data``, ``--json``) and a seeded sample of data primitives.
+
+    Returns ``(args, data, motion (P, 10, 276), text_index (P,))``; ``scripts/skate_probe.py`` uses it too.
+    """
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("models", nargs="+", help="motion model files or names ('default', 'default-v4')")
     ap.add_argument("--data", required=True, help="the models' training data folder (a run's data/)")
     ap.add_argument("--json", help="write the figures here")
     args = ap.parse_args()
     data = PrimitiveDataset.from_folder(args.data)
-    batch = data.sample(4000, 1, generator=torch.Generator().manual_seed(0))
-    results = {}
-    for name in args.models:
-        results[name] = probe(load_motion_model(name), batch.motion[:, 0], batch.text_index[:, 0], data.texts)
-        for text, row in results[name].items():
-            print(f"{name} | {text:16s} | " + " ".join(f"{k} {v:.3f}" for k, v in row.items()), flush=True)
-    if args.json:
+    batch = data.sample(primitives, 1, generator=torch.Generator().manual_seed(0))
+    return args, data, batch.motion[:, 0], batch.text_index[:, 0]
+
+
+def write_json(path: str | None, results: dict) -> None:
+    """Write the figures atomically where ``--json`` says, if it says."""
+    if path:
         from latentrl.safe_io import atomic_write_text
 
-        atomic_write_text(args.json, json.dumps(results, indent=2) + "\n")
+        atomic_write_text(path, json.dumps(results, indent=2) + "\n")
+
+
+def main() -> None:
+    args, data, motion, text_index = probe_inputs(__doc__, 4000)
+    results = {}
+    for name in args.models:
+        results[name] = probe(load_motion_model(name), motion, text_index, data.texts)
+        for text, row in results[name].items():
+            print(f"{name} | {text:16s} | " + " ".join(f"{k} {v:.3f}" for k, v in row.items()), flush=True)
+    write_json(args.json, results)
 
 
 if __name__ == "__main__":

@@ -18,12 +18,9 @@ whose reconstruction already skates cannot be fixed by its denoiser or its polic
 
 from __future__ import annotations
 
-import argparse
-import json
-
 import torch
+from denoiser_probe import probe_inputs, write_json
 
-from latentrl.datasets.primitives import PrimitiveDataset
 from latentrl.evaluation.metrics import foot_skate_cm_s
 from latentrl.motion import load_motion_model
 from latentrl.motion.representation import HISTORY_LENGTH, joints_of
@@ -61,14 +58,7 @@ def probe(model, motion: torch.Tensor, text: str) -> dict[str, dict[str, float]]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("models", nargs="+", help="motion model files or names ('default', 'default-v4')")
-    ap.add_argument("--data", required=True, help="the models' training data folder (a run's data/)")
-    ap.add_argument("--json", help="write the figures here")
-    args = ap.parse_args()
-    data = PrimitiveDataset.from_folder(args.data)
-    batch = data.sample(6000, 1, generator=torch.Generator().manual_seed(0))
-    motion, text_index = batch.motion[:, 0], batch.text_index[:, 0]
+    args, data, motion, text_index = probe_inputs(__doc__, 6000)
     results: dict = {}
     for name in args.models:
         model = load_motion_model(name)
@@ -78,10 +68,7 @@ def main() -> None:
             for label, row in rows.items():
                 print(f"{name} | {text:16s} | {label:8s} | " + " ".join(f"{k} {v:.3f}" for k, v in row.items()),
                       flush=True)
-    if args.json:
-        from latentrl.safe_io import atomic_write_text
-
-        atomic_write_text(args.json, json.dumps(results, indent=2) + "\n")
+    write_json(args.json, results)
 
 
 if __name__ == "__main__":
