@@ -18,13 +18,18 @@ whose reconstruction already skates cannot be fixed by its denoiser or its polic
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import torch
-from denoiser_probe import probe_inputs, write_json
 
 from latentrl.evaluation.metrics import foot_skate_cm_s
 from latentrl.motion import load_motion_model
 from latentrl.motion.representation import HISTORY_LENGTH, joints_of
 from latentrl.motion.skeleton import FOOT_JOINTS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the sibling script, however this one is loaded
+from denoiser_probe import probe_inputs, write_json  # noqa: E402
 
 PROMPTS = ("walk", "run", "hop on left leg")
 BAND_M = 0.03
