@@ -142,8 +142,8 @@ class RewardConfig:
     while walk and run pay in m/s, so a multi-skill policy can need a larger weight on its hops alone."""
 
     def skill_multipliers(self) -> tuple[float, ...]:
-        """The ``skill`` term's multiplier per skill code: 1 for code 0 (not judged), then one per family."""
-        return (1.0, *(float(self.skill_scale.get(name, 1.0)) for name in SKILLS))
+        """The ``skill`` term's multiplier per judged family, in the order of ``skills.SKILLS``."""
+        return tuple(float(self.skill_scale.get(name, 1.0)) for name in SKILLS)
 
     def validate(self) -> None:
         """Unknown term names, non-finite weights and negative thresholds are errors."""
@@ -249,13 +249,8 @@ def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.skill_fidelity` of the step against its text's skill rule (the evaluation's contact height)."""
     height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2] - x.floor_height
-    code = x.need("skill", "skill")
-    value = terms.skill_fidelity(*x.pelvis_before_after(), height, code, x.step_seconds())
-    multipliers = cfg.skill_multipliers()
-    if all(m == 1.0 for m in multipliers):
-        return value
-    scale = torch.tensor(multipliers, dtype=value.dtype, device=value.device)
-    return value * scale[code.long().clamp(0, len(SKILLS))]
+    return terms.skill_fidelity(*x.pelvis_before_after(), height, x.need("skill", "skill"), x.step_seconds(),
+                                scale=cfg.skill_multipliers() if cfg.skill_scale else None)
 
 
 _COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {

@@ -286,6 +286,7 @@ def skill_fidelity(
     skill: torch.Tensor,
     step_seconds: float,
     threshold: float = S.CONTACT_HEIGHT_M,
+    scale: tuple[float, ...] | None = None,
 ) -> torch.Tensor:
     """``skill``: minus how far the step is from passing the skill rule of its text (:mod:`latentrl.rewards.skills`).
 
@@ -306,6 +307,8 @@ def skill_fidelity(
         skill: (N,) long, :func:`latentrl.rewards.skills.skill_code` of each env's text.
         step_seconds: the step's duration (F / 30 s).
         threshold: contact height, metres.
+        scale: one multiplier per family of :data:`latentrl.rewards.skills.SKILLS` (``RewardConfig.skill_scale``),
+            or None for 1 each. Python floats, so a step makes no host-to-device copy for them.
 
     Returns:
         (N,) <= 0.
@@ -320,6 +323,8 @@ def skill_fidelity(
     def hop(stance: torch.Tensor, other: torch.Tensor) -> torch.Tensor:
         return -(F.relu(S.HOP_STANCE_MIN_SHARE - stance) + F.relu(other - S.HOP_OTHER_MAX_SHARE))
 
-    none = torch.zeros_like(speed)
-    per_code = torch.stack((none, run, walk, hop(left_only, right_only), hop(right_only, left_only)), 1)
+    families = [run, walk, hop(left_only, right_only), hop(right_only, left_only)]  # the order of S.SKILLS
+    if scale is not None:
+        families = [value * float(k) for value, k in zip(families, scale, strict=True)]
+    per_code = torch.stack((torch.zeros_like(speed), *families), 1)
     return per_code.gather(1, skill.long().clamp(0, len(S.SKILLS))[:, None])[:, 0]

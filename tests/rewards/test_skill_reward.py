@@ -71,16 +71,23 @@ def test_the_term_is_zero_exactly_where_the_judge_passes(code, speed, left_down,
     assert (fidelity(code, speed, left_down, right_down) == 0.0) == passes
 
 
-def test_composer_reads_the_feet_of_the_new_frames_and_weights_the_term():
-    """Two envs stepping at 1.2 m/s with alternating feet: fine for "walk", a miss for "hop on left leg"."""
-    joints = torch.zeros(2, 10, 22, 3)
-    joints[:, :, PELVIS, 0] = torch.linspace(0, 1.2 * 9 / 30, 10)
+def alternating_step(texts: list[str], speed: float) -> RewardInputs:
+    """One env per text, its pelvis moving at ``speed`` m/s along x over 2 history + 8 new frames, the left foot
+    down in new frames 0-3 and the right in 4-7 (else 20 cm up)."""
+    n = len(texts)
+    joints = torch.zeros(n, 10, 22, 3)
+    joints[:, :, PELVIS, 0] = torch.linspace(0, speed * 9 / 30, 10)
     joints[:, :, PELVIS, 2] = 0.9
     joints[:, :, list(FOOT_JOINTS), 2] = 0.2
-    joints[:, 2:6, FOOT_JOINTS[0], 2] = 0.0  # left down in new frames 0-3
-    joints[:, 6:, FOOT_JOINTS[1], 2] = 0.0  # right down in new frames 4-7
-    x = RewardInputs(joints, torch.zeros(2, 3), torch.zeros(2, dtype=torch.bool), torch.ones(2),
-                     skill=RewardComposer.skill_codes(["walk", "hop on left leg"]))
+    joints[:, 2:6, FOOT_JOINTS[0], 2] = 0.0
+    joints[:, 6:, FOOT_JOINTS[1], 2] = 0.0
+    return RewardInputs(joints, torch.zeros(n, 3), torch.zeros(n, dtype=torch.bool), torch.ones(n),
+                        skill=RewardComposer.skill_codes(texts))
+
+
+def test_composer_reads_the_feet_of_the_new_frames_and_weights_the_term():
+    """Two envs stepping at 1.2 m/s with alternating feet: fine for "walk", a miss for "hop on left leg"."""
+    x = alternating_step(["walk", "hop on left leg"], 1.2)
     total_off, values = RewardComposer(terms=("dist", "skill"))(x)
     total_on, _ = RewardComposer(weights={"skill": 2.0}, terms=("dist", "skill"))(x)
     assert torch.allclose(values["skill"], torch.tensor([0.0, -0.4]))
@@ -89,14 +96,7 @@ def test_composer_reads_the_feet_of_the_new_frames_and_weights_the_term():
 
 def test_skill_scale_multiplies_the_term_of_one_family_only():
     """``skill_scale: {hop_left: 10}`` makes the hop's miss 10x dearer and leaves walk, run and unjudged texts."""
-    joints = torch.zeros(4, 10, 22, 3)
-    joints[:, :, PELVIS, 0] = torch.linspace(0, 0.2 * 9 / 30, 10)  # 0.2 m/s: too slow to walk or run
-    joints[:, :, PELVIS, 2] = 0.9
-    joints[:, :, list(FOOT_JOINTS), 2] = 0.2
-    joints[:, 2:6, FOOT_JOINTS[0], 2] = 0.0
-    joints[:, 6:, FOOT_JOINTS[1], 2] = 0.0
-    codes = RewardComposer.skill_codes(["walk", "run", "hop on left leg", "wave"])
-    x = RewardInputs(joints, torch.zeros(4, 3), torch.zeros(4, dtype=torch.bool), torch.ones(4), skill=codes)
+    x = alternating_step(["walk", "run", "hop on left leg", "wave"], 0.2)  # 0.2 m/s: too slow to walk or run
     _, plain = RewardComposer(terms=("skill",))(x)
     _, scaled = RewardComposer(RewardConfig(skill_scale={"hop_left": 10}), terms=("skill",))(x)
     assert torch.allclose(plain["skill"], torch.tensor([-0.3, -1.8, -0.4, 0.0]), atol=1e-5)
