@@ -65,6 +65,9 @@ EMBEDDED_MODELS = {
     # v3's VAE with a denoiser whose decoded-motion consistency losses weigh 1,000, not 10,000 (configs/motion/v4.yaml):
     # the most steerable model measured, sliding more; opt-in (docs/benchmarks.md, "v4")
     "default-v4": "default_motion_v4.pt",
+    # v4's recipe on a twice-as-wide VAE trained with the planted-foot loss (configs/motion/v5.yaml): lower floor
+    # distance, more steer, hops on one foot; opt-in (docs/benchmarks.md, "v5")
+    "default-v5": "default_motion_v5.pt",
 }
 
 
