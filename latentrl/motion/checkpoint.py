@@ -103,8 +103,9 @@ def load_motion_model(
     Args:
         source: ``"default"`` (the embedded model; ``"default-v2"`` is another name for it),
             ``"default-v1"`` (the first release), ``"default-v3"`` (the v-prediction candidate),
-            ``"default-v4"`` (the steerable candidate), ``"default-v5"`` (v4 on a feet-aware VAE), a latentrl ``.pt`` file or a folder holding
-            ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with ``args.yaml`` beside it).
+            ``"default-v4"`` (the steerable candidate), ``"default-v5"`` (v4 on a feet-aware VAE), a latentrl
+            ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with
+            ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
         device: where the model runs.
         seed_history: (K, 2, 276) canonical seed histories, or a ``.npz``/``.pt`` file holding
