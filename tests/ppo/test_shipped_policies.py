@@ -25,7 +25,7 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_run_v4": ("dart_run_long", 64),  # 8.1 s on path 0 (its card, lock pinning from 0.05)
     "reach_hop_left_v4": ("dart_hop_long", 128),  # 17.5 s on path 0
     "reach_walk_v4": ("dart_walk_long", 64),  # 12.8 s on path 0
-    "reach_hop_left_v5": ("dart_hop_long", 128),  # 16.4 s on path 0
+    "reach_hop_left_v5": ("dart_hop_long", 128),  # 16.2 s on path 0
 }
 # the embedded model each policy was trained on (else "default")
 MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reach_run_v4": "default-v4",
