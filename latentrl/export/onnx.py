@@ -10,6 +10,7 @@ input                     shape           meaning
 history                   (B, 2, 276)     canonical, unnormalized history (the motion state)
 world_rotation            (B, 3, 3)       canonical-to-world rotation: ``p_world = R p + t``
 world_translation         (B, 3)          canonical-to-world translation, metres
+airborne                  (B,)            1 where the last step left the body in the air (the floor snap's flag), else 0
 goal                      (B, 3)          goal or current waypoint, world metres, z up (z unused)
 next_goal                 (B, 3)          only for FollowPath policies trained with observe_next
 text_embedding            (B, E)          only when no prompt was baked in (``--text``)
@@ -24,6 +25,7 @@ joints_world              (B, 8, 22, 3)   the 8 new frames, SMPL-22 joints, worl
 next_history              (B, 2, 276)     feed back as ``history``
 next_world_rotation       (B, 3, 3)       feed back as ``world_rotation``
 next_world_translation    (B, 3)          feed back as ``world_translation``
+next_airborne             (B,)            feed back as ``airborne``
 ========================  ==============  ===================================================
 
 Inside the graph: the env's observation (DART's goal features, text, history, floor height) ->
@@ -62,17 +64,19 @@ from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_L
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT, MotionModel, RolloutState, StepResult
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS, PELVIS
 
-FORMAT = "latentrl.onnx-controller/1"
+FORMAT = "latentrl.onnx-controller/2"  # 2: the airborne flag is part of the state
 MIN_OPSET = 17
 DEFAULT_OPSET = 17
 MAX_DIFF = 1e-3
 """``export_command`` fails when onnxruntime and torch differ by more than this after one step."""
 EXTRA = "pip install 'latentrl[onnx]' (packages onnx and onnxruntime)"
-OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation")
+OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation",
+                "next_airborne")
 _MEANINGS = {
     "history": "canonical, unnormalized history (2 frames x 276 features); start from a seed in latentrl.seeds",
     "world_rotation": "canonical-to-world rotation, p_world = R p + t",
     "world_translation": "canonical-to-world translation, metres",
+    "airborne": "1 where the previous step ended in the air (the floor snap lands it this step), else 0; start at 0",
     "goal": "goal or current waypoint, world metres, z up (z is not used)",
     "next_goal": "the waypoint after the current one, world metres (FollowPath observe_next policies)",
     "text_embedding": "prompt embedding; rows of latentrl.texts",
@@ -81,6 +85,7 @@ _MEANINGS = {
     "next_history": "feed back as history",
     "next_world_rotation": "feed back as world_rotation",
     "next_world_translation": "feed back as world_translation",
+    "next_airborne": "feed back as airborne",
 }
 
 
@@ -131,7 +136,7 @@ class ControllerStep(nn.Module):
             self.register_buffer("text", emb.expand(self.batch, -1).clone().to(model.device))
         else:
             self.text = None
-        self.input_names: tuple[str, ...] = ("history", "world_rotation", "world_translation", "goal",
+        self.input_names: tuple[str, ...] = ("history", "world_rotation", "world_translation", "airborne", "goal",
                                              *(("next_goal",) if self.observe_next else ()),
                                              *(() if self.baked_text else ("text_embedding",)))
         self.output_names = OUTPUT_NAMES
@@ -144,14 +149,14 @@ class ControllerStep(nn.Module):
     def input_shapes(self) -> dict[str, tuple[int, ...]]:
         b = self.batch
         shapes = {"history": (b, HISTORY_LENGTH, FEATURE_DIM), "world_rotation": (b, 3, 3), "world_translation": (b, 3),
-                  "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim)}
+                  "airborne": (b,), "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim)}
         return {name: shapes[name] for name in self.input_names}
 
     def output_shapes(self) -> dict[str, tuple[int, ...]]:
         b = self.batch
         return {"action": (b, self.model.latent_dim), "joints_world": (b, FUTURE_LENGTH, NUM_JOINTS, 3),
                 "next_history": (b, HISTORY_LENGTH, FEATURE_DIM), "next_world_rotation": (b, 3, 3),
-                "next_world_translation": (b, 3)}
+                "next_world_translation": (b, 3), "next_airborne": (b,)}
 
     def observe(self, state: RolloutState, goals: Sequence[torch.Tensor], text: torch.Tensor) -> torch.Tensor:
         """(B, obs_dim) the env's observation ``[goal(s) | text | history | scene]``, as the env's ``_observe``."""
@@ -174,7 +179,8 @@ class ControllerStep(nn.Module):
     def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Tensors in the order of :attr:`input_names` -> tensors in the order of :attr:`output_names`."""
         named = dict(zip(self.input_names, inputs))
-        state = RolloutState(named["history"], WorldTransform(named["world_rotation"], named["world_translation"]))
+        state = RolloutState(named["history"], WorldTransform(named["world_rotation"], named["world_translation"]),
+                             named["airborne"] > 0.5)
         text = self.text if self.baked_text else named["text_embedding"]
         goals = [named["goal"], *([named["next_goal"]] if self.observe_next else [])]
         action = self.policy(self.observe(state, goals, text)).mean.clamp(-self.action_bound, self.action_bound)
@@ -183,7 +189,8 @@ class ControllerStep(nn.Module):
                                        lock_min_weight=self.foot_lock_min_weight)
         step = self.post_step(step)
         nxt = step.state
-        return action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation
+        airborne = nxt.airborne_flags().to(torch.float32)
+        return action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation, airborne
 
     def initial_state(self, seed_index: torch.Tensor | None = None) -> RolloutState:
         """Start states from the model's seed histories (row i gets seed ``i % K`` unless ``seed_index`` is given)."""
@@ -197,7 +204,7 @@ class ControllerStep(nn.Module):
         rows = torch.arange(self.batch, dtype=torch.float32)
         goal = torch.stack((0.5 * torch.sin(rows), 1.5 + (rows % 3) * 0.75, torch.zeros_like(rows)), dim=-1)
         values = {"history": state.history, "world_rotation": state.world.rotation,
-                  "world_translation": state.world.translation, "goal": goal,
+                  "world_translation": state.world.translation, "airborne": torch.zeros(self.batch), "goal": goal,
                   "next_goal": goal + torch.tensor([1.0, 1.0, 0.0])}
         if not self.baked_text:
             emb = torch.zeros(1, self.model.text_dim) if text_embedding is None else text_embedding

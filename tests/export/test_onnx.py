@@ -43,7 +43,7 @@ def walk_onnx(tmp_path_factory):
 
 
 def _state_feeds(state):
-    return [state.history, state.world.rotation, state.world.translation]
+    return [state.history, state.world.rotation, state.world.translation, state.airborne_flags().float()]
 
 
 def test_shipped_walk_policy_runs_in_onnxruntime_like_the_torch_env(walk_onnx):
@@ -55,8 +55,9 @@ def test_shipped_walk_policy_runs_in_onnxruntime_like_the_torch_env(walk_onnx):
     obs, _ = env.reset(seed=3)
     session = onnx_session(walk_onnx)
     names = [i.name for i in session.get_inputs()]
-    assert names == ["history", "world_rotation", "world_translation", "goal"]
+    assert names == ["history", "world_rotation", "world_translation", "airborne", "goal"]
     closed = _state_feeds(env._state)
+    landed = 0
     joints = []
     for _ in range(4):
         goal = env.goal_world.clone()
@@ -64,6 +65,7 @@ def test_shipped_walk_policy_runs_in_onnxruntime_like_the_torch_env(walk_onnx):
         closed_action, closed_frames, *closed = run_session(session, [*closed, goal], names)
         with torch.no_grad():
             expected = policy.act(obs, deterministic=True).action
+        landed += int(env._state.airborne_flags().any())
         obs, *_ = env.step(expected)
         for ours, torch_value in zip(state, _state_feeds(env._state)):
             assert (ours - torch_value).abs().max() < 1e-5
@@ -75,6 +77,8 @@ def test_shipped_walk_policy_runs_in_onnxruntime_like_the_torch_env(walk_onnx):
         joints.append(closed_frames)
     for ours, torch_value in zip(closed, _state_feeds(env._state)):
         assert (ours - torch_value).abs().max() < TOL
+    # the flag is state: this seed has a step that starts in the air, which the graph must land as the env does
+    assert landed > 0
     ours = torch.cat(joints, dim=1).numpy()
     for i in range(2):
         assert np.abs(ours[i] - env.export_history(i)["joints"][2:]).max() < TOL
@@ -86,14 +90,14 @@ def test_exported_file_passes_the_onnx_checker_and_carries_its_contract(walk_onn
     assert model.opset_import[0].version == 17
     dims = {v.name: [d.dim_value for d in v.type.tensor_type.shape.dim] for v in (*model.graph.input,
                                                                                    *model.graph.output)}
-    assert dims == {"history": [2, 2, 276], "world_rotation": [2, 3, 3], "world_translation": [2, 3], "goal": [2, 3],
-                    "action": [2, 32], "joints_world": [2, 8, 22, 3], "next_history": [2, 2, 276],
-                    "next_world_rotation": [2, 3, 3], "next_world_translation": [2, 3]}
+    assert dims == {"history": [2, 2, 276], "world_rotation": [2, 3, 3], "world_translation": [2, 3], "airborne": [2],
+                    "goal": [2, 3], "action": [2, 32], "joints_world": [2, 8, 22, 3], "next_history": [2, 2, 276],
+                    "next_world_rotation": [2, 3, 3], "next_world_translation": [2, 3], "next_airborne": [2]}
     meta = {p.key: json.loads(p.value) for p in model.metadata_props}
-    assert meta["latentrl.format"] == "latentrl.onnx-controller/1"
+    assert meta["latentrl.format"] == "latentrl.onnx-controller/2"
     assert meta["latentrl.settings"]["text"] == "walk" and meta["latentrl.settings"]["guidance_scale"] == 5.0
     assert meta["latentrl.settings"]["foot_lock"] is True  # the shipped walk policy's training env
-    assert [i["name"] for i in meta["latentrl.contract"]["inputs"]] == list(dims)[:4]
+    assert [i["name"] for i in meta["latentrl.contract"]["inputs"]] == list(dims)[:5]
     assert len(meta["latentrl.joint_names"]) == 22 and "latentrl.texts" not in meta
     seeds = meta["latentrl.seeds"]["history"]
     history = np.asarray(seeds["data"], dtype=np.float32).reshape(seeds["shape"])
@@ -122,7 +126,7 @@ def test_text_input_and_observe_next_on_a_tiny_model(tmp_path):
     path = export_onnx(step, tmp_path / "tiny.onnx", opset=18, metadata=controller_metadata(step, {}, 18))
     session = onnx_session(path)
     names = [i.name for i in session.get_inputs()]
-    assert names == ["history", "world_rotation", "world_translation", "goal", "next_goal", "text_embedding"]
+    assert names == ["history", "world_rotation", "world_translation", "airborne", "goal", "next_goal", "text_embedding"]
     obs, _ = env.reset(seed=0)
     text = slice(*env.observation_layout["text"])
     next_goal = torch.tensor([far.waypoints[1], other.waypoints[1]])
