@@ -19,11 +19,28 @@ import yaml
 
 from latentrl.evaluation.report import DART_TABLE4, results_table
 from latentrl.evaluation.task_eval import results_table as task_results_table
+from latentrl.motion.checkpoint import embedded_sha256
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.ppo.checkpoint import export_policy
+from latentrl.safe_io import save_torch_atomic
 from latentrl.timing import hardware
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def name_motion(policy: Path, name: str) -> None:
+    """Store ``name`` as the policy's env motion when it names the very file the policy was trained on.
+
+    A run trained with ``env.motion=default-v5`` ships as a ``*_default`` policy once v5 is the default: it then
+    says "default", as its config does. Any other name is refused (the file would not be the one it learned on).
+    """
+    state = torch.load(policy, weights_only=True)
+    if state["config"]["env"].get("motion") == name:
+        return
+    if embedded_sha256(name) != state["motion"]["sha256"]:
+        raise SystemExit(f"--motion-name {name}: that embedded model is not the one {policy.name} was trained on")
+    state["config"]["env"]["motion"] = name
+    save_torch_atomic(state, policy)
 
 
 def main() -> None:
@@ -40,6 +57,7 @@ def main() -> None:
     run, ev = Path(args.run_dir), Path(args.eval_dir)
     state = torch.load(run / "final.pt", weights_only=True)
     out = export_policy(run / "final.pt", ROOT / "policies" / f"{args.name}.pt")
+    name_motion(out, args.motion_name)
     report = json.loads((ev / "report.json").read_text())
     s = report["settings"]
     hw = hardware()

@@ -16,9 +16,28 @@ def stored_env(policy: str | Path):
     from latentrl.ppo.checkpoint import read_checkpoint
 
     try:
-        return stored_env_config(read_checkpoint(policy, map_location="cpu").get("config"))
+        state = read_checkpoint(policy, map_location="cpu")
+        env = stored_env_config(state.get("config"))
     except (LatentRLError, OSError):
         return None
+    return _with_trained_file(env, (state.get("motion") or {}).get("sha256"))
+
+
+def _with_trained_file(env, sha256: str | None):
+    """The stored env, its embedded motion name swapped for the one now holding the file it was trained on.
+
+    "default" was v2 until stop 22 and is v5 since; a policy that stored "default" with v2's hash runs on
+    "default-v2" (by hash, so no name has to be remembered). Files and names that still match are kept.
+    """
+    import dataclasses
+
+    from latentrl.motion.checkpoint import EMBEDDED_MODELS, embedded_name_for, embedded_sha256
+
+    name = motion_of(env)
+    if env is None or not sha256 or name not in EMBEDDED_MODELS or embedded_sha256(name) in (None, sha256):
+        return env
+    moved = embedded_name_for(sha256)
+    return dataclasses.replace(env, motion=moved) if moved else env
 
 
 def motion_of(env) -> str:

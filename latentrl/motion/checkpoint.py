@@ -17,6 +17,7 @@ containers and tensors only, so ``torch.load(weights_only=True)`` reads it.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 from dataclasses import asdict, fields
@@ -53,27 +54,48 @@ _DERIVED_BUFFERS = ("sequence_pos_encoder.pe", "embed_timestep.sequence_pos_enco
 
 #: Names of the models shipped as package data -> their file under ``latentrl/assets``.
 EMBEDDED_MODELS = {
-    # the default since v2 (configs/motion/default.yaml, docs/benchmarks.md "Default model v2")
+    # the default since 2026-11-26 (stop 22): v5, v4's recipe on a twice-as-wide VAE trained with the planted-foot
+    # loss (configs/motion/default.yaml; docs/benchmarks.md, "v5")
     "default": "default_motion.pt",
-    # the same file under the name it shipped with as a candidate, so run dirs that named it still load
-    "default-v2": "default_motion.pt",
+    # the same file under the name it shipped with as a candidate, so run dirs and policies that named it still load
+    "default-v5": "default_motion.pt",
+    # the default from v2 until stop 22 (configs/motion/v2.yaml, docs/benchmarks.md "Default model v2"); policies
+    # that stored the name "default" with this file's hash are given it (``embedded_name_for``)
+    "default-v2": "default_motion_v2.pt",
     # the first release (configs/motion/v1.yaml), kept for comparison and for policies trained on it
     "default-v1": "default_motion_v1.pt",
     # v2's recipe with a v-predicting denoiser (configs/motion/v3.yaml): hops steer twice as far, walking and
-    # running less; opt-in until the shipped policies are retrained on it (docs/benchmarks.md, "v3")
+    # running less (docs/benchmarks.md, "v3")
     "default-v3": "default_motion_v3.pt",
     # v3's VAE with a denoiser whose decoded-motion consistency losses weigh 1,000, not 10,000 (configs/motion/v4.yaml):
-    # the most steerable model measured, sliding more; opt-in (docs/benchmarks.md, "v4")
+    # the most steerable model before v5, sliding more (docs/benchmarks.md, "v4")
     "default-v4": "default_motion_v4.pt",
-    # v4's recipe on a twice-as-wide VAE trained with the planted-foot loss (configs/motion/v5.yaml): lower floor
-    # distance, more steer, hops on one foot; opt-in (docs/benchmarks.md, "v5")
-    "default-v5": "default_motion_v5.pt",
 }
 
 
 def default_model_path(name: str = "default") -> Path:
     """An embedded model shipped as package data (``EMBEDDED_MODELS``)."""
     return Path(str(resources.files("latentrl").joinpath("assets", EMBEDDED_MODELS[name])))
+
+
+def embedded_name_for(sha256: str | None) -> str | None:
+    """The name of the embedded model whose file has this content hash, or None.
+
+    A checkpoint records the hash of the model it was trained on; when a name such as "default" has since
+    moved to another file (v2 -> v5), this finds the file the checkpoint was trained on under its own name.
+    """
+    return next((name for name in EMBEDDED_MODELS if sha256 and embedded_sha256(name) == sha256), None)
+
+
+def embedded_sha256(name: str) -> str | None:
+    """Content hash of an embedded model's file (None when the installation lacks it); hashed once per file."""
+    path = default_model_path(name)
+    return _cached_sha256(str(path), path.stat().st_mtime_ns) if path.is_file() else None
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_sha256(path: str, mtime_ns: int) -> str:
+    return file_sha256(path)
 
 
 def file_sha256(path: str | Path) -> str:
@@ -101,9 +123,9 @@ def load_motion_model(
     """Load a frozen motion model.
 
     Args:
-        source: ``"default"`` (the embedded model; ``"default-v2"`` is another name for it),
-            ``"default-v1"`` (the first release), ``"default-v3"`` (the v-prediction candidate),
-            ``"default-v4"`` (the steerable candidate), ``"default-v5"`` (v4 on a feet-aware VAE), a latentrl
+        source: ``"default"`` (the embedded model, v5; ``"default-v5"`` is another name for it),
+            ``"default-v2"`` (the default before v5), ``"default-v1"`` (the first release), ``"default-v3"``
+            (the v-prediction model), ``"default-v4"`` (the steerable model before v5), a latentrl
             ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with
             ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.

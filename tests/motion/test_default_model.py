@@ -42,12 +42,12 @@ def test_text_controls_speed_and_standing(model):
 
 
 def test_the_noise_steers_walking_and_running(model):
-    # What a reach policy works with: with only the noise differing, headings must spread.
-    # v1 measured 13.6 (walk) and 10.8 (run) degrees over 60 s; v2 (the default) 30.6 and 28.5.
+    # What a reach policy works with: with only the noise differing, headings must spread. Measured over
+    # 60 s: v1 13.6 (walk) and 10.8 (run) degrees, v2 30.6 and 28.5, v5 (the default) 42.4 and 47.1.
     from latentrl.app.bench.motion import steering_spread_deg
 
-    assert steering_spread_deg(model, "walk", batch=64) > 20.0
-    assert steering_spread_deg(model, "run", batch=64) > 20.0
+    assert steering_spread_deg(model, "walk", batch=64) > 35.0
+    assert steering_spread_deg(model, "run", batch=64) > 30.0
 
 
 def test_ten_seconds_stay_on_the_floor_and_hops_keep_to_one_foot(model):
@@ -77,32 +77,36 @@ def test_switching_text_from_walk_to_run_shows_within_a_second(model):
     assert switch["deepest_below_floor_cm"] <= 1.0
 
 
-def test_the_default_is_v2_and_v1_still_loads(model):
-    # "default" is v2 (configs/motion/default.yaml: steerable data); "default-v2" names the same file and
-    # "default-v1" the first release, whose heading barely followed the noise.
+def test_the_default_is_v5_and_earlier_defaults_still_load(model):
+    # "default" is v5 since stop 22 (configs/motion/default.yaml: the wider VAE with the planted-foot loss) and
+    # "default-v5" names the same file; "default-v2" (the default before it) and "default-v1" (the first
+    # release, whose heading barely followed the noise) still load for the policies trained on them.
     from latentrl.motion.checkpoint import default_model_path
 
-    assert default_model_path("default") == default_model_path("default-v2")
-    assert model.info["config"]["data"]["locomotion"]["steering"] == "random_hold"
+    assert default_model_path("default") == default_model_path("default-v5")
+    assert model.info["config"]["vae_train"]["plant_weight"] == 100.0
+    assert model.info["config"]["model"]["vae"]["h_dim"] == 256
+    v2 = load_motion_model("default-v2")
+    assert v2.info["config"]["data"]["locomotion"]["steering"] == "random_hold"
+    assert v2.info["config"]["model"]["vae"]["h_dim"] == 128
     v1 = load_motion_model("default-v1")
     assert v1.latent_shape == (1, 32) and "steering" not in v1.info["config"]["data"]["locomotion"]
 
 
 def test_hopping_keeps_to_the_named_leg(model):
-    # docs/benchmarks.md "Default model v2": left foot alone in 0.63 of the frames hopping on the left leg over
-    # 60 s. "hop on right leg" is weaker: from the seed pose 2 of these 4 rollouts hop on the LEFT leg for the
-    # first 8 s (right foot alone 0.21 on average here, 0.53 over 60 s), a known defect; this floor catches
-    # a regression, not the target.
+    # docs/benchmarks.md "v5": the named foot alone in 0.95 (left) and 0.90 (right) of the frames over 60 s
+    # (v2, the default before it: 0.63 and 0.53, its right hop often starting on the left leg). Issue 13's
+    # target is 0.6; these floors catch a regression.
     def shares(text):
         roll = model.rollout(text, num_steps=30, batch=4, generator=torch.Generator().manual_seed(0))
         return M.foot_contact_shares(roll.joints_world[:, 2:])
 
     left, right = shares("hop on left leg"), shares("hop on right leg")
-    assert float(left["left_only"].mean()) > 0.5 and float(left["right_only"].max()) < 0.05
-    assert float(right["right_only"].mean()) > 0.15
+    assert float(left["left_only"].mean()) > 0.6 and float(left["right_only"].max()) < 0.05
+    assert float(right["right_only"].mean()) > 0.6 and float(right["left_only"].max()) < 0.05
 
 
-def test_v3_hops_further_within_the_action_box_and_on_the_named_leg(model):
+def test_v3_hops_further_within_the_action_box_and_on_the_named_leg():
     """``default-v3`` (v-prediction, configs/motion/v3.yaml): what it was made for, on small batches.
 
     docs/benchmarks.md measures, over 60 s: hops steer 25 deg over the policy's +-4 box (v2: 13) and
@@ -110,11 +114,11 @@ def test_v3_hops_further_within_the_action_box_and_on_the_named_leg(model):
     """
     from latentrl.app.bench.motion import steering_spread_deg
 
-    v3 = load_motion_model("default-v3")
-    assert v3.denoiser.config.prediction == "v" and v3.latent_shape == model.latent_shape
+    v2, v3 = load_motion_model("default-v2"), load_motion_model("default-v3")
+    assert v3.denoiser.config.prediction == "v" and v3.latent_shape == v2.latent_shape
     for text in ("hop on left leg", "hop on right leg"):
         ours = steering_spread_deg(v3, text, batch=64, action_box=4.0)
-        assert ours > 18.0 and ours > 1.3 * steering_spread_deg(model, text, batch=64, action_box=4.0), text
+        assert ours > 18.0 and ours > 1.3 * steering_spread_deg(v2, text, batch=64, action_box=4.0), text
     roll = v3.rollout("hop on right leg", num_steps=30, batch=4, generator=torch.Generator().manual_seed(0))
     shares = M.foot_contact_shares(roll.joints_world[:, 2:])
     assert float(shares["right_only"].mean()) > 0.4 > 0.05 > float(shares["left_only"].mean())
@@ -139,7 +143,7 @@ def test_v4_noise_steers_further_than_v3():
 
 
 def test_v5_steers_walk_further_and_hops_lower_on_one_foot():
-    """``default-v5`` (configs/motion/v5.yaml: v4's recipe on a wider VAE with the planted-foot loss).
+    """``default-v5`` (the default since stop 22, configs/motion/default.yaml: v4's recipe on a wider VAE with the planted-foot loss).
 
     docs/benchmarks.md ("v5") measures over 60 s: walk steer 30.9 -> 42.4 degrees against v4, hop on left leg
     floor distance 3.57 -> 1.06 cm and left foot alone 0.67 -> 0.95. These floors catch a regression.
