@@ -1,4 +1,4 @@
-"""Every shipped policy loads on the embedded default model and drives one short path of its own skill.
+"""Every shipped policy loads on the embedded model it was trained on and drives one short path of its own skill.
 
 The cards' headline numbers come from ``latentrl eval policies/<name>.pt --paths dart_<skill>_long
 --episodes 32 --max-steps 256`` (each card names its command); this test keeps the files loadable and on
@@ -12,25 +12,30 @@ import pytest
 import torch
 
 from latentrl.app.cli import main
+from latentrl.evaluation.trained import stored_env
 from latentrl.motion.checkpoint import default_model_path, file_sha256
 
 ROOT = Path(__file__).resolve().parents[2]
 POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart along +y)
-    "reach_walk_default": ("dart_walk_long", 96),
-    "reach_run_default": ("dart_run_long", 48),
-    "reach_hop_left_default": ("dart_hop_long", 96),
+    "reach_walk_default": ("dart_walk_long", 64),  # 13.2 s on path 0
+    "reach_run_default": ("dart_run_long", 48),  # 7.3 s on path 0
+    "reach_hop_left_default": ("dart_hop_long", 128),  # 16.2 s on path 0
     "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m
+    "reach_walk_v2": ("dart_walk_long", 96),
+    "reach_run_v2": ("dart_run_long", 48),
+    "reach_hop_left_v2": ("dart_hop_long", 96),
     "reach_hop_left_v3": ("dart_hop_long", 96),  # 23.9 s on path 0 with prior 0.5
     "reach_run_v3": ("dart_run_long", 160),  # it circles back to waypoints it overshoots: 36 s on path 0
     "reach_run_v4": ("dart_run_long", 64),  # 8.1 s on path 0 (its card, lock pinning from 0.05)
     "reach_hop_left_v4": ("dart_hop_long", 128),  # 17.5 s on path 0
     "reach_walk_v4": ("dart_walk_long", 64),  # 12.8 s on path 0
-    "reach_hop_left_v5": ("dart_hop_long", 128),  # 16.2 s on path 0
 }
-# the embedded model each policy was trained on (else "default")
+# the embedded model each policy was trained on (else "default"): the v2 policies stored the name "default",
+# which now means v5; `stored_env` finds their file by its hash
 MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reach_run_v4": "default-v4",
           "reach_hop_left_v4": "default-v4", "reach_walk_v4": "default-v4",
-          "reach_hop_left_v5": "default-v5"}
+          "reach_walk_v2": "default-v2", "reach_run_v2": "default-v2", "reach_hop_left_v2": "default-v2",
+          "path_mixed_default": "default-v2", "joystick_walk_default": "default-v2", "timed_walk_default": "default-v2"}
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
@@ -49,7 +54,7 @@ def _evaluate_first_entry(name: str, task_dir: str, suite: str, tmp_path, *eval_
     state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
     motion = MOTION.get(name, "default")
     assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
-    assert state["config"]["env"]["motion"] == motion  # what eval loads when --motion is not given
+    assert stored_env(ROOT / "policies" / f"{name}.pt").motion == motion  # what eval loads without --motion
     card = (ROOT / "policies" / f"{name}.md").read_text()
     assert state["motion"]["sha256"][:16] in card and f"--paths {suite}" in card
     entries = json.loads((ROOT / "latentrl" / "tasks" / task_dir / f"{suite}.json").read_text())
