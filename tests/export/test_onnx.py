@@ -126,7 +126,8 @@ def test_text_input_and_observe_next_on_a_tiny_model(tmp_path):
     path = export_onnx(step, tmp_path / "tiny.onnx", opset=18, metadata=controller_metadata(step, {}, 18))
     session = onnx_session(path)
     names = [i.name for i in session.get_inputs()]
-    assert names == ["history", "world_rotation", "world_translation", "airborne", "goal", "next_goal", "text_embedding"]
+    assert names == ["history", "world_rotation", "world_translation", "airborne", "goal", "next_goal",
+                     "text_embedding"]
     obs, _ = env.reset(seed=0)
     text = slice(*env.observation_layout["text"])
     next_goal = torch.tensor([far.waypoints[1], other.waypoints[1]])

@@ -143,7 +143,8 @@ def test_v4_noise_steers_further_than_v3():
 
 
 def test_v5_steers_walk_further_and_hops_lower_on_one_foot():
-    """``default-v5`` (the default since stop 22, configs/motion/default.yaml: v4's recipe on a wider VAE with the planted-foot loss).
+    """``default-v5`` (the default since stop 22, configs/motion/default.yaml): v4's recipe on a wider VAE with
+    the planted-foot loss.
 
     docs/benchmarks.md ("v5") measures over 60 s: walk steer 30.9 -> 42.4 degrees against v4, hop on left leg
     floor distance 3.57 -> 1.06 cm and left foot alone 0.67 -> 0.95. These floors catch a regression.
