@@ -35,11 +35,13 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
 MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reach_run_v4": "default-v4",
           "reach_hop_left_v4": "default-v4", "reach_walk_v4": "default-v4",
           "reach_walk_v2": "default-v2", "reach_run_v2": "default-v2", "reach_hop_left_v2": "default-v2",
-          "path_mixed_default": "default-v2", "joystick_walk_default": "default-v2", "timed_walk_default": "default-v2"}
+          "path_mixed_default": "default-v2", "joystick_walk_v2": "default-v2", "timed_walk_default": "default-v2"}
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
-TASK_POLICIES = {"timed_walk_default", "joystick_walk_default"}  # tested by their own tests below
+JOYSTICK_POLICIES = ["joystick_walk_default", "joystick_walk_v2"]
+TIMED_POLICIES = ["timed_walk_default"]
+TASK_POLICIES = {*JOYSTICK_POLICIES, *TIMED_POLICIES}  # tested by their own tests below
 
 
 def test_every_shipped_policy_is_tested_here():
@@ -89,9 +91,11 @@ def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
     assert metrics["reached"]["mean"] > 0.5, metrics  # most waypoints of the 9.5 s line reached
 
 
-def test_shipped_joystick_policy_follows_the_first_timeline(tmp_path):
-    """joystick_walk_default (policies/joystick_walk_default.md) on the first timeline of joystick_walk.json."""
-    metrics = _first_entry_metrics("joystick_walk_default", "joystick", "joystick_walk", tmp_path)
-    # the card measures 11.3 deg and 0.09 m/s on this timeline (32 stochastic episodes); the timeline turns
+@pytest.mark.parametrize("name", JOYSTICK_POLICIES)
+def test_shipped_joystick_policy_follows_the_first_timeline(name, tmp_path):
+    """A joystick policy (policies/joystick_walk_*.md) on the first timeline of joystick_walk.json."""
+    metrics = _first_entry_metrics(name, "joystick", "joystick_walk", tmp_path)
+    # the cards measure 11.2 deg / 0.13 m/s (v5) and 11.3 deg / 0.09 m/s (v2) on this timeline (32 stochastic
+    # episodes each); the timeline turns
     # by 90 deg at each of its 4 command changes, so a policy that ignores them lands far above these bounds
     assert metrics["heading_err_deg"]["mean"] < 30.0 and metrics["speed_err_m_s"]["mean"] < 0.3, metrics
