@@ -35,12 +35,12 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
 MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reach_run_v4": "default-v4",
           "reach_hop_left_v4": "default-v4", "reach_walk_v4": "default-v4",
           "reach_walk_v2": "default-v2", "reach_run_v2": "default-v2", "reach_hop_left_v2": "default-v2",
-          "path_mixed_default": "default-v2", "joystick_walk_v2": "default-v2", "timed_walk_default": "default-v2"}
+          "path_mixed_default": "default-v2", "joystick_walk_v2": "default-v2", "timed_walk_v2": "default-v2"}
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
 JOYSTICK_POLICIES = ["joystick_walk_default", "joystick_walk_v2"]
-TIMED_POLICIES = ["timed_walk_default"]
+TIMED_POLICIES = ["timed_walk_default", "timed_walk_v2"]
 TASK_POLICIES = {*JOYSTICK_POLICIES, *TIMED_POLICIES}  # tested by their own tests below
 
 
@@ -85,9 +85,10 @@ def _first_entry_metrics(name: str, task: str, suite: str, tmp_path) -> dict:
     return report["suites"][0]["entries"][0]["metrics"]
 
 
-def test_shipped_timed_policy_reaches_the_first_timed_path(tmp_path):
-    """timed_walk_default (policies/timed_walk_default.md) on the first entry of tasks/timed/timed_walk.json."""
-    metrics = _first_entry_metrics("timed_walk_default", "timed", "timed_walk", tmp_path)
+@pytest.mark.parametrize("name", TIMED_POLICIES)
+def test_shipped_timed_policy_reaches_the_first_timed_path(name, tmp_path):
+    """A timed policy (policies/timed_walk_*.md) on the first entry of tasks/timed/timed_walk.json."""
+    metrics = _first_entry_metrics(name, "timed", "timed_walk", tmp_path)
     assert metrics["reached"]["mean"] > 0.5, metrics  # most waypoints of the 9.5 s line reached
 
 
