@@ -142,7 +142,7 @@ def test_v4_noise_steers_further_than_v3():
     assert spread["walk"][1] > spread["walk"][0], spread
 
 
-def test_v5_steers_walk_further_and_hops_lower_on_one_foot():
+def test_v5_steers_walk_further_and_hops_lower_on_one_foot(model):
     """``default-v5`` (the default since stop 22, configs/motion/default.yaml): v4's recipe on a wider VAE with
     the planted-foot loss.
 
@@ -151,7 +151,7 @@ def test_v5_steers_walk_further_and_hops_lower_on_one_foot():
     """
     from latentrl.app.bench.motion import steering_spread_deg
 
-    v4, v5 = load_motion_model("default-v4"), load_motion_model("default-v5")
+    v4, v5 = load_motion_model("default-v4"), model  # the module's "default" is the default-v5 file (test above)
     assert v5.latent_shape == v4.latent_shape and v5.info["config"]["vae_train"]["plant_weight"] == 100.0
     walk = steering_spread_deg(v4, "walk", batch=64), steering_spread_deg(v5, "walk", batch=64)
     assert walk[1] >= 35.0 and walk[1] > walk[0], walk

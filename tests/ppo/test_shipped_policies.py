@@ -97,6 +97,6 @@ def test_shipped_joystick_policy_follows_the_first_timeline(name, tmp_path):
     """A joystick policy (policies/joystick_walk_*.md) on the first timeline of joystick_walk.json."""
     metrics = _first_entry_metrics(name, "joystick", "joystick_walk", tmp_path)
     # the cards measure 11.2 deg / 0.13 m/s (v5) and 11.3 deg / 0.09 m/s (v2) on this timeline (32 stochastic
-    # episodes each); the timeline turns
-    # by 90 deg at each of its 4 command changes, so a policy that ignores them lands far above these bounds
+    # episodes each); the timeline turns by 90 deg at each of its 4 command changes, so a policy that ignores
+    # them lands far above these bounds
     assert metrics["heading_err_deg"]["mean"] < 30.0 and metrics["speed_err_m_s"]["mean"] < 0.3, metrics
