@@ -59,6 +59,9 @@ class PathConfig:
     """A DART path file (or suite name); None draws random smooth paths each episode."""
     observe_next: bool = False
     """Also observe the waypoint after the current one."""
+    next_at_last: str = "repeat"
+    """What ``observe_next`` shows at the last waypoint: "repeat" (the last waypoint again) or "extend" (a point
+    one last-segment length beyond it, so the last goal looks like any straight stretch)."""
     random_waypoints: int = 5
     """Waypoints per random path."""
     text_per_waypoint: bool = False
@@ -74,10 +77,13 @@ class PathConfig:
         require(0 <= self.random_turn_deg <= 180, "random_turn_deg",
                 f"must be degrees in [0, 180], got {self.random_turn_deg}")
         require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
+        require(self.next_at_last in ("repeat", "extend"), "next_at_last",
+                f"must be 'repeat' or 'extend', got {self.next_at_last!r}")
 
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths)) if self.paths else None
-        return {"paths": paths, "observe_next": self.observe_next, "random_waypoints": self.random_waypoints,
+        return {"paths": paths, "observe_next": self.observe_next, "next_at_last": self.next_at_last,
+                "random_waypoints": self.random_waypoints,
                 "text_per_waypoint": self.text_per_waypoint, "random_segment": tuple(self.random_segment),
                 "random_turn_deg": self.random_turn_deg}
 
@@ -121,6 +127,9 @@ class TimedConfig:
     """Random paths time each segment at a speed uniform in [min, max] m/s; max also caps the pace target."""
     observe_next: bool = False
     """Also observe the waypoint after the current one."""
+    next_at_last: str = "repeat"
+    """What ``observe_next`` shows at the last waypoint: "repeat" (the last waypoint again) or "extend" (a point
+    one last-segment length beyond it, so the last goal looks like any straight stretch)."""
     random_waypoints: int = 5
     """Waypoints per random path."""
     text_per_waypoint: bool = False
@@ -133,6 +142,8 @@ class TimedConfig:
                 f"must be [min, max] m/s with 0 < min <= max, got {self.speed_range}")
         require(self.time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {self.time_left_clip}")
         require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
+        require(self.next_at_last in ("repeat", "extend"), "next_at_last",
+                f"must be 'repeat' or 'extend', got {self.next_at_last!r}")
 
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths, "timed")) if self.paths else None

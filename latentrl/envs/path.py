@@ -19,6 +19,7 @@ from latentrl.config import require
 from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.goal import body_forward
 from latentrl.errors import DataError, closest
+from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
 from latentrl.safe_io import read_json_file
 
@@ -39,6 +40,10 @@ class WaypointPath:
 
     waypoints: tuple[tuple[float, float, float], ...]
     texts: tuple[str, ...]
+
+
+NEXT_AT_LAST = ("repeat", "extend")
+"""What ``next_goal_*`` observes at a path's last waypoint (:class:`FollowPathEnv`'s ``next_at_last``)."""
 
 
 def load_paths(file: str | Path) -> list[WaypointPath]:
@@ -125,8 +130,9 @@ class FollowPathEnv(LatentMotionVectorEnv):
     [0:3]                  goal_dir        direction to the current waypoint (DART's clipped,
                                            canonical-frame direction, as in ReachLocation)
     [3:4]                  goal_dist       xy distance to it, metres, clipped at 5
-    [4:7] (observe_next)   next_goal_dir   the same for the following waypoint (the current
-    [7:8] (observe_next)   next_goal_dist  one again at the last waypoint)
+    [4:7] (observe_next)   next_goal_dir   the same for the following waypoint (at the last
+    [7:8] (observe_next)   next_goal_dist  waypoint: itself again, or with ``next_at_last=
+                                           "extend"`` a point one last-segment length beyond it)
     [G:G+E]                text            embedding of the current waypoint's text
     [G+E:G+E+552]          motion          2 x 276 unnormalized canonical history features
     [G+E+552:G+E+553]      scene           floor z minus the pelvis z of history frame 0, metres
@@ -151,7 +157,8 @@ class FollowPathEnv(LatentMotionVectorEnv):
     ## Arguments
 
     ``paths`` (``None`` = random, a path file, or a list of :class:`WaypointPath`),
-    ``path_assignment``, ``observe_next``, ``random_waypoints`` (5), ``random_segment``
+    ``path_assignment``, ``observe_next``, ``next_at_last`` ("repeat" or "extend": what
+    ``next_goal_*`` shows at the last waypoint), ``random_waypoints`` (5), ``random_segment``
     ((1.0, 3.0) m), ``random_turn_deg`` (45), ``text_per_waypoint`` (random paths: a text per
     waypoint instead of per path); the rest are :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
 
@@ -167,6 +174,7 @@ class FollowPathEnv(LatentMotionVectorEnv):
         paths: str | Path | Sequence[WaypointPath] | None = None,
         path_assignment: str = "random",
         observe_next: bool = False,
+        next_at_last: str = "repeat",
         random_waypoints: int = 5,
         random_segment: Sequence[float] = (1.0, 3.0),
         random_turn_deg: float = 45.0,
@@ -183,12 +191,16 @@ class FollowPathEnv(LatentMotionVectorEnv):
             "path_assignment",
             f"expected 'random' or 'by_env', got {path_assignment!r}",
         )
+        require(
+            next_at_last in NEXT_AT_LAST, "next_at_last", f"expected one of {NEXT_AT_LAST}, got {next_at_last!r}"
+        )
         require(int(random_waypoints) >= 1, "random_waypoints", f"must be >= 1, got {random_waypoints}")
         lo, hi = (float(v) for v in random_segment)
         require(0 < lo <= hi, "random_segment", f"must be (min, max) metres with 0 < min <= max, got {random_segment}")
         require(0 <= random_turn_deg <= 180, "random_turn_deg", f"must be in [0, 180], got {random_turn_deg}")
         self.path_assignment = path_assignment
         self.observe_next = bool(observe_next)
+        self.next_at_last = next_at_last
         self.random_waypoints = int(random_waypoints)
         self.random_segment = (lo, hi)
         self.random_turn_deg = float(random_turn_deg)
@@ -219,6 +231,7 @@ class FollowPathEnv(LatentMotionVectorEnv):
         self._wp_text = torch.zeros(n, width, dtype=torch.long, device=dev)
         self._wp_len = torch.ones(n, dtype=torch.long, device=dev)
         self._wp_index = torch.zeros(n, dtype=torch.long, device=dev)
+        self._wp_beyond = torch.zeros(n, 3, device=dev)
         self._rows = torch.arange(n, device=dev)
 
     # ------------------------------------------------------------------ paths
@@ -255,13 +268,30 @@ class FollowPathEnv(LatentMotionVectorEnv):
         self._wp_text[idx] = texts
         self._wp_len[idx] = lengths
         self._wp_index[idx] = 0
+        self._wp_beyond[idx] = self._point_beyond(idx, points, lengths)
         self._text_idx[idx] = texts[:, 0]
+
+    def _point_beyond(self, idx: torch.Tensor, points: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
+        """(M, 3) what ``next_goal_*`` shows at the last waypoint: the last one again (``repeat``) or the
+        last segment continued by its own length (``extend``), so the last goal looks like a straight
+        stretch of path instead of an input the policy only meets at the end."""
+        rows = torch.arange(len(idx), device=self.device)
+        last = points[rows, lengths - 1]
+        if self.next_at_last == "repeat":
+            return last
+        start = self.history_world(idx)[:, -1, PELVIS].clone()
+        start[:, 2] = last[:, 2]
+        before = torch.where((lengths > 1)[:, None], points[rows, (lengths - 2).clamp(min=0)], start)
+        return last + (last - before)
 
     # ------------------------------------------------------------------ task hooks
     def _waypoint(self, offset: int = 0) -> torch.Tensor:
-        """(N, 3) the waypoint ``offset`` after the current one (clamped to the last)."""
-        k = torch.minimum(self._wp_index + offset, self._wp_len - 1)
-        return self._wp[self._rows, k]
+        """(N, 3) the waypoint ``offset`` after the current one; past the last, :meth:`_point_beyond`'s."""
+        k = self._wp_index + offset
+        point = self._wp[self._rows, torch.minimum(k, self._wp_len - 1)]
+        if offset == 0:
+            return point
+        return torch.where((k >= self._wp_len)[:, None], self._wp_beyond, point)
 
     @property
     def goal_world(self) -> torch.Tensor:

@@ -80,13 +80,19 @@ class EvalSettings:
     """Keep planted feet from sliding (docs/motion.md, "Foot lock"); the policy's training value."""
     foot_lock_min_weight: float = LOCK_MIN_WEIGHT
     """The contact weight from which the lock pins a foot fully; the policy's training value."""
+    next_at_last: str = "repeat"
+    """What a path policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``); its
+    training value."""
 
     def take_training_env(self, env_cfg: Any) -> None:
-        """Step the motion as the policy's training env did: its guidance, action bound and foot lock."""
+        """Step the motion as the policy's training env did: its guidance, action bound and foot lock (and, for a
+        path policy, observe the last waypoint as it did)."""
         self.guidance_scale = float(getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE))
         self.action_bound = float(getattr(env_cfg, "action_bound", ACTION_BOUND))
         self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
         self.foot_lock_min_weight = float(getattr(env_cfg, "foot_lock_min_weight", LOCK_MIN_WEIGHT))
+        if getattr(env_cfg, "task", None) == "path":
+            self.next_at_last = str(getattr(env_cfg.path, "next_at_last", "repeat"))
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""

@@ -121,6 +121,7 @@ def make_env(
         paths=list(paths),
         path_assignment="by_env",
         observe_next=observe_next,
+        next_at_last=settings.next_at_last,
         texts=(paths[0].texts[0],),
         device=settings.device,
         max_episode_steps=max_steps or settings.max_steps,

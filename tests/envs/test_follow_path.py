@@ -110,6 +110,30 @@ def test_observe_next_adds_the_following_waypoint(tiny_model):
     torch.testing.assert_close(obs[0, 7], (torch.tensor([4.0, 4.0]) - pelvis[0, :2]).norm().clamp(max=5.0))
 
 
+@pytest.mark.parametrize("mode", ["repeat", "extend"])
+def test_next_at_last_repeats_or_extends_the_last_segment(tiny_model, mode):
+    """At the last waypoint next_goal shows it again (repeat) or the last segment continued (extend); before
+    the last, both show the following waypoint."""
+    paths = [WaypointPath(((0.0, 3.0, 0.0), (4.0, 3.0, 0.0)), ("walk", "walk")),
+             WaypointPath(((0.0, 2.0, 0.0),), ("walk",))]
+    env = path_env(tiny_model, paths, num_envs=2, path_assignment="by_env", observe_next=True, next_at_last=mode)
+    env.reset(seed=0)
+    start = env.history_world()[1, -1, 0]
+    torch.testing.assert_close(env._waypoint(1)[0], torch.tensor([4.0, 3.0, 0.0]))  # not yet the last
+    beyond = {"repeat": torch.tensor([0.0, 2.0, 0.0]),
+              "extend": torch.tensor([2 * 0.0 - start[0], 2 * 2.0 - start[1], 0.0])}[mode]
+    torch.testing.assert_close(env._waypoint(1)[1], beyond)  # a one-waypoint path extends the start->goal line
+    env._wp_index[0] = 1  # env 0 now heads for its last waypoint
+    expected = {"repeat": torch.tensor([4.0, 3.0, 0.0]), "extend": torch.tensor([8.0, 3.0, 0.0])}[mode]
+    torch.testing.assert_close(env._waypoint(1)[0], expected)
+    torch.testing.assert_close(env._waypoint()[0], torch.tensor([4.0, 3.0, 0.0]))
+
+
+def test_next_at_last_rejects_unknown_modes(tiny_model):
+    with pytest.raises(Exception, match="next_at_last"):
+        path_env(tiny_model, None, num_envs=1, observe_next=True, next_at_last="loop")
+
+
 def test_by_env_assignment_and_texts_from_files(tiny_model):
     paths = load_paths(PATHS / "dart_random.json")
     env = path_env(tiny_model, PATHS / "dart_random.json", num_envs=4, path_assignment="by_env")
