@@ -73,8 +73,8 @@ def canonical_frame(joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     x_axis = joints[:, RIGHT_HIP] - joints[:, LEFT_HIP]
     x_axis = torch.cat((x_axis[:, :2], torch.zeros_like(x_axis[:, 2:])), dim=-1)
     x_axis = F.normalize(x_axis, dim=-1)
-    z_axis = torch.zeros_like(x_axis)
-    z_axis[:, 2] = 1.0
+    flat = torch.zeros_like(x_axis[:, 0])
+    z_axis = torch.stack((flat, flat, torch.ones_like(flat)), dim=-1)  # (0, 0, 1), built on the device
     y_axis = F.normalize(torch.cross(z_axis, x_axis, dim=-1), dim=-1)
     return torch.stack((x_axis, y_axis, z_axis), dim=-1), joints[:, PELVIS]
 

@@ -25,7 +25,7 @@ from latentrl.motion.skeleton import FOOT_JOINTS
 
 def foot_positions(joints: torch.Tensor) -> torch.Tensor:
     """(..., 22, 3) joints -> (..., 2, 3) the left and right foot joints DART uses for contact."""
-    return joints[..., list(FOOT_JOINTS), :]
+    return torch.stack([joints[..., j, :] for j in FOOT_JOINTS], dim=-2)  # no index tensor from host data
 
 
 def skate_weights(heights: torch.Tensor, threshold: float = CONTACT_HEIGHT_M) -> torch.Tensor:

@@ -67,7 +67,9 @@ class TimestepEmbedder(nn.Module):
 
     def forward(self, timesteps: torch.Tensor) -> torch.Tensor:
         """(B,) int64 or () -> (B, h) or (h,)."""
-        return self.time_embed(self.sequence_pos_encoder.pe[timesteps, 0])
+        # a gather, not an integer index: a device tensor of steps needs no host read (compile, CUDA graphs)
+        rows = self.sequence_pos_encoder.pe[:, 0].index_select(0, timesteps.reshape(-1))
+        return self.time_embed(rows.reshape(*timesteps.shape, -1))
 
 
 class Denoiser(nn.Module):
@@ -95,8 +97,9 @@ class Denoiser(nn.Module):
             return out
         if getattr(self, "v_signal", None) is None:
             raise RuntimeError("a v-predicting denoiser needs attach_schedule(...) before it denoises")
-        a = self.v_signal[timesteps].reshape(-1, 1, 1).to(out.dtype)
-        s = self.v_noise[timesteps].reshape(-1, 1, 1).to(out.dtype)
+        steps = timesteps.reshape(-1)  # gathered, not read as an integer (compile, CUDA graphs)
+        a = self.v_signal.index_select(0, steps).reshape(-1, 1, 1).to(out.dtype)
+        s = self.v_noise.index_select(0, steps).reshape(-1, 1, 1).to(out.dtype)
         return a * x_t - s * out
 
     def mask_text(self, text: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:

@@ -146,6 +146,7 @@ class GaussianDiffusion:
         """
         for name in self.COEFFICIENTS:
             self._coef(name, torch.device(device))
+        self._timesteps(torch.device(device))
 
     def _coef(self, name: str, device: torch.device) -> torch.Tensor:
         """float32 copy of a table on ``device`` (the cast DART applies when it gathers values)."""
@@ -156,7 +157,14 @@ class GaussianDiffusion:
 
     def model_timestep(self, t: int, device: torch.device) -> torch.Tensor:
         """The original step index the model sees for visited step ``t`` (a 0-dim int64 tensor)."""
-        return torch.tensor(self.timestep_map[t], dtype=torch.int64, device=device)
+        return self._timesteps(device)[t]  # a view of a device table: no host-to-device copy per step
+
+    def _timesteps(self, device: torch.device) -> torch.Tensor:
+        """(T,) int64 :attr:`timestep_map` on ``device`` (cached, filled by :meth:`warm`)."""
+        key = ("timestep_map", str(device))
+        if key not in self._f32:
+            self._f32[key] = torch.tensor(self.timestep_map, dtype=torch.int64, device=device)
+        return self._f32[key]
 
     # --------------------------------------------------------------- forward process
     def q_sample(self, x0: torch.Tensor, t: torch.Tensor, noise: torch.Tensor) -> torch.Tensor:

@@ -244,7 +244,8 @@ class MotionModel(nn.Module):
             def model_fn(x, t):
                 return self.denoiser.denoise(x, t, cond)
         else:
-            w = torch.as_tensor(guidance_scale, dtype=noise.dtype, device=noise.device).reshape(-1, 1, 1)
+            # a number stays a number (no tensor built from host data in the step: capture-safe on CUDA)
+            w = guidance_scale.reshape(-1, 1, 1) if torch.is_tensor(guidance_scale) else float(guidance_scale)
             cond2 = self.denoiser.condition(
                 torch.cat((history_n, history_n)), torch.cat((text, torch.zeros_like(text)))
             )
@@ -347,8 +348,8 @@ class MotionModel(nn.Module):
         land = (lowest <= self.floor_snap) | airborne
         target = torch.where(land, torch.zeros_like(lowest), lowest.clamp(max=FLIGHT_CAP_M))
         shift = target - lowest
-        up = torch.tensor([0.0, 0.0, 1.0], dtype=shift.dtype, device=shift.device)
-        offset = shift[:, None] * up  # (B, 3), z only
+        flat = torch.zeros_like(shift)
+        offset = torch.stack((flat, flat, shift), dim=-1)  # (B, 3), z only
         joints_world = joints_world + offset[:, None, None, :]
         translation = world.translation + offset
         return joints_world, WorldTransform(world.rotation, translation), ~land

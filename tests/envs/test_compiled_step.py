@@ -2,6 +2,7 @@
 
 import pytest
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
 from latentrl.rewards import RewardConfig
 from tests.envs.conftest import actions
@@ -41,6 +42,32 @@ def test_every_task_steps_through_one_compiled_graph_without_recompiling(make_ta
     with torch._dynamo.config.patch(error_on_recompile=True):
         for step in range(1, 5):  # truncations every 2 steps: same-step autoresets included
             env.step(actions(3, seed=step))
+
+
+class _HostData(TorchDispatchMode):
+    """Records ops that build a tensor from Python data (``torch.tensor``, list indices, scalar setitem):
+    on CUDA each is a host-to-device copy, which a CUDA graph cannot capture."""
+
+    def __init__(self):
+        super().__init__()
+        self.seen: list[str] = []
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        if func in (torch.ops.aten.lift_fresh.default, torch.ops.aten.lift_fresh_copy.default):
+            self.seen.append(str(func))
+        return func(*args, **(kwargs or {}))
+
+
+@pytest.mark.parametrize("foot_lock", [False, True])
+def test_every_task_step_core_builds_no_tensor_from_host_data(make_task, foot_lock):
+    """The sampler's timesteps, guidance, floor snap, canonical frame and foot lookup use device tensors only."""
+    env = make_task(num_envs=3, foot_lock=foot_lock)
+    env.reset(seed=0)
+    env.step(actions(3, seed=0))  # caches (text table, diffusion tables) fill outside the probe
+    inputs = _core_inputs(env)
+    with torch.no_grad(), _HostData() as probe:
+        env._motion_core(*inputs)
+    assert probe.seen == []
 
 
 def test_a_scaled_skill_term_keeps_one_graph(make_reach):
