@@ -253,7 +253,8 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
                           foot_lock_min_weight=float(env_cfg.get("foot_lock_min_weight", LOCK_MIN_WEIGHT)))
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
-            "motion": ident, "texts": texts, "text": text, "trained_texts": trained}
+            "motion": ident, "texts": texts, "text": text, "trained_texts": trained,
+            "next_at_last": (env_cfg.get("path") or {}).get("next_at_last", "repeat") if goal_size == 8 else None}
     return step, info
 
 
@@ -279,7 +280,7 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
                 "action_bound": step.action_bound, "goal_angle_clip_deg": step.goal_angle_clip_deg,
                 "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
                 "foot_lock": step.foot_lock, "foot_lock_min_weight": step.foot_lock_min_weight,
-                "observe_next": step.observe_next,
+                "observe_next": step.observe_next, "next_at_last": info.get("next_at_last"),
                 "text": info.get("text") if step.baked_text else None}
     meta = {
         "latentrl.format": FORMAT,

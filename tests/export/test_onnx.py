@@ -97,6 +97,7 @@ def test_exported_file_passes_the_onnx_checker_and_carries_its_contract(walk_onn
     assert meta["latentrl.format"] == "latentrl.onnx-controller/2"
     assert meta["latentrl.settings"]["text"] == "walk" and meta["latentrl.settings"]["guidance_scale"] == 5.0
     assert meta["latentrl.settings"]["foot_lock"] is True  # the shipped walk policy's training env
+    assert meta["latentrl.settings"]["next_at_last"] is None  # a reach policy sees no next waypoint
     assert [i["name"] for i in meta["latentrl.contract"]["inputs"]] == list(dims)[:5]
     assert len(meta["latentrl.joint_names"]) == 22 and "latentrl.texts" not in meta
     seeds = meta["latentrl.seeds"]["history"]
