@@ -272,9 +272,11 @@ class FollowPathEnv(LatentMotionVectorEnv):
         self._text_idx[idx] = texts[:, 0]
 
     def _point_beyond(self, idx: torch.Tensor, points: torch.Tensor, lengths: torch.Tensor) -> torch.Tensor:
-        """(M, 3) what ``next_goal_*`` shows at the last waypoint: the last one again (``repeat``) or the
-        last segment continued by its own length (``extend``), so the last goal looks like a straight
-        stretch of path instead of an input the policy only meets at the end."""
+        """(M, 3) what ``next_goal_*`` shows at the last waypoint.
+
+        The last one again (``repeat``) or the last segment continued by its own length (``extend``), so
+        that the last goal looks like a straight stretch of path instead of an input met only at the end.
+        """
         rows = torch.arange(len(idx), device=self.device)
         last = points[rows, lengths - 1]
         if self.next_at_last == "repeat":

@@ -85,8 +85,10 @@ class EvalSettings:
     training value."""
 
     def take_training_env(self, env_cfg: Any) -> None:
-        """Step the motion as the policy's training env did: its guidance, action bound and foot lock (and, for a
-        path policy, observe the last waypoint as it did)."""
+        """Step the motion as the policy's training env did: its guidance, action bound and foot lock.
+
+        A path policy also observes its last waypoint as in training (``next_at_last``).
+        """
         self.guidance_scale = float(getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE))
         self.action_bound = float(getattr(env_cfg, "action_bound", ACTION_BOUND))
         self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
