@@ -87,6 +87,6 @@ def test_mixed_skill_config_builds_a_path_env_with_a_text_per_waypoint(tiny_mode
     assert cfg.eval.paths == ["tasks/paths/mixed_skills.json"]
     env = build(cfg.env, "cpu", motion=tiny_model)
     assert isinstance(env, FollowPathEnv) and env.text_per_waypoint and env.paths is None
-    assert env.random_segment == (2.0, 6.0) and env.random_turn_deg == 45.0
+    assert env.random_segment == (2.0, 6.0) and env.random_turn_deg == 45.0 and env.next_at_last == "extend"
     with pytest.raises(ConfigError, match=r"env\.path\.random_segment: must be \[min, max\] metres"):
         load_config(TrainConfig, mixed, ["env.path.random_segment=[3.0,1.0]"])

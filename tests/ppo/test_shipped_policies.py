@@ -20,7 +20,8 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_walk_default": ("dart_walk_long", 64),  # 13.2 s on path 0
     "reach_run_default": ("dart_run_long", 48),  # 7.3 s on path 0
     "reach_hop_left_default": ("dart_hop_long", 128),  # 16.2 s on path 0
-    "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m
+    "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m (23.9 s)
+    "path_mixed_v2": ("mixed_skills", 96),
     "reach_walk_v2": ("dart_walk_long", 96),
     "reach_run_v2": ("dart_run_long", 48),
     "reach_hop_left_v2": ("dart_hop_long", 96),
@@ -35,7 +36,7 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
 MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reach_run_v4": "default-v4",
           "reach_hop_left_v4": "default-v4", "reach_walk_v4": "default-v4",
           "reach_walk_v2": "default-v2", "reach_run_v2": "default-v2", "reach_hop_left_v2": "default-v2",
-          "path_mixed_default": "default-v2", "joystick_walk_v2": "default-v2", "timed_walk_v2": "default-v2"}
+          "path_mixed_v2": "default-v2", "joystick_walk_v2": "default-v2", "timed_walk_v2": "default-v2"}
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
