@@ -174,6 +174,9 @@ def _bench_commands(sub) -> None:
                       help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16)")
     roll.add_argument("--compile", action="store_true",
                       help="also time the sampler under torch.compile(fullgraph=True) with frozen weights")
+    roll.add_argument("--packed", action="store_true",
+                      help="also time the sampler with its linear weights prepacked for oneDNN "
+                           "(MotionModel.pack_for_cpu; CPU only; with --compile also compiled)")
     roll.add_argument("--dart-src", default=None,
                       help="extracted zkf1997/DART tree; runs ../shared/tools/dart_peer_bench.py side by side")
     roll.add_argument("--dart-python", default=None, help="python of the environment able to import DART")

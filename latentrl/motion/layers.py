@@ -15,6 +15,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from latentrl.motion.packed import linear, pack_weight
+
 
 class SelfAttention(nn.Module):
     """Multi-head self-attention with ``nn.MultiheadAttention``'s parameter names."""
@@ -29,19 +31,29 @@ class SelfAttention(nn.Module):
         self.out_proj = nn.Linear(h_dim, h_dim)
         nn.init.xavier_uniform_(self.in_proj_weight)
         nn.init.zeros_(self.out_proj.bias)
+        self.pack_keys: tuple[int, int, int] | None = None  # packed qkv, q and kv weights (latentrl.motion.packed)
+
+    def pack(self, rows: int) -> int:
+        """Pack the joint and split input projections for oneDNN (:func:`latentrl.motion.packed.pack_linears`)."""
+        if self.pack_keys is None:
+            h = self.in_proj_weight.shape[1]
+            w = self.in_proj_weight
+            self.pack_keys = (pack_weight(w, rows), pack_weight(w[:h], rows), pack_weight(w[h:], rows))
+        return 3
 
     def forward(self, x: torch.Tensor, query_last: int | None = None) -> torch.Tensor:
         """(B, L, h) -> (B, L, h); with ``query_last=k`` only the last k tokens attend (B, k, h)."""
         b, length, h = x.shape
         heads, hd = self.num_heads, h // self.num_heads
+        keys = self.pack_keys or (None, None, None)
         if query_last is None:
-            qkv = F.linear(x, self.in_proj_weight, self.in_proj_bias)
+            qkv = linear(x, self.in_proj_weight, self.in_proj_bias, keys[0])
             q, k, v = qkv.view(b, length, 3, heads, hd).permute(2, 0, 3, 1, 4)
         else:
             w_q, w_kv = self.in_proj_weight[:h], self.in_proj_weight[h:]
             b_q, b_kv = self.in_proj_bias[:h], self.in_proj_bias[h:]
-            q = F.linear(x[:, -query_last:], w_q, b_q).view(b, query_last, heads, hd).transpose(1, 2)
-            k, v = F.linear(x, w_kv, b_kv).view(b, length, 2, heads, hd).permute(2, 0, 3, 1, 4)
+            q = linear(x[:, -query_last:], w_q, b_q, keys[1]).view(b, query_last, heads, hd).transpose(1, 2)
+            k, v = linear(x, w_kv, b_kv, keys[2]).view(b, length, 2, heads, hd).permute(2, 0, 3, 1, 4)
         out = _attention(q, k, v)  # (B, heads, Lq, hd)
         out = out.transpose(1, 2).reshape(b, q.shape[2], h)
         return self.out_proj(out)

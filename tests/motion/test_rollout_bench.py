@@ -16,6 +16,22 @@ def test_compile_adds_a_compiled_row_that_matches_the_eager_sampler(tmp_path, mo
     assert bench_rollout(req) == 0
     rows = json.loads(out.read_text())["models"]["default"]["results"]
     eager, compiled = rows
-    assert "compiled" not in eager and compiled["compiled"] is True
+    assert "compiled" not in eager and compiled["compiled"] is True and compiled["packed"] is False
     assert compiled["batch"] == eager["batch"] == 2 and compiled["primitives_per_s"] > 0
     assert compiled["max_abs_diff_vs_eager"] < 1e-4
+
+
+def test_packed_adds_packed_and_compiled_packed_rows_that_match_the_unpacked_sampler(tmp_path, monkeypatch):
+    """``--packed``: the same sampler with oneDNN-packed weights, eager and (eager-backend) compiled."""
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: real(fn, **{**kw, "backend": "eager"}))
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[2], models=["default"], device=["cpu"], repeats=1, compile=True, packed=True,
+                              json=str(out))
+    assert bench_rollout(req) == 0
+    rows = json.loads(out.read_text())["models"]["default"]["results"]
+    assert [(r.get("compiled", False), r.get("packed", False)) for r in rows] == [
+        (False, False), (True, False), (False, True), (True, True)]
+    for row in rows[2:]:
+        assert row["max_abs_diff_vs_unpacked"] < 1e-4 and row["primitives_per_s"] > 0
+    assert rows[3]["max_abs_diff_vs_eager"] < 1e-4

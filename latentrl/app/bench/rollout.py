@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import subprocess
@@ -28,6 +29,7 @@ class RolloutBenchRequest:
     threads: int | None = None
     amp: list[str] | None = None
     compile: bool = False
+    packed: bool = False
     dart_src: str | None = None
     dart_python: str | None = None
     dart_bench: str | None = None
@@ -109,6 +111,24 @@ def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = 
     }
 
 
+def _variant_label(row: dict) -> str:
+    """'eager', 'compiled', 'packed' or 'compiled + packed' for a timing row."""
+    parts = [p for p, on in (("compiled", row.get("compiled")), ("packed", row.get("packed"))) if on]
+    return " + ".join(parts) or "eager"
+
+
+def _diff_vs(model, packed, batch: int, device: str) -> float:
+    """Largest difference between the packed model's sampler output and the unpacked one's (same inputs)."""
+    g = torch.Generator().manual_seed(1)
+    hist = torch.randn(batch, 2, 276, generator=g).to(device) * 0.1
+    text = torch.randn(batch, model.text_dim, generator=g).to(device)
+    noise = torch.randn(batch, *model.latent_shape, generator=g).to(device)
+    with torch.no_grad():
+        a = model.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future
+        b = packed.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future
+    return float((a - b).abs().max())
+
+
 def run_dart_peer(req: RolloutBenchRequest, batches: list[int]) -> dict | None:
     """Run shared/tools/dart_peer_bench.py (DART's own sampler) in its own Python environment."""
     src = req.dart_src or os.environ.get("DART_SRC")
@@ -180,14 +200,26 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
                     print(f"{name:>10} {device:>5} {amp} batch {batch:>4}: {row['ms_per_primitive']:8.2f} "
                           f"ms/primitive {row['primitives_per_s']:8.1f} primitives/s")
                 model.amp_dtype = None
-            if req.compile:
+            variants = [(model, False, req.compile)]
+            if req.packed and device == "cpu":
+                packed = copy.deepcopy(model)
+                packed.pack_for_cpu()
+                variants = [(model, False, req.compile), (packed, True, False), (packed, True, req.compile)]
+            for variant, is_packed, compiled in variants:
+                if not (compiled or is_packed):
+                    continue
                 for batch in req.batches:
-                    row = {"device": device, "compiled": True,
-                           **time_sampler(model, batch, device, req.repeats, compiled=True)}
+                    row = {"device": device, "compiled": compiled, "packed": is_packed,
+                           **time_sampler(variant, batch, device, req.repeats, compiled=compiled)}
+                    if is_packed:
+                        row["max_abs_diff_vs_unpacked"] = _diff_vs(model, variant, batch, device)
                     rows.append(row)
-                    print(f"{name:>10} {device:>5} compiled batch {batch:>4}: {row['ms_per_primitive']:8.2f} "
-                          f"ms/primitive {row['primitives_per_s']:8.1f} primitives/s "
-                          f"(max |compiled - eager| {row['max_abs_diff_vs_eager']:.1e})")
+                    shown = (("max_abs_diff_vs_eager", "compiled - eager"),
+                             ("max_abs_diff_vs_unpacked", "packed - unpacked"))
+                    diffs = ", ".join(f"max |{what}| {row[key]:.1e}" for key, what in shown if key in row)
+                    print(f"{name:>10} {device:>5} {_variant_label(row)} batch {batch:>4}: "
+                          f"{row['ms_per_primitive']:8.2f} ms/primitive {row['primitives_per_s']:8.1f} primitives/s "
+                          f"({diffs})")
         out["models"][name] = {
             "flops_per_primitive": flops,
             "latent_shape": list(model.latent_shape),
@@ -198,18 +230,16 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
     if dart is not None:
         out["dart_peer"] = dart
         ours = out["models"].get("official", {}).get("results", [])
-        ratios, compiled_ratios = {}, {}
+        ratios: dict[str, dict[str, float]] = {}
         for row in ours:
             ref = _dart_ms(dart, row["batch"])
             if row["device"] == "cpu" and "amp" not in row and ref:
-                into = compiled_ratios if row.get("compiled") else ratios
-                into[str(row["batch"])] = ref / row["ms_per_batch"]
-        out["speedup_vs_dart_official_cpu"] = ratios
-        for b, r in ratios.items():
-            print(f"official size, CPU fp32, batch {b}: {r:.2f}x DART's sampler speed (same run)")
-        if compiled_ratios:
-            out["speedup_vs_dart_official_cpu_compiled"] = compiled_ratios
-            for b, r in compiled_ratios.items():
-                print(f"official size, CPU fp32 compiled, batch {b}: {r:.2f}x DART's sampler speed (same run)")
+                ratios.setdefault(_variant_label(row), {})[str(row["batch"])] = ref / row["ms_per_batch"]
+        for label, by_batch in ratios.items():
+            suffix = "" if label == "eager" else "_" + label.replace(" + ", "_")
+            out["speedup_vs_dart_official_cpu" + suffix] = by_batch
+            for b, r in by_batch.items():
+                shown = "" if label == "eager" else " " + label
+                print(f"official size, CPU fp32{shown}, batch {b}: {r:.2f}x DART's sampler speed (same run)")
     write_json(req.json, out)
     return 0

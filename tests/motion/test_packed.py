@@ -1,0 +1,56 @@
+"""``MotionModel.pack_for_cpu``: oneDNN-prepacked linear weights give the unpacked sampler's results."""
+
+import pytest
+import torch
+from torch import nn
+
+from latentrl.errors import LatentRLError
+from latentrl.motion.packed import PackedLinear
+from tests.helpers import make_tiny_model
+
+
+def _sample(model, batch: int = 3):
+    g = torch.Generator().manual_seed(0)
+    hist = torch.randn(batch, 2, 276, generator=g) * 0.1
+    text = torch.randn(batch, model.text_dim, generator=g)
+    noise = torch.randn(batch, *model.latent_shape, generator=g)
+    with torch.no_grad():
+        return model.sample_primitive(hist, text, noise, guidance_scale=5.0).future
+
+
+def test_packed_model_samples_like_the_unpacked_one_and_keeps_its_state_dict():
+    plain, packed = make_tiny_model(), make_tiny_model()
+    packed.load_state_dict(plain.state_dict())
+    state = {k: v.clone() for k, v in packed.state_dict().items()}
+    linears = sum(type(m) is nn.Linear for m in packed.modules())
+    attention = sum(hasattr(m, "pack_keys") for m in packed.modules())
+    count = packed.pack_for_cpu()
+    assert count == linears + 3 * attention > 0
+    assert not any(type(m) is nn.Linear for m in packed.modules())
+    assert any(isinstance(m, PackedLinear) for m in packed.modules())
+    assert packed.pack_for_cpu() == 3 * attention  # linears already packed are left alone
+    after = packed.state_dict()
+    assert after.keys() == state.keys() and all(torch.equal(after[k], state[k]) for k in state)
+    for batch in (1, 3):  # the layout is chosen for 10 rows; other row counts still compute the same thing
+        torch.testing.assert_close(_sample(packed, batch), _sample(plain, batch), atol=1e-5, rtol=1e-5)
+
+
+def test_packed_sampler_traces_as_one_graph():
+    """The packed op is a torch.library custom op: fullgraph tracing keeps it as one opaque call."""
+    model = make_tiny_model()
+    model.pack_for_cpu()
+    model.prepare_compile()
+    g = torch.Generator().manual_seed(0)
+    hist, text = torch.randn(2, 2, 276, generator=g) * 0.1, torch.randn(2, model.text_dim, generator=g)
+    noise = torch.randn(2, *model.latent_shape, generator=g)
+    torch._dynamo.reset()
+    fn = torch.compile(lambda h, t, n: model.sample_primitive(h, t, n, guidance_scale=5.0).future,
+                       fullgraph=True, backend="eager")
+    with torch.no_grad():
+        torch.testing.assert_close(fn(hist, text, noise), model.sample_primitive(hist, text, noise, 5.0).future)
+
+
+def test_packing_refuses_weights_that_are_not_cpu_float32():
+    model = make_tiny_model().to(torch.float64)
+    with pytest.raises(LatentRLError, match=r"packing is for CPU float32 weights, found torch.float64 on cpu"):
+        model.pack_for_cpu()
