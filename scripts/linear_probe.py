@@ -9,21 +9,15 @@ MKL's ``F.linear``, MKL-packed weights (what inductor's frozen fp32 path uses) a
 """
 
 import argparse
-import time
 
 import torch
 import torch.nn.functional as F
 
+from latentrl.timing import median_time
 
-def median_ms(fn, repeats: int = 9) -> float:
-    fn()
-    fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return sorted(times)[len(times) // 2] * 1e3
+
+def median_ms(fn) -> float:
+    return median_time(fn, repeats=9) * 1e3
 
 
 def main() -> None:
