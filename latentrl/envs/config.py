@@ -148,7 +148,8 @@ class TimedConfig:
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths, "timed")) if self.paths else None
         return {"paths": paths, "speed_range": tuple(self.speed_range), "observe_next": self.observe_next,
-                "random_waypoints": self.random_waypoints, "text_per_waypoint": self.text_per_waypoint,
+                "next_at_last": self.next_at_last, "random_waypoints": self.random_waypoints,
+                "text_per_waypoint": self.text_per_waypoint,
                 "time_left_clip": self.time_left_clip}
 
 

@@ -81,20 +81,21 @@ class EvalSettings:
     foot_lock_min_weight: float = LOCK_MIN_WEIGHT
     """The contact weight from which the lock pins a foot fully; the policy's training value."""
     next_at_last: str = "repeat"
-    """What a path policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``); its
-    training value."""
+    """What a path or timed policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``,
+    ``env.timed.next_at_last``); its training value."""
 
     def take_training_env(self, env_cfg: Any) -> None:
         """Step the motion as the policy's training env did: its guidance, action bound and foot lock.
 
-        A path policy also observes its last waypoint as in training (``next_at_last``).
+        A path or timed policy also observes its last waypoint as in training (``next_at_last``).
         """
         self.guidance_scale = float(getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE))
         self.action_bound = float(getattr(env_cfg, "action_bound", ACTION_BOUND))
         self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
         self.foot_lock_min_weight = float(getattr(env_cfg, "foot_lock_min_weight", LOCK_MIN_WEIGHT))
-        if getattr(env_cfg, "task", None) == "path":
-            self.next_at_last = str(getattr(env_cfg.path, "next_at_last", "repeat"))
+        section = {"path": "path", "timed": "timed"}.get(getattr(env_cfg, "task", None))
+        if section:
+            self.next_at_last = str(getattr(getattr(env_cfg, section), "next_at_last", "repeat"))
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""

@@ -78,7 +78,7 @@ def make_env(motion, path: TimedPath, num_envs: int, settings: EvalSettings, obs
              record_history: bool = False, max_steps: int | None = None) -> TimedPathEnv:
     """The evaluation env: every env follows ``path``, no autoreset, the policy's guidance and bound."""
     return TimedPathEnv(num_envs, motion=motion, paths=[path], path_assignment="by_env", observe_next=observe_next,
-                        texts=(path.texts[0],), device=settings.device,
+                        next_at_last=settings.next_at_last, texts=(path.texts[0],), device=settings.device,
                         max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
                         success_threshold=settings.success_threshold, record_history=record_history,
                         **settings.motion_kwargs())

@@ -12,7 +12,8 @@ world_rotation            (B, 3, 3)       canonical-to-world rotation: ``p_world
 world_translation         (B, 3)          canonical-to-world translation, metres
 airborne                  (B,)            1 where the last step left the body in the air (the floor snap's flag), else 0
 goal                      (B, 3)          goal or current waypoint, world metres, z up (z unused)
-next_goal                 (B, 3)          only for FollowPath policies trained with observe_next
+next_goal                 (B, 3)          only for FollowPath policies trained with observe_next (at the last
+                                          waypoint: as ``latentrl.settings.next_at_last`` says)
 text_embedding            (B, E)          only when no prompt was baked in (``--text``)
 ========================  ==============  ===================================================
 
@@ -78,7 +79,9 @@ _MEANINGS = {
     "world_translation": "canonical-to-world translation, metres",
     "airborne": "1 where the previous step ended in the air (the floor snap lands it this step), else 0; start at 0",
     "goal": "goal or current waypoint, world metres, z up (z is not used)",
-    "next_goal": "the waypoint after the current one, world metres (FollowPath observe_next policies)",
+    "next_goal": "the waypoint after the current one, world metres (FollowPath observe_next policies); at the last "
+                 "waypoint what latentrl.settings.next_at_last says: the last again (repeat) or last + (last - "
+                 "previous) (extend; previous = the episode's start pelvis on a one-waypoint path)",
     "text_embedding": "prompt embedding; rows of latentrl.texts",
     "action": "policy mean clamped to +-action_bound: the latent noise the sampler started from",
     "joints_world": "8 new frames of SMPL-22 joints (latentrl.joint_names), world metres, z up, 30 fps",

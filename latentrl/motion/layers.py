@@ -35,10 +35,11 @@ class SelfAttention(nn.Module):
 
     def pack(self, rows: int) -> int:
         """Pack the joint and split input projections for oneDNN (:func:`latentrl.motion.packed.pack_linears`)."""
-        if self.pack_keys is None:
-            h = self.in_proj_weight.shape[1]
-            w = self.in_proj_weight
-            self.pack_keys = (pack_weight(w, rows), pack_weight(w[:h], rows), pack_weight(w[h:], rows))
+        if self.pack_keys is not None:
+            return 0
+        h = self.in_proj_weight.shape[1]
+        w = self.in_proj_weight
+        self.pack_keys = (pack_weight(w, rows), pack_weight(w[:h], rows), pack_weight(w[h:], rows))
         return 3
 
     def forward(self, x: torch.Tensor, query_last: int | None = None) -> torch.Tensor:

@@ -38,8 +38,11 @@ def _packed_linear_fake(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tenso
 
 
 def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None, key: int | None) -> torch.Tensor:
-    """``F.linear``, or the packed op when ``key`` names a packed copy of ``weight``."""
-    if key is None:
+    """``F.linear``, or the packed op when ``key`` names a packed copy of ``weight`` and ``x`` is CPU float32.
+
+    Anything else (a cast model, autocast) takes ``F.linear``; the check reads only metadata.
+    """
+    if key is None or x.dtype != torch.float32 or x.device.type != "cpu":
         return F.linear(x, weight, bias)
     return packed_linear(x, weight, bias, key)
 
@@ -64,7 +67,8 @@ def pack_linears(module: nn.Module, rows: int = 10) -> int:
 
     ``rows`` only picks oneDNN's weight layout (other row counts still compute the right result): 10 is a
     batch-1 sampler step. Modules that project with raw weights (``SelfAttention``) pack them through their
-    ``pack`` method. Packing twice is a no-op for layers already packed.
+    ``pack`` method. Layers already packed are left alone (and not counted). Linears without a bias stay as
+    they are. The packed copies do not follow later weight changes (``load_state_dict``, training).
     """
     problem = _pack_problem(module)
     if problem:
@@ -84,6 +88,8 @@ def _pack_problem(module: nn.Module) -> str | None:
     """Why ``module`` cannot be packed, or None."""
     if not torch.backends.mkldnn.is_available():
         return "this torch build has no oneDNN (mkldnn)"
+    if getattr(module, "amp_dtype", None) is not None:
+        return f"the model samples under autocast ({module.amp_dtype}); packing is for float32 sampling"
     for p in module.parameters():
         if p.device.type != "cpu" or p.dtype != torch.float32:
             return f"packing is for CPU float32 weights, found {p.dtype} on {p.device}"

@@ -255,7 +255,10 @@ class MotionModel(nn.Module):
                 return self.denoiser.denoise(x, t, cond)
         else:
             # a number stays a number (no tensor built from host data in the step: capture-safe on CUDA)
-            w = guidance_scale.reshape(-1, 1, 1) if torch.is_tensor(guidance_scale) else float(guidance_scale)
+            if torch.is_tensor(guidance_scale):
+                w = guidance_scale.to(device=noise.device, dtype=noise.dtype).reshape(-1, 1, 1)
+            else:
+                w = float(guidance_scale)
             cond2 = self.denoiser.condition(
                 torch.cat((history_n, history_n)), torch.cat((text, torch.zeros_like(text)))
             )

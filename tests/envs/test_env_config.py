@@ -90,3 +90,20 @@ def test_mixed_skill_config_builds_a_path_env_with_a_text_per_waypoint(tiny_mode
     assert env.random_segment == (2.0, 6.0) and env.random_turn_deg == 45.0 and env.next_at_last == "extend"
     with pytest.raises(ConfigError, match=r"env\.path\.random_segment: must be \[min, max\] metres"):
         load_config(TrainConfig, mixed, ["env.path.random_segment=[3.0,1.0]"])
+
+
+def test_next_at_last_reaches_the_path_and_timed_envs_and_the_eval_settings(tiny_model):
+    """``env.path.next_at_last`` / ``env.timed.next_at_last`` build envs with it, and eval takes it from the policy."""
+    from latentrl.evaluation.config import EvalSettings
+
+    for task in ("path", "timed"):
+        cfg = EnvConfig(task=task, num_envs=1, texts=["walk"])
+        getattr(cfg, task).next_at_last = "extend"
+        cfg.validate()
+        assert build(cfg, "cpu", motion=tiny_model).next_at_last == "extend"
+        settings = EvalSettings()
+        settings.take_training_env(cfg)
+        assert settings.next_at_last == "extend"
+    settings = EvalSettings()
+    settings.take_training_env(EnvConfig(task="reach"))
+    assert settings.next_at_last == "repeat"

@@ -28,7 +28,7 @@ def test_packed_model_samples_like_the_unpacked_one_and_keeps_its_state_dict():
     assert count == linears + 3 * attention > 0
     assert not any(type(m) is nn.Linear for m in packed.modules())
     assert any(isinstance(m, PackedLinear) for m in packed.modules())
-    assert packed.pack_for_cpu() == 3 * attention  # linears already packed are left alone
+    assert packed.pack_for_cpu() == 0  # layers already packed are left alone
     after = packed.state_dict()
     assert after.keys() == state.keys() and all(torch.equal(after[k], state[k]) for k in state)
     for batch in (1, 3):  # the layout is chosen for 10 rows; other row counts still compute the same thing
@@ -50,7 +50,27 @@ def test_packed_sampler_traces_as_one_graph():
         torch.testing.assert_close(fn(hist, text, noise), model.sample_primitive(hist, text, noise, 5.0).future)
 
 
-def test_packing_refuses_weights_that_are_not_cpu_float32():
+def test_packing_refuses_weights_that_are_not_cpu_float32_and_autocast():
     model = make_tiny_model().to(torch.float64)
     with pytest.raises(LatentRLError, match=r"packing is for CPU float32 weights, found torch.float64 on cpu"):
         model.pack_for_cpu()
+    model = make_tiny_model()
+    model.amp_dtype = torch.bfloat16
+    with pytest.raises(LatentRLError, match=r"samples under autocast \(torch.bfloat16\)"):
+        model.pack_for_cpu()
+
+
+def test_a_packed_model_cast_afterwards_falls_back_to_plain_linears():
+    """Inputs that are not CPU float32 (here float64 after packing) take F.linear, not the oneDNN op."""
+    plain, packed = make_tiny_model(), make_tiny_model()
+    packed.load_state_dict(plain.state_dict())
+    packed.pack_for_cpu()
+    plain, packed = plain.double(), packed.double()
+    g = torch.Generator().manual_seed(0)
+    hist = torch.randn(2, 2, 276, generator=g, dtype=torch.float64) * 0.1
+    text = torch.randn(2, plain.text_dim, generator=g, dtype=torch.float64)
+    noise = torch.randn(2, *plain.latent_shape, generator=g, dtype=torch.float64)
+    with torch.no_grad():
+        a = plain.sample_primitive(hist, text, noise, guidance_scale=5.0).future
+        b = packed.sample_primitive(hist, text, noise, guidance_scale=5.0).future
+    torch.testing.assert_close(a, b)

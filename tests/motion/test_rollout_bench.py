@@ -35,3 +35,11 @@ def test_packed_adds_packed_and_compiled_packed_rows_that_match_the_unpacked_sam
     for row in rows[2:]:
         assert row["max_abs_diff_vs_unpacked"] < 1e-4 and row["primitives_per_s"] > 0
     assert rows[3]["max_abs_diff_vs_eager"] < 1e-4
+
+
+def test_packed_without_compile_adds_one_packed_row(tmp_path):
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[2], models=["default"], device=["cpu"], repeats=1, packed=True, json=str(out))
+    assert bench_rollout(req) == 0
+    rows = json.loads(out.read_text())["models"]["default"]["results"]
+    assert [r.get("packed", False) for r in rows] == [False, True] and rows[1]["compiled"] is False

@@ -204,7 +204,7 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
             if req.packed and device == "cpu":
                 packed = copy.deepcopy(model)
                 packed.pack_for_cpu()
-                variants = [(model, False, req.compile), (packed, True, False), (packed, True, req.compile)]
+                variants += [(packed, True, False)] + ([(packed, True, True)] if req.compile else [])
             for variant, is_packed, compiled in variants:
                 if not (compiled or is_packed):
                     continue
