@@ -25,6 +25,7 @@ from typing import Any
 
 from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
+from latentrl.envs.path import next_at_last_problem
 from latentrl.errors import ConfigError, closest
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT, lock_min_weight_problem
 from latentrl.motion.text import prompt_problem
@@ -77,8 +78,8 @@ class PathConfig:
         require(0 <= self.random_turn_deg <= 180, "random_turn_deg",
                 f"must be degrees in [0, 180], got {self.random_turn_deg}")
         require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
-        require(self.next_at_last in ("repeat", "extend"), "next_at_last",
-                f"must be 'repeat' or 'extend', got {self.next_at_last!r}")
+        problem = next_at_last_problem(self.next_at_last)
+        require(problem is None, "next_at_last", str(problem))
 
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths)) if self.paths else None
@@ -142,8 +143,8 @@ class TimedConfig:
                 f"must be [min, max] m/s with 0 < min <= max, got {self.speed_range}")
         require(self.time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {self.time_left_clip}")
         require(self.random_waypoints >= 1, "random_waypoints", f"must be >= 1, got {self.random_waypoints}")
-        require(self.next_at_last in ("repeat", "extend"), "next_at_last",
-                f"must be 'repeat' or 'extend', got {self.next_at_last!r}")
+        problem = next_at_last_problem(self.next_at_last)
+        require(problem is None, "next_at_last", str(problem))
 
     def kwargs(self) -> dict[str, Any]:
         paths = str(resolve_task_file(self.paths, "timed")) if self.paths else None
@@ -265,6 +266,11 @@ class EnvConfig:
     def observe_next(self) -> bool:
         """Whether the env observes the waypoint after the current one (path and timed tasks only)."""
         return (self.task == "path" and self.path.observe_next) or (self.task == "timed" and self.timed.observe_next)
+
+    @property
+    def next_at_last(self) -> str:
+        """What ``next_goal_*`` shows at the last waypoint (path and timed tasks; "repeat" for the others)."""
+        return getattr(self, self.task).next_at_last if self.task in ("path", "timed") else "repeat"
 
 
 def resolve_task_file(path: str, kind: str = "paths") -> Path:

@@ -46,6 +46,11 @@ NEXT_AT_LAST = ("repeat", "extend")
 """What ``next_goal_*`` observes at a path's last waypoint (:class:`FollowPathEnv`'s ``next_at_last``)."""
 
 
+def next_at_last_problem(value: str) -> str | None:
+    """Why ``value`` cannot be ``next_at_last`` (the env's and the configs' one check), or None."""
+    return None if value in NEXT_AT_LAST else f"must be 'repeat' or 'extend', got {value!r}"
+
+
 def load_paths(file: str | Path) -> list[WaypointPath]:
     """Read a DART path file; errors name the file, path index, waypoint index and field (0-based)."""
     data = read_json_file(file, "path file", MAX_FILE_BYTES, DataError)
@@ -191,9 +196,8 @@ class FollowPathEnv(LatentMotionVectorEnv):
             "path_assignment",
             f"expected 'random' or 'by_env', got {path_assignment!r}",
         )
-        require(
-            next_at_last in NEXT_AT_LAST, "next_at_last", f"expected one of {NEXT_AT_LAST}, got {next_at_last!r}"
-        )
+        problem = next_at_last_problem(next_at_last)
+        require(problem is None, "next_at_last", str(problem))
         require(int(random_waypoints) >= 1, "random_waypoints", f"must be >= 1, got {random_waypoints}")
         lo, hi = (float(v) for v in random_segment)
         require(0 < lo <= hi, "random_segment", f"must be (min, max) metres with 0 < min <= max, got {random_segment}")

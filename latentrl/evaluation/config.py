@@ -93,9 +93,7 @@ class EvalSettings:
         self.action_bound = float(getattr(env_cfg, "action_bound", ACTION_BOUND))
         self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
         self.foot_lock_min_weight = float(getattr(env_cfg, "foot_lock_min_weight", LOCK_MIN_WEIGHT))
-        section = {"path": "path", "timed": "timed"}.get(getattr(env_cfg, "task", None))
-        if section:
-            self.next_at_last = str(getattr(getattr(env_cfg, section), "next_at_last", "repeat"))
+        self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""

@@ -71,6 +71,15 @@ def analytic_flops_per_primitive(model) -> float:
     return steps * 2 * per_pass + decode
 
 
+def _sampler_inputs(model, batch: int, device: str, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Seeded random (history, text embedding, noise) for one primitive of ``batch`` sequences on ``device``."""
+    g = torch.Generator().manual_seed(seed)
+    hist = torch.randn(batch, 2, 276, generator=g).to(device) * 0.1
+    text = torch.randn(batch, model.text_dim, generator=g).to(device)
+    noise = torch.randn(batch, *model.latent_shape, generator=g).to(device)
+    return hist, text, noise
+
+
 def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = False) -> dict:
     """Ms per primitive-batch of :meth:`MotionModel.sample_primitive` with DART's CFG (DDIM 10).
 
@@ -79,10 +88,7 @@ def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = 
     prepack them for oneDNN); compiling happens in the untimed warm-up. Returns also the largest
     difference from the eager sampler's output.
     """
-    g = torch.Generator().manual_seed(0)
-    hist = torch.randn(batch, 2, 276, generator=g).to(device) * 0.1
-    text = torch.randn(batch, model.text_dim, generator=g).to(device)
-    noise = torch.randn(batch, *model.latent_shape, generator=g).to(device)
+    hist, text, noise = _sampler_inputs(model, batch, device, seed=0)
 
     def sample(h, t, n):
         return model.sample_primitive(h, t, n, guidance_scale=GUIDANCE_SCALE).future
@@ -119,10 +125,7 @@ def _variant_label(row: dict) -> str:
 
 def _diff_vs(model, packed, batch: int, device: str) -> float:
     """Largest difference between the packed model's sampler output and the unpacked one's (same inputs)."""
-    g = torch.Generator().manual_seed(1)
-    hist = torch.randn(batch, 2, 276, generator=g).to(device) * 0.1
-    text = torch.randn(batch, model.text_dim, generator=g).to(device)
-    noise = torch.randn(batch, *model.latent_shape, generator=g).to(device)
+    hist, text, noise = _sampler_inputs(model, batch, device, seed=1)
     with torch.no_grad():
         a = model.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future
         b = packed.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future
