@@ -5,7 +5,9 @@ linear1 1024x512, linear2 512x1024; 64 MB fp32) on 10 rows (a batch-1 sampler st
 MKL's ``F.linear``, MKL-packed weights (what inductor's frozen fp32 path uses) and oneDNN weights reordered for
 10 rows (what ``MotionModel.pack_for_cpu`` uses), next to a plain 64 MB read. Usage:
 
-    python scripts/linear_probe.py [--threads 1] [--rows 10]
+    python scripts/linear_probe.py [--threads 1] [--rows 10] [--layouts 1 8 10 16 32 64]
+
+``--layouts`` also times oneDNN with the weights reordered for other row counts (the input stays ``--rows``).
 """
 
 import argparse
@@ -24,6 +26,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--rows", type=int, default=10)
+    ap.add_argument("--layouts", type=int, nargs="*", default=[], help="also oneDNN layouts for these row counts")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     shapes = [(1536, 512), (512, 512), (1024, 512), (512, 1024)] * 8
@@ -44,10 +47,15 @@ def main() -> None:
         "oneDNN packed": lambda: [torch.ops.mkldnn._linear_pointwise(x[w.shape[1]], p, b, "none", [], "")
                                   for p, w, b in zip(onednn, weights, biases)],
     }
+    for layout in args.layouts:
+        packed = [torch.ops.mkldnn._reorder_linear_weight(w, layout) for w in weights]
+        ways[f"oneDNN {layout}-row layout"] = lambda packed=packed: [
+            torch.ops.mkldnn._linear_pointwise(x[w.shape[1]], p, b, "none", [], "")
+            for p, w, b in zip(packed, weights, biases)]
     for name, fn in ways.items():
         ms = median_ms(fn)
         rate, traffic = gflop / ms * 1e3, mb / 1024 / ms * 1e3
-        print(f"  {name:>15}: {ms:6.2f} ms  {rate:6.1f} GFLOP/s  {traffic:5.1f} GB/s of weights")
+        print(f"  {name:>22}: {ms:6.2f} ms  {rate:6.1f} GFLOP/s  {traffic:5.1f} GB/s of weights")
 
 
 if __name__ == "__main__":

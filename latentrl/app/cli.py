@@ -171,7 +171,8 @@ def _bench_commands(sub) -> None:
     roll.add_argument("--repeats", type=_pos_int, default=5, help="timed runs per figure (median reported)")
     roll.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads (default: torch's)")
     roll.add_argument("--amp", nargs="+", choices=["bf16", "fp16"],
-                      help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16)")
+                      help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16); with --compile also "
+                           "compiled; rows print their difference from the plain fp32 sampler")
     roll.add_argument("--compile", action="store_true",
                       help="also time the sampler under torch.compile(fullgraph=True) with frozen weights")
     roll.add_argument("--packed", action="store_true",

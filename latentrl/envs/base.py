@@ -37,6 +37,7 @@ from latentrl.constants import (
     SUCCESS_RADIUS_M,
     TERMINATE_DISTANCE_M,
 )
+from latentrl.envs.compiled import compile_step_core
 from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder
 from latentrl.errors import ConfigError, NonFiniteError, closest
@@ -115,7 +116,8 @@ class LatentMotionVectorEnv(VectorEnv):
         record_features: also record world-frame 276-D features (costs a transform per step).
         render_mode: only ``None``; render exported histories with :mod:`latentrl.render`.
         compile: run each step's tensor maths (:meth:`_motion_core`) as one
-            ``torch.compile(fullgraph=True)`` graph; the first step compiles (tens of seconds).
+            ``torch.compile(fullgraph=True)`` graph, on CUDA also captured as a CUDA graph
+            (:mod:`latentrl.envs.compiled`); the first step compiles (tens of seconds).
         foot_lock: keep planted feet from sliding (:func:`latentrl.motion.rollout.lock_feet`): the body
             moves by its steps, not by sliding feet.
         foot_lock_min_weight: the summed contact weight from which the lock pins a foot fully (the
@@ -195,9 +197,7 @@ class LatentMotionVectorEnv(VectorEnv):
         self.compiled = bool(compile)
         if self.compiled:
             self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
-        self._core = (
-            torch.compile(self._motion_core, fullgraph=True, dynamic=False) if self.compiled else self._motion_core
-        )
+        self._core = compile_step_core(self._motion_core, self.device) if self.compiled else self._motion_core
         self.rewards = RewardComposer(reward_config, reward_weights, terms=self.reward_terms)
         self._setup_texts(texts, text_weights)
         self._setup_spaces()

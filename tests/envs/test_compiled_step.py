@@ -93,3 +93,32 @@ def test_compiled_env_matches_the_eager_env(make_reach):
         torch.testing.assert_close(rew_c, rew_e, atol=1e-4, rtol=1e-4)
         torch.testing.assert_close(obs_c, obs_e, atol=1e-4, rtol=1e-4)
         assert torch.equal(term_c, term_e) and torch.equal(trunc_c, trunc_e)
+
+
+def test_the_cuda_step_is_compiled_for_graph_capture_and_returns_copies(make_task, monkeypatch):
+    """On CUDA ``compile=True`` asks for CUDA-graph capture ("reduce-overhead"), marks every call as a new step and
+    copies the outputs (a replay overwrites them). Checked here with the eager backend on CPU tensors: the
+    capture itself needs a GPU and is not run by this suite."""
+    from latentrl.envs import compiled
+
+    seen, marks, real = [], [], torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: seen.append(kw) or real(fn, **{**kw, "backend": "eager"}))
+    monkeypatch.setattr(torch.compiler, "cudagraph_mark_step_begin", lambda: marks.append(1))
+    assert compiled.compile_mode("cpu") == "default" and compiled.compile_mode("cuda:0") == "reduce-overhead"
+
+    fixed = torch.zeros(3)
+    step = compiled.compile_step_core(lambda x: (fixed, {"y": x + 1}), "cuda")
+    out = step(torch.ones(3))
+    assert seen[-1] == {"fullgraph": True, "dynamic": False, "mode": "reduce-overhead"} and len(marks) == 1
+    assert out[0] is not fixed and out[0].data_ptr() != fixed.data_ptr() and torch.equal(out[1]["y"], torch.full((3,), 2.0))
+
+    torch._dynamo.reset()
+    env, plain = make_task(num_envs=3), make_task(num_envs=3)
+    env._core = compiled.compile_step_core(env._motion_core, "cuda")
+    env.reset(seed=0)
+    plain.reset(seed=0)
+    for i in range(3):
+        got, want = env.step(actions(3, seed=i)), plain.step(actions(3, seed=i))
+        torch.testing.assert_close(got[0], want[0])
+        torch.testing.assert_close(got[1], want[1])
+    assert len(marks) == 4

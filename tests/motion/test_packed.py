@@ -74,3 +74,20 @@ def test_a_packed_model_cast_afterwards_falls_back_to_plain_linears():
         a = plain.sample_primitive(hist, text, noise, guidance_scale=5.0).future
         b = packed.sample_primitive(hist, text, noise, guidance_scale=5.0).future
     torch.testing.assert_close(a, b)
+
+
+def test_an_input_that_needs_a_gradient_takes_the_differentiable_linear():
+    """The packed op has no backward: a gradient through a packed layer must still be the true one."""
+    layer = nn.Linear(16, 24)
+    packed = nn.Linear(16, 24)
+    packed.load_state_dict(layer.state_dict())
+    from latentrl.motion.packed import pack_linears
+
+    assert pack_linears(packed.requires_grad_(False)) == 1
+    x = torch.randn(2, 5, 16, requires_grad=True)
+    x2 = x.detach().clone().requires_grad_(True)
+    layer(x).square().sum().backward()
+    packed(x2).square().sum().backward()
+    assert torch.allclose(x.grad, x2.grad, atol=1e-5)
+    with torch.no_grad():
+        assert torch.allclose(layer(x), packed(x), atol=1e-5)

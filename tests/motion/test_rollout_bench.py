@@ -33,7 +33,7 @@ def test_packed_adds_packed_and_compiled_packed_rows_that_match_the_unpacked_sam
     assert [(r.get("compiled", False), r.get("packed", False)) for r in rows] == [
         (False, False), (True, False), (False, True), (True, True)]
     for row in rows[2:]:
-        assert row["max_abs_diff_vs_unpacked"] < 1e-4 and row["primitives_per_s"] > 0
+        assert row["max_abs_diff_vs_plain"] < 1e-4 and row["primitives_per_s"] > 0
     assert rows[3]["max_abs_diff_vs_eager"] < 1e-4
 
 
@@ -43,3 +43,21 @@ def test_packed_without_compile_adds_one_packed_row(tmp_path):
     assert bench_rollout(req) == 0
     rows = json.loads(out.read_text())["models"]["default"]["results"]
     assert [r.get("packed", False) for r in rows] == [False, True] and rows[1]["compiled"] is False
+
+
+def test_amp_with_compile_adds_eager_and_compiled_autocast_rows_with_their_error(tmp_path, monkeypatch):
+    """``--amp bf16 --compile``: bf16 autocast eager and compiled, each with its difference from plain fp32."""
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: real(fn, **{**kw, "backend": "eager"}))
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[2], models=["default"], device=["cpu"], repeats=1, amp=["bf16"], compile=True,
+                              json=str(out))
+    assert bench_rollout(req) == 0
+    rows = json.loads(out.read_text())["models"]["default"]["results"]
+    assert [(r.get("amp"), r.get("compiled", False)) for r in rows] == [
+        (None, False), (None, True), ("bf16", False), ("bf16", True)]
+    for row in rows[2:]:
+        # bf16 really changes the numbers (a row that silently ran fp32 would show 0), but not wildly
+        assert 0 < row["rel_diff_vs_plain"] < 0.2 and row["max_abs_diff_vs_plain"] > 0
+    assert rows[3]["max_abs_diff_vs_eager"] < 1e-3
+    assert "max_abs_diff_vs_plain" not in rows[1]

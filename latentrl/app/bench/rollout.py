@@ -80,13 +80,15 @@ def _sampler_inputs(model, batch: int, device: str, seed: int) -> tuple[torch.Te
     return hist, text, noise
 
 
-def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = False) -> dict:
+def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = False,
+                 reference: torch.Tensor | None = None) -> dict:
     """Ms per primitive-batch of :meth:`MotionModel.sample_primitive` with DART's CFG (DDIM 10).
 
     ``compiled``: the whole primitive (10 guided denoiser passes and the decode) as one
     ``torch.compile(fullgraph=True)`` graph with inductor's weight freezing (constant weights let it
-    prepack them for oneDNN); compiling happens in the untimed warm-up. Returns also the largest
-    difference from the eager sampler's output.
+    prepack them for oneDNN); compiling happens in the untimed warm-up, and the row gets the largest
+    difference from the eager sampler's output. ``reference``: the plain sampler's output on the same inputs
+    (:func:`_reference`); the row then gets the timed sampler's (largest, relative L2) difference from it.
     """
     hist, text, noise = _sampler_inputs(model, batch, device, seed=0)
 
@@ -94,19 +96,24 @@ def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = 
         return model.sample_primitive(h, t, n, guidance_scale=GUIDANCE_SCALE).future
 
     extra = {}
-    fn = sample
-    if compiled:
-        import torch._inductor.config as inductor_config
+    with torch.no_grad():
+        if compiled:
+            import torch._inductor.config as inductor_config
 
-        model.prepare_compile()
-        torch._dynamo.reset()
-        with inductor_config.patch(freezing=True), torch.no_grad():
-            fn = torch.compile(sample, fullgraph=True, dynamic=False)
-            extra["max_abs_diff_vs_eager"] = float((fn(hist, text, noise) - sample(hist, text, noise)).abs().max())
-            sec = median_time(lambda: fn(hist, text, noise), repeats=repeats, device=device)
-        torch._dynamo.reset()
-    else:
-        sec = median_time(lambda: fn(hist, text, noise), repeats=repeats, device=device)
+            model.prepare_compile()
+            torch._dynamo.reset()
+            with inductor_config.patch(freezing=True):
+                fn = torch.compile(sample, fullgraph=True, dynamic=False)
+                out = fn(hist, text, noise).float()
+                extra["max_abs_diff_vs_eager"] = float((out - sample(hist, text, noise)).abs().max())
+                sec = median_time(lambda: fn(hist, text, noise), repeats=repeats, device=device)
+            torch._dynamo.reset()
+        else:
+            out = sample(hist, text, noise).float()
+            sec = median_time(lambda: sample(hist, text, noise), repeats=repeats, device=device)
+    if reference is not None:
+        extra["max_abs_diff_vs_plain"] = float((out - reference).abs().max())
+        extra["rel_diff_vs_plain"] = float((out - reference).norm() / reference.norm())
     return {
         "batch": batch,
         "ms_per_batch": sec * 1e3,
@@ -118,18 +125,17 @@ def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = 
 
 
 def _variant_label(row: dict) -> str:
-    """'eager', 'compiled', 'packed' or 'compiled + packed' for a timing row."""
-    parts = [p for p, on in (("compiled", row.get("compiled")), ("packed", row.get("packed"))) if on]
+    """'eager', 'compiled', 'packed', 'compiled + packed', 'bf16 autocast + compiled', ... for a timing row."""
+    parts = [f"{row['amp']} autocast"] if row.get("amp") else []
+    parts += [p for p, on in (("compiled", row.get("compiled")), ("packed", row.get("packed"))) if on]
     return " + ".join(parts) or "eager"
 
 
-def _diff_vs(model, packed, batch: int, device: str) -> float:
-    """Largest difference between the packed model's sampler output and the unpacked one's (same inputs)."""
-    hist, text, noise = _sampler_inputs(model, batch, device, seed=1)
+def _reference(model, batch: int, device: str) -> torch.Tensor:
+    """The plain sampler's output (fp32, eager, unpacked) on :func:`time_sampler`'s inputs."""
+    hist, text, noise = _sampler_inputs(model, batch, device, seed=0)
     with torch.no_grad():
-        a = model.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future
-        b = packed.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future
-    return float((a - b).abs().max())
+        return model.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future.float()
 
 
 def run_dart_peer(req: RolloutBenchRequest, batches: list[int]) -> dict | None:
@@ -195,34 +201,31 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
                     f"{name:>10} {device:>5} batch {batch:>4}: {row['ms_per_primitive']:8.2f} ms/primitive "
                     f"{row['primitives_per_s']:8.1f} primitives/s {row['frames_per_s']:9.1f} frames/s"
                 )
-            for amp in req.amp or []:
-                model.amp_dtype = {"bf16": torch.bfloat16, "fp16": torch.float16}[amp]
-                for batch in req.batches:
-                    row = {"device": device, "amp": amp, **time_sampler(model, batch, device, req.repeats)}
-                    rows.append(row)
-                    print(f"{name:>10} {device:>5} {amp} batch {batch:>4}: {row['ms_per_primitive']:8.2f} "
-                          f"ms/primitive {row['primitives_per_s']:8.1f} primitives/s")
-                model.amp_dtype = None
-            variants = [(model, False, req.compile)]
+            fp32_refs = {batch: _reference(model, batch, device) for batch in req.batches}
+            variants = [(model, None, False, True)] if req.compile else []
             if req.packed and device == "cpu":
                 packed = copy.deepcopy(model)
                 packed.pack_for_cpu()
-                variants += [(packed, True, False)] + ([(packed, True, True)] if req.compile else [])
-            for variant, is_packed, compiled in variants:
-                if not (compiled or is_packed):
-                    continue
+                variants += [(packed, None, True, False)] + ([(packed, None, True, True)] if req.compile else [])
+            # autocast last: with the compiled bf16 rows timed first (batches 1 and 16), compiled + packed fp32 at
+            # batch 1 measured 115 ms in the same process, against 80 ms without them (one thread, 2026-11-26)
+            for amp in req.amp or []:
+                variants += [(model, amp, False, False)] + ([(model, amp, False, True)] if req.compile else [])
+            for variant, amp, is_packed, compiled in variants:
+                variant.amp_dtype = {None: None, "bf16": torch.bfloat16, "fp16": torch.float16}[amp]
                 for batch in req.batches:
-                    row = {"device": device, "compiled": compiled, "packed": is_packed,
-                           **time_sampler(variant, batch, device, req.repeats, compiled=compiled)}
-                    if is_packed:
-                        row["max_abs_diff_vs_unpacked"] = _diff_vs(model, variant, batch, device)
+                    reference = fp32_refs[batch] if amp or is_packed else None
+                    row = {"device": device, **({"amp": amp} if amp else {}), "compiled": compiled, "packed": is_packed,
+                           **time_sampler(variant, batch, device, req.repeats, compiled=compiled, reference=reference)}
                     rows.append(row)
-                    shown = (("max_abs_diff_vs_eager", "compiled - eager"),
-                             ("max_abs_diff_vs_unpacked", "packed - unpacked"))
-                    diffs = ", ".join(f"max |{what}| {row[key]:.1e}" for key, what in shown if key in row)
+                    diffs = [f"max |compiled - eager| {row['max_abs_diff_vs_eager']:.1e}"] if compiled else []
+                    if "max_abs_diff_vs_plain" in row:
+                        diffs.append(f"max |{_variant_label(row)} - plain fp32| {row['max_abs_diff_vs_plain']:.1e}, "
+                                     f"relative {row['rel_diff_vs_plain']:.1e}")
                     print(f"{name:>10} {device:>5} {_variant_label(row)} batch {batch:>4}: "
-                          f"{row['ms_per_primitive']:8.2f} ms/primitive {row['primitives_per_s']:8.1f} primitives/s "
-                          f"({diffs})")
+                          f"{row['ms_per_primitive']:8.2f} ms/primitive {row['primitives_per_s']:8.1f} primitives/s"
+                          + (f" ({'; '.join(diffs)})" if diffs else ""))
+                variant.amp_dtype = None
         out["models"][name] = {
             "flops_per_primitive": flops,
             "latent_shape": list(model.latent_shape),
@@ -236,13 +239,13 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
         ratios: dict[str, dict[str, float]] = {}
         for row in ours:
             ref = _dart_ms(dart, row["batch"])
-            if row["device"] == "cpu" and "amp" not in row and ref:
+            if row["device"] == "cpu" and ref:
                 ratios.setdefault(_variant_label(row), {})[str(row["batch"])] = ref / row["ms_per_batch"]
         for label, by_batch in ratios.items():
-            suffix = "" if label == "eager" else "_" + label.replace(" + ", "_")
+            suffix = "" if label == "eager" else "_" + label.replace(" + ", "_").replace(" ", "_")
             out["speedup_vs_dart_official_cpu" + suffix] = by_batch
             for b, r in by_batch.items():
-                shown = "" if label == "eager" else " " + label
-                print(f"official size, CPU fp32{shown}, batch {b}: {r:.2f}x DART's sampler speed (same run)")
+                shown = "fp32" if label == "eager" else label if "autocast" in label else "fp32 " + label
+                print(f"official size, CPU {shown}, batch {b}: {r:.2f}x DART's sampler speed (same run)")
     write_json(req.json, out)
     return 0
