@@ -25,8 +25,10 @@ _PACKED: list[torch.Tensor] = []
 
 
 # A plain ``torch.library.Library`` op, not ``torch.library.custom_op``: the latter's Python wrapper costs
-# ~19 us per call (35 vs 16 us for a tiny matmul, one thread), ~7 ms per batch-1 primitive of ~390 linears.
-_LIB = torch.library.Library("latentrl", "DEF")
+# ~17 us per call (35 vs 18 us for a tiny matmul, one thread; oneDNN alone 15), ~7 ms per batch-1 primitive of ~390
+# linears. A FRAGMENT, so other code may add ops to the namespace; reloading this module is not supported (the op
+# and the packed weights it reads are defined once per process).
+_LIB = torch.library.Library("latentrl", "FRAGMENT")
 _LIB.define("packed_linear(Tensor x, Tensor weight, Tensor bias, int key) -> Tensor")
 
 
@@ -50,10 +52,11 @@ packed_linear = torch.ops.latentrl.packed_linear.default
 def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None, key: int | None) -> torch.Tensor:
     """``F.linear``, or the packed op when ``key`` names a packed copy of ``weight`` and ``x`` is CPU float32.
 
-    Anything else (a cast model, autocast, an input that needs a gradient: the op has no backward) takes
-    ``F.linear``; the check reads only metadata.
+    Anything else takes ``F.linear``: a cast or moved model, CPU autocast (even switched on after packing), and
+    any input, weight or bias that needs a gradient (the op has no backward). The checks read only metadata.
     """
-    if key is None or x.dtype != torch.float32 or x.device.type != "cpu" or x.requires_grad:
+    if (key is None or x.dtype != torch.float32 or x.device.type != "cpu" or torch.is_autocast_enabled("cpu")
+            or x.requires_grad or weight.requires_grad or (bias is not None and bias.requires_grad)):
         return F.linear(x, weight, bias)
     return packed_linear(x, weight, bias, key)
 

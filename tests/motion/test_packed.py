@@ -36,7 +36,7 @@ def test_packed_model_samples_like_the_unpacked_one_and_keeps_its_state_dict():
 
 
 def test_packed_sampler_traces_as_one_graph():
-    """The packed op is a torch.library custom op: fullgraph tracing keeps it as one opaque call."""
+    """The packed op is a torch.library op: fullgraph tracing keeps it as one opaque call."""
     model = make_tiny_model()
     model.pack_for_cpu()
     model.prepare_compile()
@@ -91,3 +91,16 @@ def test_an_input_that_needs_a_gradient_takes_the_differentiable_linear():
     assert torch.allclose(x.grad, x2.grad, atol=1e-5)
     with torch.no_grad():
         assert torch.allclose(layer(x), packed(x), atol=1e-5)
+    trainable = nn.Linear(16, 24)  # packed while its weight still needs a gradient: the weight must get one
+    pack_linears(trainable)
+    trainable(x.detach()).sum().backward()
+    assert trainable.weight.grad is not None and trainable.weight.grad.abs().sum() > 0
+
+
+def test_cpu_autocast_switched_on_after_packing_takes_the_plain_linear():
+    from latentrl.motion.packed import pack_linears
+
+    packed = nn.Linear(16, 24).requires_grad_(False)
+    pack_linears(packed)
+    with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16):
+        assert packed(torch.randn(3, 16)).dtype == torch.bfloat16

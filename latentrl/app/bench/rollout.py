@@ -201,7 +201,8 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
                     f"{name:>10} {device:>5} batch {batch:>4}: {row['ms_per_primitive']:8.2f} ms/primitive "
                     f"{row['primitives_per_s']:8.1f} primitives/s {row['frames_per_s']:9.1f} frames/s"
                 )
-            fp32_refs = {batch: _reference(model, batch, device) for batch in req.batches}
+            needs_ref = bool(req.amp) or (req.packed and device == "cpu")
+            fp32_refs = {batch: _reference(model, batch, device) for batch in req.batches} if needs_ref else {}
             variants = [(model, None, False, True)] if req.compile else []
             if req.packed and device == "cpu":
                 packed = copy.deepcopy(model)
