@@ -8,7 +8,7 @@
 # torch: a torch that the environment already has (e.g. a CUDA build you installed) is kept as it
 # is. Otherwise the CPU build is installed first and pinned (torch==2.13.0 from PyTorch's CPU index):
 # a bare `torch` requirement would pull a multi-GB CUDA build. The package itself asks for a range
-# (torch>=2.3). GPU users: create the venv, install the CUDA build of torch into it
+# (torch>=2.4). GPU users: create the venv, install the CUDA build of torch into it
 # (https://pytorch.org/get-started/locally/), then run this script; LATENTRL_TORCH and
 # LATENTRL_TORCH_INDEX change what is installed when no torch is there.
 set -euo pipefail

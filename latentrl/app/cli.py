@@ -196,6 +196,8 @@ def _bench_commands(sub) -> None:
     env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
     env.add_argument("--compile", action="store_true",
                      help="also time the env with compile=True (its first step compiles; not timed)")
+    env.add_argument("--amp", choices=["bf16", "fp16"], default=None,
+                     help="also time the env with amp=bf16/fp16 (the motion model under autocast; docs/envs.md)")
     env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
     env.add_argument("--json", help="write all figures to this JSON file")
     env.set_defaults(func=_bench_env)

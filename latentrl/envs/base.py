@@ -45,7 +45,7 @@ from latentrl.motion.canonical import WorldTransform, features_to_world
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.prior import MotionPrior
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import LOCK_MIN_WEIGHT, RolloutState
+from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, RewardComposer, RewardConfig, RewardInputs
@@ -121,6 +121,9 @@ class LatentMotionVectorEnv(VectorEnv):
             step compiles (tens of seconds).
         foot_lock: keep planted feet from sliding (:func:`latentrl.motion.rollout.lock_feet`): the body
             moves by its steps, not by sliding feet.
+        amp: sample the motion model under autocast in this dtype ('bf16'; on CUDA also 'fp16'); sets the
+            model's ``amp_dtype`` (a model shared with other envs samples so there too). None: the model's own
+            setting (float32 unless changed). Only the sampler and decoder run in it; the step's outputs stay float32.
         foot_lock_min_weight: the summed contact weight from which the lock pins a foot fully (the
             lock's ``min_weight``; 0.5 as before, 0.05 pins any foot inside DART's 3 cm band).
     """
@@ -159,6 +162,7 @@ class LatentMotionVectorEnv(VectorEnv):
         compile: bool = False,
         foot_lock: bool = False,
         foot_lock_min_weight: float = LOCK_MIN_WEIGHT,
+        amp: str | None = None,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -168,6 +172,7 @@ class LatentMotionVectorEnv(VectorEnv):
             "nonfinite_actions",
             f"expected 'error' or 'zero', got {nonfinite_actions!r}",
         )
+        require(amp is None or amp in AMP_DTYPES, "amp", f"expected one of {tuple(AMP_DTYPES)} or None, got {amp!r}")
         require(render_mode is None, "render_mode", "these envs do not render; export_history() + latentrl.render")
         for name, value in (
             ("obs_goal_dist_clip", obs_goal_dist_clip),
@@ -180,6 +185,11 @@ class LatentMotionVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.device = torch.device(device)
         self.motion = self._load_motion(motion)
+        self.amp = amp
+        if amp is not None:
+            if not hasattr(self.motion, "amp_dtype"):
+                raise ConfigError(f"amp: the motion model ({type(self.motion).__name__}) has no amp_dtype to set")
+            self.motion.amp_dtype = AMP_DTYPES[amp]
         self.max_episode_steps = int(max_episode_steps)
         self.autoreset_mode = _autoreset_mode(autoreset_mode)
         self.action_bound = float(action_bound)

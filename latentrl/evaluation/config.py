@@ -80,12 +80,14 @@ class EvalSettings:
     """Keep planted feet from sliding (docs/motion.md, "Foot lock"); the policy's training value."""
     foot_lock_min_weight: float = LOCK_MIN_WEIGHT
     """The contact weight from which the lock pins a foot fully; the policy's training value."""
+    amp: str | None = None
+    """Autocast dtype the motion model samples in ('bf16', 'fp16' or None = float32); the policy's training value."""
     next_at_last: str = "repeat"
     """What a path or timed policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``,
     ``env.timed.next_at_last``); its training value."""
 
     def take_training_env(self, env_cfg: Any) -> None:
-        """Step the motion as the policy's training env did: its guidance, action bound and foot lock.
+        """Step the motion as the policy's training env did: its guidance, action bound, foot lock and autocast.
 
         A path or timed policy also observes its last waypoint as in training (``next_at_last``).
         """
@@ -94,11 +96,12 @@ class EvalSettings:
         self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
         self.foot_lock_min_weight = float(getattr(env_cfg, "foot_lock_min_weight", LOCK_MIN_WEIGHT))
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
+        self.amp = getattr(env_cfg, "amp", None)
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""
         return {"guidance_scale": self.guidance_scale, "action_bound": self.action_bound, "foot_lock": self.foot_lock,
-                "foot_lock_min_weight": self.foot_lock_min_weight}
+                "foot_lock_min_weight": self.foot_lock_min_weight, "amp": self.amp}
 
     def validate(self) -> None:
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")

@@ -47,6 +47,10 @@ def lock_min_weight_problem(value: float) -> str | None:
     return None
 
 
+AMP_DTYPES: dict[str, torch.dtype] = {"bf16": torch.bfloat16, "fp16": torch.float16}
+"""Autocast dtypes by the names configs use (``env.amp``, ``bench rollout --amp``) for ``MotionModel.amp_dtype``."""
+
+
 class PrimitiveSample(NamedTuple):
     """Result of sampling one primitive."""
 

@@ -17,6 +17,7 @@ def bench_args(tmp_path, **kwargs) -> argparse.Namespace:
         "max_seconds": 60.0,
         "baseline": True,
         "compile": False,
+        "amp": None,
         "threads": None,
         "json": str(tmp_path / "env.json"),
     }
@@ -76,3 +77,15 @@ def test_bench_times_the_compiled_env_beside_the_eager_one(tmp_path, monkeypatch
     row = json.loads((tmp_path / "env.json").read_text())["models"]["tiny"]["results"][0]
     assert row["compiled"]["env_steps_per_s"] > 0
     assert row["compile_speedup"] == row["compiled"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
+
+
+def test_bench_times_the_bf16_env_beside_the_fp32_one_and_restores_the_model(tmp_path):
+    """``--amp bf16`` adds an autocast row and its ratio; the model is left in float32 for the rows after it."""
+    assert bench_env(bench_args(tmp_path, num_envs=[2], baseline=False, amp="bf16")) == 0
+    row = json.loads((tmp_path / "env.json").read_text())["models"]["tiny"]["results"][0]
+    assert row["amp"]["env_steps_per_s"] > 0
+    assert row["amp_speedup"] == row["amp"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
+    model = bench_model("tiny")
+    from latentrl.app.bench.env import time_vector_env
+
+    assert time_vector_env(model, 2, "cpu", 1, amp="bf16") > 0 and model.amp_dtype is None

@@ -2,6 +2,9 @@
 
 from pathlib import Path
 
+import pytest
+import torch
+
 from latentrl.app.train import TrainConfig
 from latentrl.config import load_config
 from latentrl.envs.config import EnvConfig, build, stored_env_config
@@ -107,3 +110,31 @@ def test_next_at_last_reaches_the_path_and_timed_envs_and_the_eval_settings(tiny
     settings = EvalSettings()
     settings.take_training_env(EnvConfig(task="reach"))
     assert settings.next_at_last == "repeat"
+
+
+def test_amp_samples_the_motion_in_bf16_keeps_float32_outputs_and_reaches_eval():
+    """``env.amp: bf16``: the model samples under autocast (results move a little), the env's outputs stay float32,
+    eval takes the setting from the policy, and a bad value is refused naming the field."""
+    from latentrl.errors import ConfigError
+    from latentrl.evaluation.config import EvalSettings
+    from tests.envs.conftest import actions
+    from tests.helpers import make_tiny_model
+
+    plain_model, amp_model = make_tiny_model(), make_tiny_model()  # fresh: the env sets the model's amp_dtype
+    cfg = EnvConfig(task="reach", num_envs=3, texts=["walk"], amp="bf16")
+    cfg.validate()
+    env = build(cfg, "cpu", motion=amp_model)
+    plain = build(EnvConfig(task="reach", num_envs=3, texts=["walk"]), "cpu", motion=plain_model)
+    assert amp_model.amp_dtype == torch.bfloat16 and plain_model.amp_dtype is None
+    env.reset(seed=0)
+    plain.reset(seed=0)
+    obs, reward, *_ = env.step(actions(3))
+    obs_plain, reward_plain, *_ = plain.step(actions(3))
+    assert obs.dtype == reward.dtype == torch.float32
+    assert not torch.equal(obs, obs_plain) and torch.allclose(obs, obs_plain, atol=0.2)
+    settings = EvalSettings()
+    settings.take_training_env(cfg)
+    assert settings.amp == "bf16" and settings.motion_kwargs()["amp"] == "bf16"
+    bad = EnvConfig(amp="int8")
+    with pytest.raises(ConfigError, match="amp.*int8"):
+        bad.validate()

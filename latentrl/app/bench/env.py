@@ -39,6 +39,7 @@ class EnvBenchRequest:
     max_seconds: float = 120.0
     baseline: bool = True
     compile: bool = False
+    amp: str | None = None
     threads: int | None = None
     json: str | None = None
 
@@ -104,12 +105,20 @@ def tiny_model() -> MotionModel:
     )
 
 
-def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int, compile: bool = False) -> float:
-    """Seconds per step of one batched ReachLocation env of ``num_envs`` envs (``compile``: its step compiled)."""
-    env = ReachLocationEnv(num_envs, motion=model, device=device, compile=compile)
-    env.reset(seed=0)
-    actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
-    return mean_time(lambda: env.step(actions), steps, device)
+def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int, compile: bool = False,
+                    amp: str | None = None) -> float:
+    """Seconds per step of one batched ReachLocation env of ``num_envs`` envs.
+
+    ``compile``: its step compiled; ``amp``: the env's ``amp`` (undone on the model afterwards).
+    """
+    before = model.amp_dtype
+    try:
+        env = ReachLocationEnv(num_envs, motion=model, device=device, compile=compile, amp=amp)
+        env.reset(seed=0)
+        actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
+        return mean_time(lambda: env.step(actions), steps, device)
+    finally:
+        model.amp_dtype = before
 
 
 def time_bare_sampler(model: MotionModel, num_envs: int, device: str, steps: int) -> float:
@@ -163,7 +172,8 @@ def bench_env(args: EnvBenchRequest) -> int:
     'tiny' or paths), ``num_envs`` (list of N), ``device`` (list or ``None`` = cpu plus cuda
     when present), ``steps`` (timed steps per figure, after one warm-up), ``max_seconds``
     (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too), ``compile``
-    (time the env with ``compile=True`` too; the warm-up step compiles and is not timed),
+    (time the env with ``compile=True`` too; the warm-up step compiles and is not timed), ``amp`` (time the env
+    with that ``amp`` too, e.g. 'bf16'),
     ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``).
     """
     if args.threads:
@@ -195,6 +205,11 @@ def bench_env(args: EnvBenchRequest) -> int:
                     row["compiled"] = _run_kind("compiled", timer, model, name, device, n, args, last)
                     if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["compiled"]:
                         row["compile_speedup"] = row["compiled"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
+                if args.amp:
+                    timer = partial(time_vector_env, amp=args.amp)
+                    row["amp"] = _run_kind("amp", timer, model, name, device, n, args, last)
+                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["amp"]:
+                        row["amp_speedup"] = row["amp"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
                 if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["sampler"]:
                     row["env_share"] = 1.0 - row["vector"]["env_steps_per_s"] / row["sampler"]["env_steps_per_s"]
                 if args.baseline:
@@ -228,6 +243,10 @@ def _line(name: str, row: dict) -> str:
         text += f" | compiled {fmt(row['compiled'])}"
     if "compile_speedup" in row:
         text += f" ({row['compile_speedup']:.2f}x eager)"
+    if "amp" in row:
+        text += f" | amp {fmt(row['amp'])}"
+    if "amp_speedup" in row:
+        text += f" ({row['amp_speedup']:.2f}x fp32)"
     if "loop" in row:
         text += f" | loop {fmt(row['loop'])}"
     if "speedup" in row:

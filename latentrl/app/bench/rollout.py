@@ -15,6 +15,7 @@ import torch
 from latentrl.app.bench.common import default_devices, official_size_model, write_json
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
+from latentrl.motion.rollout import AMP_DTYPES
 from latentrl.timing import hardware, matmul_peak_gflops, median_time
 
 
@@ -213,7 +214,7 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
             for amp in req.amp or []:
                 variants += [(model, amp, False, False)] + ([(model, amp, False, True)] if req.compile else [])
             for variant, amp, is_packed, compiled in variants:
-                variant.amp_dtype = {None: None, "bf16": torch.bfloat16, "fp16": torch.float16}[amp]
+                variant.amp_dtype = AMP_DTYPES[amp] if amp else None
                 for batch in req.batches:
                     reference = fp32_refs[batch] if amp or is_packed else None
                     row = {"device": device, **({"amp": amp} if amp else {}), "compiled": compiled, "packed": is_packed,
