@@ -113,14 +113,14 @@ def test_eval_envs_take_the_training_envs_foot_lock(tiny_model):
     settings = EvalSettings()
     settings.take_training_env(EnvConfig(foot_lock=True, action_bound=3.0))
     assert settings.motion_kwargs() == {"guidance_scale": 5.0, "action_bound": 3.0, "foot_lock": True,
-                                        "foot_lock_min_weight": 0.5}
+                                        "foot_lock_min_weight": 0.5, "amp": None}
     paths = load_paths(resolve_path_files(["sharp_turns"])[0])[:1]
     assert path_env(tiny_model, paths, 1, settings).foot_lock
     settings.take_training_env(EnvConfig(foot_lock=True, foot_lock_min_weight=0.05))
     assert path_env(tiny_model, paths, 1, settings).foot_lock_min_weight == 0.05
     settings.take_training_env(None)  # a checkpoint without a stored env: the env defaults
     assert settings.motion_kwargs() == {"guidance_scale": 5.0, "action_bound": 4.0, "foot_lock": False,
-                                        "foot_lock_min_weight": 0.5}
+                                        "foot_lock_min_weight": 0.5, "amp": None}
 
 
 def test_suite_names_resolve_to_shipped_files(tmp_path):
