@@ -45,7 +45,7 @@ from latentrl.motion.canonical import WorldTransform, features_to_world
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.prior import MotionPrior
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, RolloutState
+from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, RolloutState, amp_problem
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, RewardComposer, RewardConfig, RewardInputs
@@ -121,11 +121,11 @@ class LatentMotionVectorEnv(VectorEnv):
             step compiles (tens of seconds).
         foot_lock: keep planted feet from sliding (:func:`latentrl.motion.rollout.lock_feet`): the body
             moves by its steps, not by sliding feet.
+        foot_lock_min_weight: the summed contact weight from which the lock pins a foot fully (the
+            lock's ``min_weight``; 0.5 as before, 0.05 pins any foot inside DART's 3 cm band).
         amp: sample the motion model under autocast in this dtype ('bf16'; on CUDA also 'fp16'); sets the
             model's ``amp_dtype`` (a model shared with other envs samples so there too). None: the model's own
             setting (float32 unless changed). Only the sampler and decoder run in it; the step's outputs stay float32.
-        foot_lock_min_weight: the summed contact weight from which the lock pins a foot fully (the
-            lock's ``min_weight``; 0.5 as before, 0.05 pins any foot inside DART's 3 cm band).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -172,7 +172,7 @@ class LatentMotionVectorEnv(VectorEnv):
             "nonfinite_actions",
             f"expected 'error' or 'zero', got {nonfinite_actions!r}",
         )
-        require(amp is None or amp in AMP_DTYPES, "amp", f"expected one of {tuple(AMP_DTYPES)} or None, got {amp!r}")
+        require(amp_problem(amp) is None, "amp", str(amp_problem(amp)))
         require(render_mode is None, "render_mode", "these envs do not render; export_history() + latentrl.render")
         for name, value in (
             ("obs_goal_dist_clip", obs_goal_dist_clip),

@@ -27,7 +27,7 @@ from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
 from latentrl.envs.path import next_at_last_problem
 from latentrl.errors import ConfigError, closest
-from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, lock_min_weight_problem
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT, amp_problem, lock_min_weight_problem
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import TERM_NAMES, RewardConfig
@@ -259,8 +259,7 @@ class EnvConfig:
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
-        require(self.amp is None or self.amp in AMP_DTYPES, "amp",
-                f"expected one of {tuple(AMP_DTYPES)} or null, got {self.amp!r}")
+        require(amp_problem(self.amp) is None, "amp", str(amp_problem(self.amp)))
         problem = lock_min_weight_problem(self.foot_lock_min_weight)
         require(problem is None, "foot_lock_min_weight", str(problem))
         for name in self.reward_weights:

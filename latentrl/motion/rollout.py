@@ -51,6 +51,13 @@ AMP_DTYPES: dict[str, torch.dtype] = {"bf16": torch.bfloat16, "fp16": torch.floa
 """Autocast dtypes by the names configs use (``env.amp``, ``bench rollout --amp``) for ``MotionModel.amp_dtype``."""
 
 
+def amp_problem(value: str | None) -> str | None:
+    """Why ``value`` cannot name an autocast dtype (None = float32), or None: the env's and the config's one check."""
+    if value is None or value in AMP_DTYPES:
+        return None
+    return f"expected one of {tuple(AMP_DTYPES)} or null, got {value!r}"
+
+
 class PrimitiveSample(NamedTuple):
     """Result of sampling one primitive."""
 

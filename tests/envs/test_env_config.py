@@ -138,3 +138,5 @@ def test_amp_samples_the_motion_in_bf16_keeps_float32_outputs_and_reaches_eval()
     bad = EnvConfig(amp="int8")
     with pytest.raises(ConfigError, match="amp.*int8"):
         bad.validate()
+    with pytest.raises(ConfigError, match="amp.*int8"):
+        build(bad, "cpu", motion=plain_model)
