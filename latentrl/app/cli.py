@@ -175,6 +175,9 @@ def _bench_commands(sub) -> None:
                            "compiled; rows print their difference from the plain fp32 sampler")
     roll.add_argument("--compile", action="store_true",
                       help="also time the sampler under torch.compile(fullgraph=True) with frozen weights")
+    roll.add_argument("--cuda-graph", action="store_true",
+                      help="on CUDA also time the compiled sampler captured and replayed as a CUDA graph "
+                           "(torch.compile mode='reduce-overhead'); with --amp also in those dtypes")
     roll.add_argument("--packed", action="store_true",
                       help="also time the sampler with its linear weights prepacked for oneDNN "
                            "(MotionModel.pack_for_cpu; CPU only; with --compile also compiled)")
@@ -195,9 +198,11 @@ def _bench_commands(sub) -> None:
     env.add_argument("--max-seconds", type=_pos_float, default=120.0, help="skip combinations estimated to take longer")
     env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
     env.add_argument("--compile", action="store_true",
-                     help="also time the env with compile=True (its first step compiles; not timed)")
+                     help="also time the env with compile=True (on CUDA captured as a CUDA graph; its first two "
+                          "steps compile and record, not timed)")
     env.add_argument("--amp", choices=["bf16", "fp16"], default=None,
-                     help="also time the env with amp=bf16/fp16 (the motion model under autocast; docs/envs.md)")
+                     help="also time the env with amp=bf16/fp16 (the motion model under autocast; docs/envs.md); "
+                          "with --compile also both together")
     env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
     env.add_argument("--json", help="write all figures to this JSON file")
     env.set_defaults(func=_bench_env)

@@ -89,3 +89,14 @@ def test_bench_times_the_bf16_env_beside_the_fp32_one_and_restores_the_model(tmp
     from latentrl.app.bench.env import time_vector_env
 
     assert time_vector_env(model, 2, "cpu", 1, amp="bf16") > 0 and model.amp_dtype is None
+
+
+def test_compile_with_amp_also_times_both_together(tmp_path, monkeypatch):
+    """``--compile --amp bf16``: a third row, the compiled env under autocast, and its ratio to the fp32 eager env."""
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: real(fn, **{**kw, "backend": "eager"}))
+    torch._dynamo.reset()
+    assert bench_env(bench_args(tmp_path, num_envs=[2], baseline=False, compile=True, amp="bf16")) == 0
+    row = json.loads((tmp_path / "env.json").read_text())["models"]["tiny"]["results"][0]
+    assert {"compiled", "amp", "amp_compiled"} <= row.keys()
+    assert row["amp_compiled_speedup"] == row["amp_compiled"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]

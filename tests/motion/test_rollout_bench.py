@@ -61,3 +61,20 @@ def test_amp_with_compile_adds_eager_and_compiled_autocast_rows_with_their_error
         assert 0 < row["rel_diff_vs_plain"] < 0.2 and row["max_abs_diff_vs_plain"] > 0
     assert rows[3]["max_abs_diff_vs_eager"] < 1e-3
     assert "max_abs_diff_vs_plain" not in rows[1]
+
+
+def test_cuda_graph_rows_are_cuda_only(tmp_path):
+    """``--cuda-graph`` adds no row on the CPU (nothing to capture there); scripts/gpu_check.sh times it on CUDA."""
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[2], models=["default"], device=["cpu"], repeats=1, cuda_graph=True,
+                              json=str(out))
+    assert bench_rollout(req) == 0
+    rows = json.loads(out.read_text())["models"]["default"]["results"]
+    assert len(rows) == 1 and "cuda_graph" not in rows[0]
+
+
+def test_dart_runs_pair_each_cuda_device_with_fp32_and_dart_s_own_fp16():
+    from latentrl.app.bench.rollout import _dart_runs
+
+    assert _dart_runs(["cpu"]) == [("cpu", None)]
+    assert _dart_runs(["cpu", "cuda"]) == [("cpu", None), ("cuda", "none"), ("cuda", "fp16")]

@@ -109,13 +109,17 @@ def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int, 
                     amp: str | None = None) -> float:
     """Seconds per step of one batched ReachLocation env of ``num_envs`` envs.
 
-    ``compile``: its step compiled; ``amp``: the env's ``amp`` (undone on the model afterwards).
+    ``compile``: its step compiled; ``amp``: the env's ``amp`` (undone on the model afterwards). A compiled
+    env takes two untimed steps first: the first compiles, and on CUDA the second records the CUDA graph
+    that later steps replay.
     """
     before = model.amp_dtype
     try:
         env = ReachLocationEnv(num_envs, motion=model, device=device, compile=compile, amp=amp)
         env.reset(seed=0)
         actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
+        if compile:
+            env.step(actions)
         return mean_time(lambda: env.step(actions), steps, device)
     finally:
         model.amp_dtype = before
@@ -172,8 +176,8 @@ def bench_env(args: EnvBenchRequest) -> int:
     'tiny' or paths), ``num_envs`` (list of N), ``device`` (list or ``None`` = cpu plus cuda
     when present), ``steps`` (timed steps per figure, after one warm-up), ``max_seconds``
     (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too), ``compile``
-    (time the env with ``compile=True`` too; the warm-up step compiles and is not timed), ``amp`` (time the env
-    with that ``amp`` too, e.g. 'bf16'),
+    (time the env with ``compile=True`` too; the warm-up steps compile and are not timed), ``amp`` (time the env
+    with that ``amp`` too, e.g. 'bf16'; with ``compile`` also both together),
     ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``).
     """
     if args.threads:
@@ -210,6 +214,12 @@ def bench_env(args: EnvBenchRequest) -> int:
                     row["amp"] = _run_kind("amp", timer, model, name, device, n, args, last)
                     if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["amp"]:
                         row["amp_speedup"] = row["amp"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
+                if args.amp and args.compile:
+                    timer = partial(time_vector_env, compile=True, amp=args.amp)
+                    row["amp_compiled"] = _run_kind("amp_compiled", timer, model, name, device, n, args, last)
+                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["amp_compiled"]:
+                        row["amp_compiled_speedup"] = (row["amp_compiled"]["env_steps_per_s"]
+                                                       / row["vector"]["env_steps_per_s"])
                 if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["sampler"]:
                     row["env_share"] = 1.0 - row["vector"]["env_steps_per_s"] / row["sampler"]["env_steps_per_s"]
                 if args.baseline:
@@ -247,6 +257,10 @@ def _line(name: str, row: dict) -> str:
         text += f" | amp {fmt(row['amp'])}"
     if "amp_speedup" in row:
         text += f" ({row['amp_speedup']:.2f}x fp32)"
+    if "amp_compiled" in row:
+        text += f" | amp compiled {fmt(row['amp_compiled'])}"
+    if "amp_compiled_speedup" in row:
+        text += f" ({row['amp_compiled_speedup']:.2f}x fp32 eager)"
     if "loop" in row:
         text += f" | loop {fmt(row['loop'])}"
     if "speedup" in row:

@@ -30,6 +30,7 @@ class RolloutBenchRequest:
     threads: int | None = None
     amp: list[str] | None = None
     compile: bool = False
+    cuda_graph: bool = False
     packed: bool = False
     dart_src: str | None = None
     dart_python: str | None = None
@@ -82,13 +83,15 @@ def _sampler_inputs(model, batch: int, device: str, seed: int) -> tuple[torch.Te
 
 
 def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = False,
-                 reference: torch.Tensor | None = None) -> dict:
+                 reference: torch.Tensor | None = None, cuda_graph: bool = False) -> dict:
     """Ms per primitive-batch of :meth:`MotionModel.sample_primitive` with DART's CFG (DDIM 10).
 
     ``compiled``: the whole primitive (10 guided denoiser passes and the decode) as one
     ``torch.compile(fullgraph=True)`` graph with inductor's weight freezing (constant weights let it
     prepack them for oneDNN); compiling happens in the untimed warm-up, and the row gets the largest
-    difference from the eager sampler's output. ``reference``: the plain sampler's output on the same inputs
+    difference from the eager sampler's output. ``cuda_graph`` (CUDA, with ``compiled``): that graph is also
+    captured and replayed as a CUDA graph (``mode="reduce-overhead"``; each call marked as a new step, so a
+    replay may overwrite the previous output). ``reference``: the plain sampler's output on the same inputs
     (:func:`_reference`); the row then gets the timed sampler's (largest, relative L2) difference from it.
     """
     hist, text, noise = _sampler_inputs(model, batch, device, seed=0)
@@ -104,8 +107,15 @@ def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = 
             model.prepare_compile()
             torch._dynamo.reset()
             with inductor_config.patch(freezing=True):
-                fn = torch.compile(sample, fullgraph=True, dynamic=False)
-                out = fn(hist, text, noise).float()
+                graph = torch.compile(sample, fullgraph=True, dynamic=False,
+                                      mode="reduce-overhead" if cuda_graph else "default")
+
+                def fn(h, t, n):
+                    if cuda_graph:
+                        torch.compiler.cudagraph_mark_step_begin()
+                    return graph(h, t, n)
+
+                out = fn(hist, text, noise).float().clone()
                 extra["max_abs_diff_vs_eager"] = float((out - sample(hist, text, noise)).abs().max())
                 sec = median_time(lambda: fn(hist, text, noise), repeats=repeats, device=device)
             torch._dynamo.reset()
@@ -126,9 +136,10 @@ def time_sampler(model, batch: int, device: str, repeats: int, compiled: bool = 
 
 
 def _variant_label(row: dict) -> str:
-    """'eager', 'compiled', 'packed', 'compiled + packed', 'bf16 autocast + compiled', ... for a timing row."""
+    """'eager', 'compiled', 'packed', 'compiled + packed', 'bf16 autocast + compiled + CUDA graph', ... for a row."""
     parts = [f"{row['amp']} autocast"] if row.get("amp") else []
-    parts += [p for p, on in (("compiled", row.get("compiled")), ("packed", row.get("packed"))) if on]
+    parts += [p for p, on in (("compiled", row.get("compiled")), ("CUDA graph", row.get("cuda_graph")),
+                              ("packed", row.get("packed"))) if on]
     return " + ".join(parts) or "eager"
 
 
@@ -139,8 +150,12 @@ def _reference(model, batch: int, device: str) -> torch.Tensor:
         return model.sample_primitive(hist, text, noise, guidance_scale=GUIDANCE_SCALE).future.float()
 
 
-def run_dart_peer(req: RolloutBenchRequest, batches: list[int]) -> dict | None:
-    """Run shared/tools/dart_peer_bench.py (DART's own sampler) in its own Python environment."""
+def run_dart_peer(req: RolloutBenchRequest, batches: list[int], device: str = "cpu",
+                  amp: str | None = None) -> dict | None:
+    """Run shared/tools/dart_peer_bench.py (DART's own sampler) in its own Python environment.
+
+    ``device``/``amp`` are passed on for CUDA (``amp``: the peer's 'none' = fp32, or 'fp16', DART's own GPU mode).
+    """
     src = req.dart_src or os.environ.get("DART_SRC")
     if not src:
         return None
@@ -153,6 +168,8 @@ def run_dart_peer(req: RolloutBenchRequest, batches: list[int]) -> dict | None:
     cmd = [python, str(script), "--batches", *map(str, batches)]
     if req.threads:
         cmd += ["--threads", str(req.threads)]
+    if device != "cpu":
+        cmd += ["--device", device, "--amp", amp or "none"]
     env = {**os.environ, "DART_SRC": src, "DART_STUBS": stubs}
     print(f"running DART's sampler: {' '.join(cmd)}", file=sys.stderr)
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
@@ -163,6 +180,12 @@ def run_dart_peer(req: RolloutBenchRequest, batches: list[int]) -> dict | None:
         )
     lines = [ln for ln in proc.stdout.splitlines() if ln.strip().startswith("{")]
     return json.loads(lines[-1])
+
+
+def _dart_runs(devices: list[str]) -> list[tuple[str, str | None]]:
+    """(device, peer amp) of each DART peer run: the CPU in fp32; each CUDA device in fp32 and in fp16 (DART's own)."""
+    runs: list[tuple[str, str | None]] = [("cpu", None)] if "cpu" in devices else []
+    return runs + [(d, amp) for d in devices if d != "cpu" for amp in ("none", "fp16")]
 
 
 def _dart_ms(dart: dict, batch: int) -> float | None:
@@ -204,21 +227,27 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
                 )
             needs_ref = bool(req.amp) or (req.packed and device == "cpu")
             fp32_refs = {batch: _reference(model, batch, device) for batch in req.batches} if needs_ref else {}
-            variants = [(model, None, False, True)] if req.compile else []
+            graph = req.cuda_graph and device.startswith("cuda")
+            # (model, amp, packed, compiled, captured as a CUDA graph)
+            compiled_kinds = [(True, False)] * req.compile + [(True, True)] * graph
+            variants = [(model, None, False, c, g) for c, g in compiled_kinds]
             if req.packed and device == "cpu":
                 packed = copy.deepcopy(model)
                 packed.pack_for_cpu()
-                variants += [(packed, None, True, False)] + ([(packed, None, True, True)] if req.compile else [])
+                variants += [(packed, None, True, False, False)]
+                variants += [(packed, None, True, c, g) for c, g in compiled_kinds]
             # autocast last: with the compiled bf16 rows timed first (batches 1 and 16), compiled + packed fp32 at
             # batch 1 measured 115 ms in the same process, against 80 ms without them (one thread, 2026-11-26)
             for amp in req.amp or []:
-                variants += [(model, amp, False, False)] + ([(model, amp, False, True)] if req.compile else [])
-            for variant, amp, is_packed, compiled in variants:
+                variants += [(model, amp, False, False, False)] + [(model, amp, False, c, g) for c, g in compiled_kinds]
+            for variant, amp, is_packed, compiled, captured in variants:
                 variant.amp_dtype = AMP_DTYPES[amp] if amp else None
                 for batch in req.batches:
                     reference = fp32_refs[batch] if amp or is_packed else None
                     row = {"device": device, **({"amp": amp} if amp else {}), "compiled": compiled, "packed": is_packed,
-                           **time_sampler(variant, batch, device, req.repeats, compiled=compiled, reference=reference)}
+                           **({"cuda_graph": True} if captured else {}),
+                           **time_sampler(variant, batch, device, req.repeats, compiled=compiled, reference=reference,
+                                          cuda_graph=captured)}
                     rows.append(row)
                     diffs = [f"max |compiled - eager| {row['max_abs_diff_vs_eager']:.1e}"] if compiled else []
                     if "max_abs_diff_vs_plain" in row:
@@ -234,20 +263,27 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
             "source": model.info.get("source"),
             "results": rows,
         }
-    dart = run_dart_peer(req, req.batches)
-    if dart is not None:
-        out["dart_peer"] = dart
-        ours = out["models"].get("official", {}).get("results", [])
+    ours = out["models"].get("official", {}).get("results", [])
+    for device, amp in _dart_runs(devices):
+        dart = run_dart_peer(req, req.batches, device=device, amp=amp)
+        if dart is None:
+            break
+        on_cpu, dev, peer_dtype = device == "cpu", device.replace(":", ""), "fp32" if amp in (None, "none") else amp
+        tag = "" if on_cpu else f"_{dev}_{peer_dtype}"
+        out["dart_peer" + tag] = dart
         ratios: dict[str, dict[str, float]] = {}
         for row in ours:
             ref = _dart_ms(dart, row["batch"])
-            if row["device"] == "cpu" and ref:
+            if row["device"] == device and ref:
                 ratios.setdefault(_variant_label(row), {})[str(row["batch"])] = ref / row["ms_per_batch"]
+        base = "speedup_vs_dart_official_cpu" if on_cpu else f"speedup_vs_dart_{peer_dtype}_official_{dev}"
         for label, by_batch in ratios.items():
             suffix = "" if label == "eager" else "_" + label.replace(" + ", "_").replace(" ", "_")
-            out["speedup_vs_dart_official_cpu" + suffix] = by_batch
+            out[base + suffix] = by_batch
             for b, r in by_batch.items():
                 shown = "fp32" if label == "eager" else label if "autocast" in label else "fp32 " + label
-                print(f"official size, CPU {shown}, batch {b}: {r:.2f}x DART's sampler speed (same run)")
+                peer = "" if on_cpu else f" ({peer_dtype})"
+                print(f"official size, {'CPU' if on_cpu else device} {shown}, batch {b}: {r:.2f}x "
+                      f"DART's sampler{peer} speed (same run)")
     write_json(req.json, out)
     return 0
