@@ -116,9 +116,9 @@ class LatentMotionVectorEnv(VectorEnv):
         record_features: also record world-frame 276-D features (costs a transform per step).
         render_mode: only ``None``; render exported histories with :mod:`latentrl.render`.
         compile: run each step's tensor maths (:meth:`_motion_core`) as one
-            ``torch.compile(fullgraph=True)`` graph, on CUDA compiled for CUDA-graph capture
-            (``mode="reduce-overhead"``; capture not yet run on a GPU, :mod:`latentrl.envs.compiled`); the first
-            step compiles (tens of seconds).
+            ``torch.compile(fullgraph=True)`` graph, on CUDA captured as a CUDA graph
+            (``mode="reduce-overhead"``, :mod:`latentrl.envs.compiled`; run on an H200 by tests/gpu/test_cuda.py);
+            the first step compiles (tens of seconds).
         foot_lock: keep planted feet from sliding (:func:`latentrl.motion.rollout.lock_feet`): the body
             moves by its steps, not by sliding feet.
         foot_lock_min_weight: the summed contact weight from which the lock pins a foot fully (the
