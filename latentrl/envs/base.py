@@ -172,7 +172,8 @@ class LatentMotionVectorEnv(VectorEnv):
             "nonfinite_actions",
             f"expected 'error' or 'zero', got {nonfinite_actions!r}",
         )
-        require(amp_problem(amp) is None, "amp", str(amp_problem(amp)))
+        problem = amp_problem(amp)
+        require(problem is None, "amp", str(problem))
         require(render_mode is None, "render_mode", "these envs do not render; export_history() + latentrl.render")
         for name, value in (
             ("obs_goal_dist_clip", obs_goal_dist_clip),

@@ -259,7 +259,8 @@ class EnvConfig:
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
-        require(amp_problem(self.amp) is None, "amp", str(amp_problem(self.amp)))
+        problem = amp_problem(self.amp)
+        require(problem is None, "amp", str(problem))
         problem = lock_min_weight_problem(self.foot_lock_min_weight)
         require(problem is None, "foot_lock_min_weight", str(problem))
         for name in self.reward_weights:

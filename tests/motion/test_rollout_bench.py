@@ -76,5 +76,5 @@ def test_cuda_graph_rows_are_cuda_only(tmp_path):
 def test_dart_runs_pair_each_cuda_device_with_fp32_and_dart_s_own_fp16():
     from latentrl.app.bench.rollout import _dart_runs
 
-    assert _dart_runs(["cpu"]) == [("cpu", None)]
-    assert _dart_runs(["cpu", "cuda"]) == [("cpu", None), ("cuda", "none"), ("cuda", "fp16")]
+    assert _dart_runs(["cpu"]) == [("cpu", "fp32")]
+    assert _dart_runs(["cpu", "cuda"]) == [("cpu", "fp32"), ("cuda", "fp32"), ("cuda", "fp16")]

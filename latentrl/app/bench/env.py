@@ -169,6 +169,22 @@ def _run_kind(kind: str, timer, model, name, device, n, args, last: dict) -> dic
     return _figures(seconds, n)
 
 
+VARIANTS = (
+    # row key, printed label, key of its ratio to the eager fp32 env, that ratio's label, compiled?, with ``amp``?
+    ("compiled", "compiled", "compile_speedup", "eager", True, False),
+    ("amp", "amp", "amp_speedup", "fp32", False, True),
+    ("amp_compiled", "amp compiled", "amp_compiled_speedup", "fp32 eager", True, True),
+)
+"""The env variants ``--compile`` and ``--amp`` time beside the eager fp32 env, in the order they run."""
+
+
+def _rate_ratio(a: dict, b: dict) -> float | None:
+    """``a``'s env steps/s over ``b``'s, or None when either figure was skipped."""
+    if "env_steps_per_s" in a and "env_steps_per_s" in b:
+        return a["env_steps_per_s"] / b["env_steps_per_s"]
+    return None
+
+
 def bench_env(args: EnvBenchRequest) -> int:
     """Env steps/s and frames/s per model, device and env count; batched env vs per-env loop.
 
@@ -204,28 +220,19 @@ def bench_env(args: EnvBenchRequest) -> int:
                     "vector": _run_kind("vector", time_vector_env, model, name, device, n, args, last),
                     "sampler": _run_kind("sampler", time_bare_sampler, model, name, device, n, args, last),
                 }
-                if args.compile:
-                    timer = partial(time_vector_env, compile=True)
-                    row["compiled"] = _run_kind("compiled", timer, model, name, device, n, args, last)
-                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["compiled"]:
-                        row["compile_speedup"] = row["compiled"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
-                if args.amp:
-                    timer = partial(time_vector_env, amp=args.amp)
-                    row["amp"] = _run_kind("amp", timer, model, name, device, n, args, last)
-                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["amp"]:
-                        row["amp_speedup"] = row["amp"]["env_steps_per_s"] / row["vector"]["env_steps_per_s"]
-                if args.amp and args.compile:
-                    timer = partial(time_vector_env, compile=True, amp=args.amp)
-                    row["amp_compiled"] = _run_kind("amp_compiled", timer, model, name, device, n, args, last)
-                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["amp_compiled"]:
-                        row["amp_compiled_speedup"] = (row["amp_compiled"]["env_steps_per_s"]
-                                                       / row["vector"]["env_steps_per_s"])
-                if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["sampler"]:
-                    row["env_share"] = 1.0 - row["vector"]["env_steps_per_s"] / row["sampler"]["env_steps_per_s"]
+                for key, _, ratio_key, _, compile, amp in VARIANTS:
+                    if (compile and not args.compile) or (amp and not args.amp):
+                        continue
+                    timer = partial(time_vector_env, compile=compile, amp=args.amp if amp else None)
+                    row[key] = _run_kind(key, timer, model, name, device, n, args, last)
+                    if (ratio := _rate_ratio(row[key], row["vector"])) is not None:
+                        row[ratio_key] = ratio
+                if (ratio := _rate_ratio(row["vector"], row["sampler"])) is not None:
+                    row["env_share"] = 1.0 - ratio
                 if args.baseline:
                     row["loop"] = _run_kind("loop", time_loop_env, model, name, device, n, args, last)
-                    if "env_steps_per_s" in row["vector"] and "env_steps_per_s" in row["loop"]:
-                        row["speedup"] = row["vector"]["env_steps_per_s"] / row["loop"]["env_steps_per_s"]
+                    if (ratio := _rate_ratio(row["vector"], row["loop"])) is not None:
+                        row["speedup"] = ratio
                 rows.append(row)
                 print(_line(name, row))
         out["models"][name] = {
@@ -249,18 +256,11 @@ def _line(name: str, row: dict) -> str:
     text += f" | bare sampler {fmt(row['sampler'])}"
     if "env_share" in row:
         text += f" (env adds {100 * row['env_share']:.0f}%)"
-    if "compiled" in row:
-        text += f" | compiled {fmt(row['compiled'])}"
-    if "compile_speedup" in row:
-        text += f" ({row['compile_speedup']:.2f}x eager)"
-    if "amp" in row:
-        text += f" | amp {fmt(row['amp'])}"
-    if "amp_speedup" in row:
-        text += f" ({row['amp_speedup']:.2f}x fp32)"
-    if "amp_compiled" in row:
-        text += f" | amp compiled {fmt(row['amp_compiled'])}"
-    if "amp_compiled_speedup" in row:
-        text += f" ({row['amp_compiled_speedup']:.2f}x fp32 eager)"
+    for key, label, ratio_key, versus, _, _ in VARIANTS:
+        if key in row:
+            text += f" | {label} {fmt(row[key])}"
+        if ratio_key in row:
+            text += f" ({row[ratio_key]:.2f}x {versus})"
     if "loop" in row:
         text += f" | loop {fmt(row['loop'])}"
     if "speedup" in row:

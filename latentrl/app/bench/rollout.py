@@ -151,10 +151,10 @@ def _reference(model, batch: int, device: str) -> torch.Tensor:
 
 
 def run_dart_peer(req: RolloutBenchRequest, batches: list[int], device: str = "cpu",
-                  amp: str | None = None) -> dict | None:
+                  dtype: str = "fp32") -> dict | None:
     """Run shared/tools/dart_peer_bench.py (DART's own sampler) in its own Python environment.
 
-    ``device``/``amp`` are passed on for CUDA (``amp``: the peer's 'none' = fp32, or 'fp16', DART's own GPU mode).
+    ``device`` and ``dtype`` ('fp32', or 'fp16': fp16 autocast, DART's own GPU mode) are passed on for CUDA.
     """
     src = req.dart_src or os.environ.get("DART_SRC")
     if not src:
@@ -169,7 +169,7 @@ def run_dart_peer(req: RolloutBenchRequest, batches: list[int], device: str = "c
     if req.threads:
         cmd += ["--threads", str(req.threads)]
     if device != "cpu":
-        cmd += ["--device", device, "--amp", amp or "none"]
+        cmd += ["--device", device, "--amp", "none" if dtype == "fp32" else dtype]
     env = {**os.environ, "DART_SRC": src, "DART_STUBS": stubs}
     print(f"running DART's sampler: {' '.join(cmd)}", file=sys.stderr)
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
@@ -182,10 +182,10 @@ def run_dart_peer(req: RolloutBenchRequest, batches: list[int], device: str = "c
     return json.loads(lines[-1])
 
 
-def _dart_runs(devices: list[str]) -> list[tuple[str, str | None]]:
-    """(device, peer amp) of each DART peer run: the CPU in fp32; each CUDA device in fp32 and in fp16 (DART's own)."""
-    runs: list[tuple[str, str | None]] = [("cpu", None)] if "cpu" in devices else []
-    return runs + [(d, amp) for d in devices if d != "cpu" for amp in ("none", "fp16")]
+def _dart_runs(devices: list[str]) -> list[tuple[str, str]]:
+    """(device, dtype) of each DART peer run: the CPU in fp32; each CUDA device in fp32 and in fp16 (DART's own)."""
+    runs = [("cpu", "fp32")] if "cpu" in devices else []
+    return runs + [(d, dtype) for d in devices if d != "cpu" for dtype in ("fp32", "fp16")]
 
 
 def _dart_ms(dart: dict, batch: int) -> float | None:
@@ -264,11 +264,11 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
             "results": rows,
         }
     ours = out["models"].get("official", {}).get("results", [])
-    for device, amp in _dart_runs(devices):
-        dart = run_dart_peer(req, req.batches, device=device, amp=amp)
+    for device, peer_dtype in _dart_runs(devices):
+        dart = run_dart_peer(req, req.batches, device=device, dtype=peer_dtype)
         if dart is None:
             break
-        on_cpu, dev, peer_dtype = device == "cpu", device.replace(":", ""), "fp32" if amp in (None, "none") else amp
+        on_cpu, dev = device == "cpu", device.replace(":", "")
         tag = "" if on_cpu else f"_{dev}_{peer_dtype}"
         out["dart_peer" + tag] = dart
         ratios: dict[str, dict[str, float]] = {}
