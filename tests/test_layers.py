@@ -2,7 +2,8 @@
 
 1. Each package sits on a floor; a module may import its own floor and the floors below, never above.
 2. A few packages are kept apart from neighbours on their own floor or below (``ppo`` never sees the
-   motion model or the envs; ``motion`` is the frozen runtime and imports only the ground floor).
+   motion model or the envs; ``motion`` is the frozen runtime and imports only the ground floor; ``optim``,
+   the noise optimizer, shares the evaluation's floor and may use its metric kernels, never the reverse).
 3. No import cycles, neither between modules nor between packages.
 
 ``latentrl/__init__.py`` (the version and the Gymnasium registration) is left out: every import of
@@ -21,7 +22,7 @@ FLOORS = (
     ("motion",),
     ("datasets", "render", "rewards"),
     ("motion_training", "envs", "ppo"),
-    ("evaluation",),
+    ("evaluation", "optim"),
     ("viewer", "export"),
     ("app", "cli", "__main__"),
 )
@@ -33,6 +34,8 @@ APART = {
     "envs": ("ppo", "datasets", "motion_training"),
     "rewards": ("datasets", "render"),
     "motion_training": ("envs", "ppo", "rewards", "render"),
+    "optim": ("ppo", "motion_training", "datasets"),
+    "evaluation": ("optim",),
 }
 """unit -> units it must not import, whatever their floor."""
 

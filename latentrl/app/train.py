@@ -24,9 +24,11 @@ from typing import ClassVar
 
 import torch
 
+import latentrl.evaluation.tasks  # noqa: F401  (attaches the shipped tasks' evaluators)
 from latentrl.config import MAX_THREADS, load_config, require
 from latentrl.envs.config import ALIASES as ENV_ALIASES
-from latentrl.envs.config import EnvConfig, build, resolve_task_file
+from latentrl.envs.config import EnvConfig, build
+from latentrl.envs.tasks import task_spec
 from latentrl.errors import ConfigError
 from latentrl.evaluation.config import EvalConfig
 from latentrl.ppo.config import PolicyConfig, PPOConfig
@@ -125,24 +127,14 @@ def motion_info(model) -> dict:
 
 
 def make_eval_hook(cfg: TrainConfig, motion, device: str):
-    """The trainer's periodic evaluation: our path runner on ``cfg.eval.paths``, plus a track plot."""
+    """The trainer's periodic evaluation: the evaluator of the task (``cfg.eval.paths`` or its first suite)."""
     if cfg.ppo.eval_every <= 0:
         return None
-    task = cfg.env.task
-    if task in ("joystick", "timed"):  # their own suites (tasks/<task>/) and evaluators
-        from latentrl.app.evaluate import TASK_SUITES
-
-        if task == "joystick":
-            from latentrl.evaluation.joystick import training_eval_hook
-        else:
-            from latentrl.evaluation.timed import training_eval_hook
-        paths = cfg.eval.paths if cfg.eval.paths != EvalConfig().paths else list(TASK_SUITES[task][:1])
-        files = [resolve_task_file(p, task) for p in paths]
-        return training_eval_hook(files, motion, cfg.env, cfg.eval, device=device)
-    from latentrl.evaluation.runner import training_eval_hook
-
-    files = [resolve_task_file(p) for p in cfg.eval.paths]
-    return training_eval_hook(files, motion, cfg.env, cfg.eval, device=device)
+    spec = task_spec(cfg.env.task)
+    if spec.evaluator is None:
+        raise ConfigError(f"ppo.eval_every: task '{spec.name}' has no evaluator; set ppo.eval_every=0")
+    files = spec.evaluator.training_files(cfg.eval.paths, spec.suites)
+    return spec.evaluator.training_hook(files, motion, cfg.env, cfg.eval, device=device)
 
 
 def load_train_config(config: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> TrainConfig:

@@ -27,6 +27,10 @@ _EXPORTS = {
     "parse_timed_paths": "latentrl.envs.timed",
     "Sb3VecEnv": "latentrl.envs.sb3",
     "SingleEnv": "latentrl.envs.single",
+    "TaskSpec": "latentrl.envs.tasks",
+    "Evaluator": "latentrl.envs.tasks",
+    "register_task": "latentrl.envs.tasks",
+    "task_spec": "latentrl.envs.tasks",
     "ENV_IDS": "latentrl.envs.registration",
     "register_envs": "latentrl.envs.registration",
 }

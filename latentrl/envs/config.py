@@ -2,7 +2,8 @@
 
 Settings every task shares sit at the top of the section; each task has its own sub-section
 (``env.reach``, ``env.path``, ``env.joystick``, ``env.timed``) holding its constructor's arguments,
-and an entry in :data:`TASKS`::
+and a :class:`~latentrl.envs.tasks.TaskSpec` in :data:`~latentrl.envs.tasks.TASKS` (a task registered from outside
+the package without a section here takes its arguments from ``env.options``)::
 
     env:
       task: path
@@ -17,15 +18,17 @@ Configs written before the sections existed named the task arguments at the top
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
 from latentrl.envs.path import next_at_last_problem
+from latentrl.envs.tasks import TASKS, task_spec
 from latentrl.errors import ConfigError, closest
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT, amp_problem, lock_min_weight_problem
 from latentrl.motion.text import prompt_problem
@@ -154,34 +157,6 @@ class TimedConfig:
                 "time_left_clip": self.time_left_clip}
 
 
-def _reach_env() -> type:
-    from latentrl.envs.reach import ReachLocationEnv
-
-    return ReachLocationEnv
-
-
-def _path_env() -> type:
-    from latentrl.envs.path import FollowPathEnv
-
-    return FollowPathEnv
-
-
-def _joystick_env() -> type:
-    from latentrl.envs.joystick import JoystickEnv
-
-    return JoystickEnv
-
-
-def _timed_env() -> type:
-    from latentrl.envs.timed import TimedPathEnv
-
-    return TimedPathEnv
-
-
-TASKS: dict[str, Callable[[], type]] = {"reach": _reach_env, "path": _path_env, "joystick": _joystick_env,
-                                        "timed": _timed_env}
-"""Task name (= the name of its ``EnvConfig`` section) -> its env class, imported when first built."""
-
 ALIASES: dict[str, str] = {
     "goal_angle_deg": "reach.goal_angle_deg",
     "goal_distance": "reach.goal_distance",
@@ -199,7 +174,8 @@ class EnvConfig:
 
     task: str = "reach"
     """'reach' (latentrl/ReachLocation-v0, DART's task), 'path' (latentrl/FollowPath-v0), 'joystick'
-    (latentrl/Joystick-v0) or 'timed' (latentrl/TimedPath-v0)."""
+    (latentrl/Joystick-v0), 'timed' (latentrl/TimedPath-v0), or a task registered with
+    :func:`~latentrl.envs.tasks.register_task`."""
     num_envs: int = 256
     """Environments stepped together (DART: 256)."""
     motion: str = "default"
@@ -245,9 +221,18 @@ class EnvConfig:
     """Arguments of the joystick task."""
     timed: TimedConfig = field(default_factory=TimedConfig)
     """Arguments of the timed-path task."""
+    options: dict[str, Any] = field(default_factory=dict)
+    """Arguments of a registered task that has no section of its own above (its spec's ``config`` fields)."""
 
     def validate(self) -> None:
         require(self.task in TASKS, "task", f"expected one of {tuple(TASKS)}, got '{self.task}'")
+        if not self._has_section():
+            section = self.section
+            if callable(getattr(section, "validate", None)):
+                try:
+                    section.validate()
+                except ConfigError as exc:
+                    raise ConfigError(f"options.{exc}") from None
         require(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
         require(self.num_envs <= MAX_NUM_ENVS, "num_envs", f"must be <= {MAX_NUM_ENVS}, got {self.num_envs}")
         require(math.isfinite(self.guidance_scale) and abs(self.guidance_scale) <= MAX_GUIDANCE, "guidance_scale",
@@ -267,15 +252,28 @@ class EnvConfig:
             require(name in TERM_NAMES, "reward_weights",
                     f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")
 
+    def _has_section(self) -> bool:
+        return self.task in {f.name for f in fields(self)} and dataclasses.is_dataclass(getattr(self, self.task))
+
+    @property
+    def section(self) -> Any:
+        """The task's arguments: its section (``env.<task>``), or its spec's ``config`` built from ``env.options``."""
+        if self._has_section():
+            return getattr(self, self.task)
+        try:
+            return task_spec(self.task).config_class()(**self.options)
+        except TypeError as exc:
+            raise ConfigError(f"options: {exc} (the arguments of task '{self.task}')") from None
+
     @property
     def observe_next(self) -> bool:
-        """Whether the env observes the waypoint after the current one (path and timed tasks only)."""
-        return (self.task == "path" and self.path.observe_next) or (self.task == "timed" and self.timed.observe_next)
+        """Whether the env observes the waypoint after the current one (tasks whose section has ``observe_next``)."""
+        return bool(getattr(self.section, "observe_next", False))
 
     @property
     def next_at_last(self) -> str:
-        """What ``next_goal_*`` shows at the last waypoint (path and timed tasks; "repeat" for the others)."""
-        return getattr(self, self.task).next_at_last if self.task in ("path", "timed") else "repeat"
+        """What ``next_goal_*`` shows at the last waypoint (tasks whose section has it; "repeat" for the others)."""
+        return str(getattr(self.section, "next_at_last", "repeat"))
 
 
 def resolve_task_file(path: str, kind: str = "paths") -> Path:
@@ -297,7 +295,7 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
     if cfg.max_episode_steps is not None:
         common["max_episode_steps"] = cfg.max_episode_steps
     common.update(extra)
-    return TASKS[cfg.task]()(cfg.num_envs, **getattr(cfg, cfg.task).kwargs(), **common)
+    return task_spec(cfg.task).env_class()(cfg.num_envs, **cfg.section.kwargs(), **common)
 
 
 def stored_env_config(config: Mapping[str, Any] | None) -> EnvConfig | None:

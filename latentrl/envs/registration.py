@@ -3,19 +3,19 @@
 The ids have only a ``vector_entry_point``: create them with
 ``gymnasium.make_vec(id, num_envs=N, vectorization_mode="vector_entry_point", **kwargs)``, where
 ``kwargs`` are the task's constructor arguments (``motion``, ``texts``, ``device``, ...).
-Registration imports nothing but Gymnasium; the env modules (and torch) load on ``make_vec``.
+Each id is a :class:`~latentrl.envs.tasks.TaskSpec`'s ``gym_id``; registration imports nothing but
+Gymnasium and the task registry; the env modules (and torch) load on ``make_vec``.
 """
 
 from __future__ import annotations
 
 import gymnasium
 
+from latentrl.envs.tasks import TASKS
+
 #: id -> (vector entry point, max_episode_steps passed to the constructor by make_vec).
 ENV_IDS: dict[str, tuple[str, int]] = {
-    "latentrl/ReachLocation-v0": ("latentrl.envs.reach:ReachLocationEnv", 32),
-    "latentrl/FollowPath-v0": ("latentrl.envs.path:FollowPathEnv", 256),
-    "latentrl/Joystick-v0": ("latentrl.envs.joystick:JoystickEnv", 75),
-    "latentrl/TimedPath-v0": ("latentrl.envs.timed:TimedPathEnv", 256),
+    spec.gym_id: (spec.env, spec.max_episode_steps) for spec in TASKS.values() if spec.gym_id is not None
 }
 
 
