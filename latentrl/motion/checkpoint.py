@@ -54,22 +54,21 @@ _DERIVED_BUFFERS = ("sequence_pos_encoder.pe", "embed_timestep.sequence_pos_enco
 
 #: Names of the models shipped as package data -> their file under ``latentrl/assets``.
 EMBEDDED_MODELS = {
-    # the default since 2026-11-26 (stop 22): v5, v4's recipe on a twice-as-wide VAE trained with the planted-foot
-    # loss (configs/motion/default.yaml; docs/benchmarks.md, "v5")
+    # the default since 2026-11-26: v5, v4's recipe on a twice-as-wide VAE trained with the planted-foot loss
+    # (configs/motion/default.yaml; docs/benchmarks.md)
     "default": "default_motion.pt",
     # the same file under the name it shipped with as a candidate, so run dirs and policies that named it still load
     "default-v5": "default_motion.pt",
-    # the default from v2 until stop 22 (configs/motion/v2.yaml, docs/benchmarks.md "Default model v2"); policies
-    # that stored the name "default" with this file's hash are given it (``embedded_name_for``)
-    "default-v2": "default_motion_v2.pt",
-    # the first release (configs/motion/v1.yaml), kept for comparison and for policies trained on it
-    "default-v1": "default_motion_v1.pt",
-    # v2's recipe with a v-predicting denoiser (configs/motion/v3.yaml): hops steer twice as far, walking and
-    # running less (docs/benchmarks.md, "v3")
-    "default-v3": "default_motion_v3.pt",
-    # v3's VAE with a denoiser whose decoded-motion consistency losses weigh 1,000, not 10,000 (configs/motion/v4.yaml):
-    # the most steerable model before v5, sliding more (docs/benchmarks.md, "v4")
-    "default-v4": "default_motion_v4.pt",
+}
+
+#: Models shipped until 2026-11-27, now outside the package (zoo/README.md restores each exact file from git
+#: history): name -> (file name, sha256). Policies trained on one store its name or hash; loading such a policy
+#: without ``--motion FILE`` names the file it needs instead of running it on another model.
+RETIRED_MODELS = {
+    "default-v1": ("default_motion_v1.pt", "150a3e26ed4d8741bea6acc821d1fb982bf9f9097bfaa431a8e12e714be7acd0"),
+    "default-v2": ("default_motion_v2.pt", "1b4d0a54dda3a3f95daa2660261c199bdd520990e635d723e605d303a608db77"),
+    "default-v3": ("default_motion_v3.pt", "4448db2f30b0ed84a800c86e33ae87505ca2f20bb7266f29445dccd894691398"),
+    "default-v4": ("default_motion_v4.pt", "596b449ab5de030e5408aebc3d79724cf24d4576eed372d66a8531b9946d8347"),
 }
 
 
@@ -82,9 +81,11 @@ def embedded_name_for(sha256: str | None) -> str | None:
     """The name of the embedded model whose file has this content hash, or None.
 
     A checkpoint records the hash of the model it was trained on; when a name such as "default" has since
-    moved to another file (v2 -> v5), this finds the file the checkpoint was trained on under its own name.
+    moved to another file (v2 -> v5), this finds the model the checkpoint was trained on under its own name
+    (a ``RETIRED_MODELS`` name when that file is no longer shipped).
     """
-    return next((name for name in EMBEDDED_MODELS if sha256 and embedded_sha256(name) == sha256), None)
+    found = next((name for name in EMBEDDED_MODELS if sha256 and embedded_sha256(name) == sha256), None)
+    return found or next((name for name, (_, h) in RETIRED_MODELS.items() if sha256 and h == sha256), None)
 
 
 def embedded_sha256(name: str) -> str | None:
@@ -123,11 +124,9 @@ def load_motion_model(
     """Load a frozen motion model.
 
     Args:
-        source: ``"default"`` (the embedded model, v5; ``"default-v5"`` is another name for it),
-            ``"default-v2"`` (the default before v5), ``"default-v1"`` (the first release), ``"default-v3"``
-            (the v-prediction model), ``"default-v4"`` (the steerable model before v5), a latentrl
-            ``.pt`` file or a folder holding ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with
-            ``args.yaml`` beside it).
+        source: ``"default"`` (the embedded model, v5; ``"default-v5"`` is another name for it), a latentrl
+            ``.pt`` file (the models before v5 are such files, zoo/README.md) or a folder holding
+            ``motion_model.pt``, or a DART denoiser ``checkpoint_*.pt`` (with ``args.yaml`` beside it).
         vae, mean_std: override the paths DART's ``args.yaml`` names.
         device: where the model runs.
         seed_history: (K, 2, 276) canonical seed histories, or a ``.npz``/``.pt`` file holding
@@ -135,6 +134,9 @@ def load_motion_model(
         text_table: a DART ``train_text_embedding_dict.pkl`` (prompt -> vector) to use instead of
             the one found beside the mean/std file.
     """
+    if str(source) in RETIRED_MODELS:
+        raise CheckpointError(f"motion model '{source}' ({RETIRED_MODELS[str(source)][0]}) is no longer shipped: "
+                              "restore it as zoo/README.md says and pass --motion PATH_TO_THAT_FILE")
     if str(source) in EMBEDDED_MODELS:
         path = default_model_path(str(source))
         if not path.is_file():

@@ -266,9 +266,9 @@ def test_generate_dataset_writes_readable_files_and_meta(tmp_path):
     assert len(list(tmp_path.glob("*.npz"))) == 1
 
 
-def test_v2_data_options_steer_unpredictably_and_keep_flights_low():
-    # steering: random_hold and flights: low (configs/motion/v2.yaml): the data itself meets the v2 targets
-    # for heading variety, floor distance and single support (docs/benchmarks.md, "Default model v2").
+def test_steerable_data_options_steer_unpredictably_and_keep_flights_low():
+    # steering: random_hold and flights: low (configs/motion/default.yaml, and every model since v2): the data
+    # itself meets the targets for heading variety, floor distance and single support (docs/benchmarks.md).
     from latentrl.datasets.locomotion import dataset_statistics
 
     stats = dataset_statistics(generate_sequences(

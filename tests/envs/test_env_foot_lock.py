@@ -39,11 +39,11 @@ def test_config_field_locks_the_feet_of_the_default_model():
 
 
 def test_min_weight_reaches_the_rollout_and_pins_more():
-    """``foot_lock_min_weight`` 0.05 against 0.5 on the v4 run (a foot often high in the 3 cm band): same seed and
+    """``foot_lock_min_weight`` 0.05 against 0.5 on the default run (a foot often high in the 3 cm band): same seed and
     actions, the horizontal skate left is smaller."""
     slide = {}
     for w in (0.5, 0.05):
-        env = build(EnvConfig(num_envs=8, motion="default-v4", texts=["run"], foot_lock=True, foot_lock_min_weight=w),
+        env = build(EnvConfig(num_envs=8, motion="default", texts=["run"], foot_lock=True, foot_lock_min_weight=w),
                     "cpu", record_history=True)
         assert env.foot_lock_min_weight == w
         env.reset(seed=0)

@@ -148,10 +148,13 @@ def test_play_and_export_take_the_motion_model_the_policy_names(eval_files, tmp_
     from latentrl.evaluation.trained import trained_motion
     from latentrl.resources import policy_file
 
-    assert trained_motion(policy_file("reach_hop_left_v3")) == "default-v3"
     assert trained_motion(policy_file("reach_walk_default")) == "default"
-    assert trained_motion(policy_file("reach_hop_left_v3"), "my_model.pt") == "my_model.pt"
-    state = torch.load(eval_files["policy"], weights_only=True)
+    assert trained_motion(policy_file("reach_walk_default"), "my_model.pt") == "my_model.pt"
+    state = torch.load(policy_file("reach_walk_default"), weights_only=True)
+    state["config"]["env"]["motion"] = "default-v3"  # a policy trained on a model that is no longer shipped
+    named = tmp_path / "named.pt"
+    torch.save(state, named)
+    assert trained_motion(named) == "default-v3"
     state.pop("config", None)
     bare = tmp_path / "bare.pt"
     torch.save(state, bare)

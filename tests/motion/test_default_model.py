@@ -77,20 +77,21 @@ def test_switching_text_from_walk_to_run_shows_within_a_second(model):
     assert switch["deepest_below_floor_cm"] <= 1.0
 
 
-def test_the_default_is_v5_and_earlier_defaults_still_load(model):
-    # "default" is v5 since stop 22 (configs/motion/default.yaml: the wider VAE with the planted-foot loss) and
-    # "default-v5" names the same file; "default-v2" (the default before it) and "default-v1" (the first
-    # release, whose heading barely followed the noise) still load for the policies trained on them.
-    from latentrl.motion.checkpoint import default_model_path
+def test_the_default_is_v5_and_the_only_model_shipped(model):
+    # "default" is v5 since 2026-11-26 (configs/motion/default.yaml: the wider VAE with the planted-foot loss) and
+    # "default-v5" names the same file; the models before it left the package (zoo/README.md) and their names
+    # say which file to restore instead of loading another model.
+    from latentrl.errors import CheckpointError
+    from latentrl.motion.checkpoint import EMBEDDED_MODELS, RETIRED_MODELS, default_model_path
 
     assert default_model_path("default") == default_model_path("default-v5")
+    assert set(EMBEDDED_MODELS.values()) == {"default_motion.pt"}
+    assert sorted(p.name for p in default_model_path().parent.glob("*.pt")) == ["default_motion.pt"]
     assert model.info["config"]["vae_train"]["plant_weight"] == 100.0
     assert model.info["config"]["model"]["vae"]["h_dim"] == 256
-    v2 = load_motion_model("default-v2")
-    assert v2.info["config"]["data"]["locomotion"]["steering"] == "random_hold"
-    assert v2.info["config"]["model"]["vae"]["h_dim"] == 128
-    v1 = load_motion_model("default-v1")
-    assert v1.latent_shape == (1, 32) and "steering" not in v1.info["config"]["data"]["locomotion"]
+    for name, (file, _) in RETIRED_MODELS.items():
+        with pytest.raises(CheckpointError, match=file):
+            load_motion_model(name)
 
 
 def test_hopping_keeps_to_the_named_leg(model):
@@ -106,59 +107,20 @@ def test_hopping_keeps_to_the_named_leg(model):
     assert float(right["right_only"].mean()) > 0.6 and float(right["left_only"].max()) < 0.05
 
 
-def test_v3_hops_further_within_the_action_box_and_on_the_named_leg():
-    """``default-v3`` (v-prediction, configs/motion/v3.yaml): what it was made for, on small batches.
-
-    docs/benchmarks.md measures, over 60 s: hops steer 25 deg over the policy's +-4 box (v2: 13) and
-    the right foot alone carries 60 % of "hop on right leg" (v2: 53 %). These floors catch a regression.
-    """
-    from latentrl.app.bench.motion import steering_spread_deg
-
-    v2, v3 = load_motion_model("default-v2"), load_motion_model("default-v3")
-    assert v3.denoiser.config.prediction == "v" and v3.latent_shape == v2.latent_shape
-    for text in ("hop on left leg", "hop on right leg"):
-        ours = steering_spread_deg(v3, text, batch=64, action_box=4.0)
-        assert ours > 18.0 and ours > 1.3 * steering_spread_deg(v2, text, batch=64, action_box=4.0), text
-    roll = v3.rollout("hop on right leg", num_steps=30, batch=4, generator=torch.Generator().manual_seed(0))
-    shares = M.foot_contact_shares(roll.joints_world[:, 2:])
-    assert float(shares["right_only"].mean()) > 0.4 > 0.05 > float(shares["left_only"].mean())
-
-
-def test_v4_noise_steers_further_than_v3():
-    """``default-v4`` (configs/motion/v4.yaml: consistency losses at 1,000): what it was made for.
-
-    docs/benchmarks.md ("v4") measures the steer spread with N(0, I) noise: walk 25.6 -> 30.9, run 19.0 -> 32.9,
-    hop on left leg 9.1 -> 15.9 degrees against v3. These floors catch a regression.
-    """
-    from latentrl.app.bench.motion import steering_spread_deg
-
-    v3, v4 = load_motion_model("default-v3"), load_motion_model("default-v4")
-    assert v4.denoiser.config.prediction == "v" and v4.latent_shape == v3.latent_shape
-    assert torch.equal(v4.vae.latent_std, v3.vae.latent_std)  # the same VAE: only the denoiser was retrained
-    spread = {text: (steering_spread_deg(v3, text, batch=64), steering_spread_deg(v4, text, batch=64))
-              for text in ("walk", "run", "hop on left leg")}
-    assert spread["run"][1] >= 30.0 and spread["run"][1] > 1.4 * spread["run"][0], spread
-    assert spread["hop on left leg"][1] > 1.4 * spread["hop on left leg"][0], spread
-    assert spread["walk"][1] > spread["walk"][0], spread
-
-
-def test_v5_steers_walk_further_and_hops_lower_on_one_foot(model):
-    """``default-v5`` (the default since stop 22, configs/motion/default.yaml): v4's recipe on a wider VAE with
+def test_v5_steers_walk_far_and_hops_low_on_one_foot(model):
+    """``default-v5`` (the default since 2026-11-26, configs/motion/default.yaml): v4's recipe on a wider VAE with
     the planted-foot loss.
 
-    docs/benchmarks.md ("v5") measures over 60 s: walk steer 30.9 -> 42.4 degrees against v4, hop on left leg
-    floor distance 3.57 -> 1.06 cm and left foot alone 0.67 -> 0.95. These floors catch a regression.
+    docs/benchmarks.md measures over 60 s: walk steer 42.4 degrees (v4: 30.9), hop on left leg floor distance
+    1.06 cm (v4: 3.57) and left foot alone 0.95 (v4: 0.67). These floors, above v4's figures, catch a regression.
     """
     from latentrl.app.bench.motion import steering_spread_deg
 
-    v4, v5 = load_motion_model("default-v4"), model  # the module's "default" is the default-v5 file (test above)
-    assert v5.latent_shape == v4.latent_shape and v5.info["config"]["vae_train"]["plant_weight"] == 100.0
-    walk = steering_spread_deg(v4, "walk", batch=64), steering_spread_deg(v5, "walk", batch=64)
-    assert walk[1] >= 35.0 and walk[1] > walk[0], walk
-    floor, alone = [], []
-    for m in (v4, v5):
-        roll = m.rollout("hop on left leg", num_steps=30, batch=4, generator=torch.Generator().manual_seed(0))
-        floor.append(float(M.foot_floor_distance_cm(roll.joints_world).mean()))
-        alone.append(float(M.foot_contact_shares(roll.joints_world[:, 2:])["left_only"].mean()))
-    assert floor[1] < floor[0] and floor[1] < 3.0, floor
-    assert alone[1] > 0.8 and alone[1] > alone[0], alone
+    assert model.latent_shape == (1, 32) and model.info["config"]["vae_train"]["plant_weight"] == 100.0
+    walk = steering_spread_deg(model, "walk", batch=64)
+    assert walk >= 35.0, walk
+    roll = model.rollout("hop on left leg", num_steps=30, batch=4, generator=torch.Generator().manual_seed(0))
+    floor = float(M.foot_floor_distance_cm(roll.joints_world).mean())
+    alone = float(M.foot_contact_shares(roll.joints_world[:, 2:])["left_only"].mean())
+    assert floor < 3.0, floor
+    assert alone > 0.8, alone

@@ -21,43 +21,27 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_run_default": ("dart_run_long", 48),  # 7.3 s on path 0
     "reach_hop_left_default": ("dart_hop_long", 128),  # 16.2 s on path 0
     "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m (23.9 s)
-    "path_mixed_v2": ("mixed_skills", 96),
-    "reach_walk_v2": ("dart_walk_long", 96),
-    "reach_run_v2": ("dart_run_long", 48),
-    "reach_hop_left_v2": ("dart_hop_long", 96),
-    "reach_hop_left_v3": ("dart_hop_long", 96),  # 23.9 s on path 0 with prior 0.5
-    "reach_run_v3": ("dart_run_long", 160),  # it circles back to waypoints it overshoots: 36 s on path 0
-    "reach_run_v4": ("dart_run_long", 64),  # 8.1 s on path 0 (its card, lock pinning from 0.05)
-    "reach_hop_left_v4": ("dart_hop_long", 128),  # 17.5 s on path 0
-    "reach_walk_v4": ("dart_walk_long", 64),  # 12.8 s on path 0
 }
-# the embedded model each policy was trained on (else "default"): the v2 policies stored the name "default",
-# which now means v5; `stored_env` finds their file by its hash
-MOTION = {"reach_hop_left_v3": "default-v3", "reach_run_v3": "default-v3", "reach_run_v4": "default-v4",
-          "reach_hop_left_v4": "default-v4", "reach_walk_v4": "default-v4",
-          "reach_walk_v2": "default-v2", "reach_run_v2": "default-v2", "reach_hop_left_v2": "default-v2",
-          "path_mixed_v2": "default-v2", "joystick_walk_v2": "default-v2", "timed_walk_v2": "default-v2"}
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
 
-JOYSTICK_POLICIES = ["joystick_walk_default", "joystick_walk_v2"]
-TIMED_POLICIES = ["timed_walk_default", "timed_walk_v2"]
+JOYSTICK_POLICIES = ["joystick_walk_default"]
+TIMED_POLICIES = ["timed_walk_default"]
 TASK_POLICIES = {*JOYSTICK_POLICIES, *TIMED_POLICIES}  # tested by their own tests below
 
 
 def test_every_shipped_policy_is_tested_here():
     shipped = {p.stem for p in (ROOT / "policies").glob("*.pt")}
-    assert shipped <= set(POLICIES) | TASK_POLICIES, shipped - set(POLICIES) - TASK_POLICIES
-    assert {"reach_walk_default", "path_mixed_default"} | TASK_POLICIES <= shipped
+    assert shipped == set(POLICIES) | TASK_POLICIES, shipped ^ (set(POLICIES) | TASK_POLICIES)
+    assert all(name.endswith("_default") for name in shipped)  # older versions live in zoo/ (zoo/README.md)
 
 
 def _evaluate_first_entry(name: str, task_dir: str, suite: str, tmp_path, *eval_args: str) -> tuple[dict, dict]:
     """Check policies/<name>.pt and its card against the model it was trained on, evaluate it on the first
     entry of tasks/<task_dir>/<suite>.json (one deterministic episode), and return (checkpoint, report)."""
     state = torch.load(ROOT / "policies" / f"{name}.pt", weights_only=True, map_location="cpu")
-    motion = MOTION.get(name, "default")
-    assert state["motion"]["sha256"] == file_sha256(default_model_path(motion)), "trained on another model"
-    assert stored_env(ROOT / "policies" / f"{name}.pt").motion == motion  # what eval loads without --motion
+    assert state["motion"]["sha256"] == file_sha256(default_model_path("default")), "trained on another model"
+    assert stored_env(ROOT / "policies" / f"{name}.pt").motion == "default"  # what eval loads without --motion
     card = (ROOT / "policies" / f"{name}.md").read_text()
     assert state["motion"]["sha256"][:16] in card and f"--paths {suite}" in card
     entries = json.loads((ROOT / "latentrl" / "tasks" / task_dir / f"{suite}.json").read_text())
@@ -97,7 +81,7 @@ def test_shipped_timed_policy_reaches_the_first_timed_path(name, tmp_path):
 def test_shipped_joystick_policy_follows_the_first_timeline(name, tmp_path):
     """A joystick policy (policies/joystick_walk_*.md) on the first timeline of joystick_walk.json."""
     metrics = _first_entry_metrics(name, "joystick", "joystick_walk", tmp_path)
-    # the cards measure 11.2 deg / 0.13 m/s (v5) and 11.3 deg / 0.09 m/s (v2) on this timeline (32 stochastic
-    # episodes each); the timeline turns by 90 deg at each of its 4 command changes, so a policy that ignores
+    # its card measures 11.2 deg / 0.13 m/s on this timeline (32 stochastic episodes); the timeline turns by 90 deg
+    # at each of its 4 command changes, so a policy that ignores
     # them lands far above these bounds
     assert metrics["heading_err_deg"]["mean"] < 30.0 and metrics["speed_err_m_s"]["mean"] < 0.3, metrics
