@@ -1,6 +1,6 @@
 """Time the exported controller: export time, file size, onnxruntime vs torch per controller step.
 
-    python scripts/bench_onnx.py [--policy policies/reach_walk_default.pt] [--batch 1] [--threads 1] [--json F]
+    python tools/bench_onnx.py [--policy policies/reach_walk_default.pt] [--batch 1] [--threads 1] [--json F]
 
 One controller step = observation, policy mean, 10 guided DDIM steps, VAE decode and world update
 (what one call of the exported graph computes). Both sides run on the CPU with ``--threads`` threads;

@@ -1,6 +1,6 @@
 """How far a motion model's noise reaches, and why: figures that compare denoiser levers.
 
-    python scripts/denoiser_probe.py MODEL.pt [MODEL.pt ...] --data RUN_DIR/data [--json out.json]
+    python tools/denoiser_probe.py MODEL.pt [MODEL.pt ...] --data RUN_DIR/data [--json out.json]
 
 Per prompt (walk, run, both hops), on primitives of the model's own training data (``--data``):
 
@@ -57,7 +57,7 @@ def probe(model, motion: torch.Tensor, text_index: torch.Tensor, texts: list[str
 def probe_inputs(doc: str, primitives: int) -> tuple[argparse.Namespace, PrimitiveDataset, torch.Tensor, torch.Tensor]:
     """The probes' shared command line (MODELS, ``--data``, ``--json``) and a seeded sample of data primitives.
 
-    Returns ``(args, data, motion (P, 10, 276), text_index (P,))``; ``scripts/skate_probe.py`` uses it too.
+    Returns ``(args, data, motion (P, 10, 276), text_index (P,))``; ``tools/skate_probe.py`` uses it too.
     """
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("models", nargs="+", help="motion model files or names ('default', 'default-v4')")

@@ -5,7 +5,7 @@ linear1 1024x512, linear2 512x1024; 64 MB fp32) on 10 rows (a batch-1 sampler st
 MKL's ``F.linear``, MKL-packed weights (what inductor's frozen fp32 path uses) and oneDNN weights reordered for
 10 rows (what ``MotionModel.pack_for_cpu`` uses), next to a plain 64 MB read. Usage:
 
-    python scripts/linear_probe.py [--threads 1] [--rows 10] [--layouts 1 8 10 16 32 64]
+    python tools/linear_probe.py [--threads 1] [--rows 10] [--layouts 1 8 10 16 32 64]
 
 ``--layouts`` also times oneDNN with the weights reordered for other row counts (the input stays ``--rows``).
 """

@@ -1,6 +1,6 @@
 """Where a motion model's foot skate comes from: the data, the VAE's reconstruction, or the sampler.
 
-    python scripts/skate_probe.py MODEL.pt [MODEL.pt ...] --data RUN_DIR/data [--json out.json]
+    python tools/skate_probe.py MODEL.pt [MODEL.pt ...] --data RUN_DIR/data [--json out.json]
 
 Per prompt (walk, run, hop on left leg), on up to 256 primitives of the models' training data (``--data``,
 a ``latentrl motion train`` run's ``data/``), over the last history frame and the 8 future frames:

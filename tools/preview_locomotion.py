@@ -2,8 +2,8 @@
 
 Usage::
 
-    python scripts/preview_locomotion.py --skill walk --seed 0 --out /tmp/walk.png
-    python scripts/preview_locomotion.py --file data/loco/seq_00003.npz --start 60 --out /tmp/seq3.png
+    python tools/preview_locomotion.py --skill walk --seed 0 --out /tmp/walk.png
+    python tools/preview_locomotion.py --file data/loco/seq_00003.npz --start 60 --out /tmp/seq3.png
 
 The strip is drawn in the body's side plane (forward to the right, z up) and, below it, from the front, so
 knees and elbows should bend forward, arms swing opposite the legs, and stance feet sit on the floor line.

@@ -1,6 +1,6 @@
 """Ship a trained policy: export it to policies/<name>.pt and write its card policies/<name>.md.
 
-    python scripts/ship_policy.py RUN_DIR EVAL_DIR NAME --config CONFIG --text TEXT [--task LINE] [--notes FILE]
+    python tools/ship_policy.py RUN_DIR EVAL_DIR NAME --config CONFIG --text TEXT [--task LINE] [--notes FILE]
 
 RUN_DIR is a `latentrl train` run (its final.pt is exported without optimizer state); EVAL_DIR holds
 the `latentrl eval` report of that final.pt on the skill's suite. The eval's ``paths.png`` is copied to

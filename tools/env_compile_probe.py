@@ -4,7 +4,7 @@ Why: ``bench rollout`` compiles the bare sampler with frozen weights (inductor t
 and in bf16 casts them once), while the env's ``compile: true`` does not freeze. This measures what freezing
 would change for the env's whole step. Every variant runs in this one process, in the order printed.
 
-    python scripts/env_compile_probe.py --model official --num-envs 1 --steps 5 --threads 2 --skip "eager bf16"
+    python tools/env_compile_probe.py --model official --num-envs 1 --steps 5 --threads 2 --skip "eager bf16"
 """
 
 from __future__ import annotations
