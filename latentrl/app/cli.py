@@ -336,6 +336,37 @@ def _export_onnx(a: argparse.Namespace) -> int:
                               allow_motion_mismatch=a.allow_motion_mismatch) or 0)
 
 
+def _optimize_commands(sub) -> None:
+    opt = sub.add_parser("optimize", help="keyframes and joint targets by latent noise optimization (docs/optimize.md)")
+    opt.add_argument("suite", metavar="SUITE", help="a latentrl.constraints/1 JSON file or a shipped suite name "
+                                                     "(inbetween_walk, ...)")
+    opt.add_argument("--out", help="output folder (default: ./optimize-<suite>)")
+    opt.add_argument("--motion", default="default", help="'default', a latentrl model file, or a DART checkpoint")
+    opt.add_argument("--steps", type=_positive(int), default=100, help="Adam steps (learning rate falls linearly to 0)")
+    opt.add_argument("--lr", type=_positive(float), default=0.05, help="Adam learning rate")
+    opt.add_argument("--batch", type=_positive(int), default=16, help="problems solved together as one tensor")
+    opt.add_argument("--samples", type=_positive(int), default=1, help="starts per problem; the best is kept")
+    opt.add_argument("--init", default="randn", help="'zeros', 'randn' (N(0, 0.1^2)) or a reach/path policy .pt "
+                                                     "(or shipped name) whose noises start the optimizer")
+    opt.add_argument("--init-scale", type=float, default=0.1, help="standard deviation of the 'randn' start")
+    opt.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
+    opt.add_argument("--stop-cm", type=_positive(float), help="end a batch once every problem is within this (cm)")
+    for name, default, what in (("floor", 1.0, "floor distance (m)"), ("skate", 0.1, "foot skate (m/s)"),
+                                ("jerk", 0.0, "jerk (m/s^3)"), ("prior", 0.1, "noise above the Gaussian shell")):
+        opt.add_argument(f"--{name}", type=float, default=default, help=f"weight of the {what} regularizer")
+    opt.add_argument("--problem", dest="problems", action="append", metavar="NAME", help="solve only this problem")
+    opt.add_argument("--device", default="cpu", type=_device)
+    opt.add_argument("--seed", type=_seed, default=0, help="random seed of the starts")
+    opt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    opt.set_defaults(func=_optimize)
+
+
+def _optimize(args: argparse.Namespace) -> int:
+    from latentrl.app.optimize import OptimizeRequest, optimize_command
+
+    return optimize_command(request(OptimizeRequest, args))
+
+
 def build_parser() -> argparse.ArgumentParser:
     from latentrl import __version__
 
@@ -348,6 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
     _data_commands(sub)
     _train_commands(sub)
     _eval_commands(sub)
+    _optimize_commands(sub)
     _bench_commands(sub)
     _viewer_commands(sub)
     _export_commands(sub)

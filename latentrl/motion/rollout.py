@@ -246,6 +246,11 @@ class MotionModel(nn.Module):
             step_noise: (T, B, 1, D) DDPM per-step noises (else drawn from ``generator``).
             trace: optional list receiving ``(t, x_t, x0_pred)`` per step.
         """
+        return self._sample(history, text_embedding, noise, guidance_scale, sampler, step_noise, generator, trace)
+
+    def _sample(self, history, text_embedding, noise, guidance_scale=GUIDANCE_SCALE, sampler="ddim",
+                step_noise=None, generator=None, trace=None) -> PrimitiveSample:
+        """:meth:`sample_primitive` without its ``no_grad``: gradients flow to ``noise`` when autograd is on."""
         self._check_inputs(history, text_embedding, noise)
         with self._autocast():
             history_n = (history - self.mean) / self.std
@@ -253,8 +258,9 @@ class MotionModel(nn.Module):
                 history_n, text_embedding, noise, guidance_scale, sampler, step_noise, generator, trace
             )
             future_n = self.vae.decode(latent, history_n, FUTURE_LENGTH, scale_latent=self.rescale_latent)
-        future_n = future_n.float()
-        return PrimitiveSample(latent.float(), future_n * self.std + self.mean, future_n)
+        out = self.std.dtype  # autocast's half outputs come back in the model's dtype (float64 stays float64)
+        future_n = future_n.to(out)
+        return PrimitiveSample(latent.to(out), future_n * self.std + self.mean, future_n)
 
     def _denoise(self, history_n, text, noise, guidance_scale, sampler, step_noise, generator, trace):
         b = history_n.shape[0]
@@ -347,6 +353,31 @@ class MotionModel(nn.Module):
                 joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight)
                 world = WorldTransform(world.rotation, world.translation + shift)
         return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
+
+    def differentiable_step(
+        self,
+        state: RolloutState,
+        text_embedding: torch.Tensor,
+        noise: torch.Tensor,
+        guidance_scale: float | torch.Tensor = GUIDANCE_SCALE,
+    ) -> StepResult:
+        """:meth:`rollout_step` with gradients from the world joints back to ``noise`` (DDIM, eta 0).
+
+        Why a second method: the RL path keeps its ``no_grad`` (no autograd cost per env step), while
+        noise optimization (``latentrl.optim``) differentiates through sampler, decoder, canonicalization and
+        placement. The floor snap and the foot lock are left out (both are post-processes that move the
+        placement; the optimizer scores the floor and the skate as losses instead, as DART's ``optim_mld`` does),
+        so the motion returned is exactly the motion optimized.
+        """
+        if self.pelvis_delta is None:
+            raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")
+        sample = self._sample(state.history, text_embedding, noise, guidance_scale)
+        placement = state.world
+        joints_world = placement.apply(joints_of(sample.future))
+        history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
+        world = placement.compose(rotation, origin)
+        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world, state.airborne),
+                          placement)
 
     def _snap_to_floor(
         self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor

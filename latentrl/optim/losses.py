@@ -1,0 +1,60 @@
+"""The optimizer's losses and the metrics that score its result, from the same kernels.
+
+Constraints: :func:`target_squared` picks each point target's joint at its frame and takes the squared
+distance over the target's axes. The loss (:func:`constraint_loss`) is a pseudo-Huber of it (zero exactly
+where a target is met, metres far from it, smooth near it, as DART's trajectory control uses a Huber loss);
+the metric (:func:`goal_error_cm`) is its square root, averaged over the targets, in centimetres.
+
+Regularizers use the evaluation's metric kernels (DART's definitions, :mod:`latentrl.evaluation.metrics`):
+floor distance, foot skate and jerk, and the ``prior`` reward term's noise-shell penalty, so the number a
+weight pushes down is the number the report prints.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from latentrl.evaluation.metrics import foot_floor_distance_cm, foot_skate_cm_s, jerk
+from latentrl.optim.problems import Targets
+from latentrl.rewards.terms import noise_prior
+
+HUBER_M = 0.01
+"""Pseudo-Huber scale of the constraint loss (1 cm): quadratic inside, linear (in metres) beyond."""
+REGULARIZERS = ("floor", "skate", "jerk", "prior")
+
+
+def target_squared(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
+    """(B, T, 22, 3) generated frames -> (B, K) squared distance of each target (its axes only; 0 on padding)."""
+    rows = torch.arange(joints.shape[0], device=joints.device)[:, None]
+    picked = joints[rows, targets.frames, targets.joints]  # (B, K, 3)
+    diff = (picked - targets.points) * targets.masks
+    return diff.square().sum(dim=-1) * targets.valid
+
+
+def constraint_loss(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
+    """(B,) weighted mean pseudo-Huber distance of the targets, metres; 0 exactly when every target is met."""
+    d2 = target_squared(joints, targets)
+    huber = torch.sqrt(d2 + HUBER_M**2) - HUBER_M
+    return (huber * targets.weights).sum(dim=1) / targets.weights.sum(dim=1)
+
+
+def goal_error_cm(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
+    """(B,) mean distance of the targets from their joints, cm (DART's goal error when the targets are a keyframe)."""
+    d = target_squared(joints, targets).clamp(min=0).sqrt()
+    valid = targets.valid.float()
+    return (d * valid).sum(dim=1) / valid.sum(dim=1) * 100.0
+
+
+def regularizers(joints: torch.Tensor, noise: torch.Tensor, fps: float) -> dict[str, torch.Tensor]:
+    """(B,) each regularizer of a whole motion (B, T, 22, 3) and its noise (S, B, 1, D), in SI units.
+
+    ``floor`` m (DART's floor distance), ``skate`` m/s (DART's skate), ``jerk`` m/s^3, ``prior`` (mean square of
+    the noise above 1, per primitive, averaged).
+    """
+    prior = -noise_prior(noise.flatten(2)).mean(dim=0)  # (S, B) -> (B,)
+    return {
+        "floor": foot_floor_distance_cm(joints) / 100.0,
+        "skate": foot_skate_cm_s(joints, fps) / 100.0,
+        "jerk": jerk(joints, fps),
+        "prior": prior,
+    }
