@@ -268,7 +268,7 @@ def test_generate_dataset_writes_readable_files_and_meta(tmp_path):
 
 def test_steerable_data_options_steer_unpredictably_and_keep_flights_low():
     # steering: random_hold and flights: low (configs/motion/default.yaml, and every model since v2): the data
-    # itself meets the targets for heading variety, floor distance and single support (docs/benchmarks.md).
+    # itself meets the targets for heading variety, floor distance and single support (docs/motion_history.md).
     from latentrl.datasets.locomotion import dataset_statistics
 
     stats = dataset_statistics(generate_sequences(
