@@ -118,7 +118,7 @@ def main() -> None:
     if plot.is_file():
         target = ROOT / "docs" / "eval" / f"{args.name}_paths.png"
         shutil.copyfile(plot, target)
-        card += [f"![{args.name} on its evaluation paths](../docs/eval/{target.name})", ""]
+        card += [f"![{args.name} on its evaluation paths](../../docs/eval/{target.name})", ""]
     if args.notes:
         card += [Path(args.notes).read_text().rstrip(), ""]
     (ROOT / "policies" / f"{args.name}.md").write_text("\n".join(card))
