@@ -16,7 +16,6 @@ origin facing +y. "Canonical" is the frame of the current history's first frame 
 
 from __future__ import annotations
 
-import math
 import os
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
@@ -40,12 +39,13 @@ from latentrl.constants import (
 from latentrl.envs.compiled import compile_step_core
 from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder
+from latentrl.envs.settings import StepSettings
 from latentrl.errors import ConfigError, NonFiniteError, closest
 from latentrl.motion.canonical import WorldTransform, features_to_world
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.prior import MotionPrior
 from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, RolloutState, amp_problem
+from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, RewardComposer, RewardConfig, RewardInputs
@@ -166,21 +166,21 @@ class LatentMotionVectorEnv(VectorEnv):
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
-        require(action_bound > 0 and math.isfinite(action_bound), "action_bound", f"must be > 0, got {action_bound}")
         require(
             nonfinite_actions in ("error", "zero"),
             "nonfinite_actions",
             f"expected 'error' or 'zero', got {nonfinite_actions!r}",
         )
-        problem = amp_problem(amp)
-        require(problem is None, "amp", str(problem))
+        # how this env steps the motion; the attributes set below are copies for the step's hot path
+        self.step_settings = StepSettings(float(guidance_scale), float(action_bound), bool(foot_lock),
+                                          float(foot_lock_min_weight), amp)
+        self.step_settings.validate()
         require(render_mode is None, "render_mode", "these envs do not render; export_history() + latentrl.render")
         for name, value in (
             ("obs_goal_dist_clip", obs_goal_dist_clip),
             ("success_threshold", success_threshold),
             ("terminate_distance", terminate_distance),
             ("divergence_limit", divergence_limit),
-            ("foot_lock_min_weight", foot_lock_min_weight),
         ):
             require(value > 0, name, f"must be > 0, got {value}")
         self.num_envs = int(num_envs)

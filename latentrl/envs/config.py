@@ -19,18 +19,18 @@ Configs written before the sections existed named the task arguments at the top
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from latentrl.config import apply_aliases, require
-from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
+from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import next_at_last_problem
+from latentrl.envs.settings import StepSettings
 from latentrl.envs.tasks import TASKS, task_spec
 from latentrl.errors import ConfigError, closest
-from latentrl.motion.rollout import LOCK_MIN_WEIGHT, amp_problem, lock_min_weight_problem
+from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import TERM_NAMES, RewardConfig
@@ -235,8 +235,7 @@ class EnvConfig:
                     raise ConfigError(f"options.{exc}") from None
         require(self.num_envs >= 1, "num_envs", f"must be >= 1, got {self.num_envs}")
         require(self.num_envs <= MAX_NUM_ENVS, "num_envs", f"must be <= {MAX_NUM_ENVS}, got {self.num_envs}")
-        require(math.isfinite(self.guidance_scale) and abs(self.guidance_scale) <= MAX_GUIDANCE, "guidance_scale",
-                f"must be a finite number in [-{MAX_GUIDANCE:g}, {MAX_GUIDANCE:g}], got {self.guidance_scale}")
+        self.step_settings().validate()
         require(len(self.texts) >= 1, "texts", "give at least one prompt")
         for problem in map(prompt_problem, self.texts):
             require(problem is None, "texts", str(problem))
@@ -244,13 +243,13 @@ class EnvConfig:
                 f"needs one weight per text ({len(self.texts)}), got {self.text_weights}")
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
-        problem = amp_problem(self.amp)
-        require(problem is None, "amp", str(problem))
-        problem = lock_min_weight_problem(self.foot_lock_min_weight)
-        require(problem is None, "foot_lock_min_weight", str(problem))
         for name in self.reward_weights:
             require(name in TERM_NAMES, "reward_weights",
                     f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")
+
+    def step_settings(self) -> StepSettings:
+        """How the env steps the motion (guidance, action bound, foot lock, autocast): the fields above."""
+        return StepSettings.of(self)
 
     def _has_section(self) -> bool:
         return self.task in {f.name for f in fields(self)} and dataclasses.is_dataclass(getattr(self, self.task))
@@ -287,11 +286,9 @@ def resolve_task_file(path: str, kind: str = "paths") -> Path:
 def build(cfg: EnvConfig, device: str, motion=None, **extra):
     """The torch VectorEnv an ``EnvConfig`` describes (``motion`` may be a loaded model)."""
     common = dict(motion=motion if motion is not None else cfg.motion, texts=list(cfg.texts),
-                  text_weights=cfg.text_weights, device=device, guidance_scale=cfg.guidance_scale,
-                  action_bound=cfg.action_bound, random_initial_steps=cfg.random_initial_steps,
+                  text_weights=cfg.text_weights, device=device, random_initial_steps=cfg.random_initial_steps,
                   reward_weights=dict(cfg.reward_weights) or None, reward_config=cfg.rewards,
-                  nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile, foot_lock=cfg.foot_lock,
-                  foot_lock_min_weight=cfg.foot_lock_min_weight, amp=cfg.amp)
+                  nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile, **cfg.step_settings().step_kwargs())
     if cfg.max_episode_steps is not None:
         common["max_episode_steps"] = cfg.max_episode_steps
     common.update(extra)

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from latentrl.config import require, require_seed
-from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, SUCCESS_RADIUS_M
-from latentrl.motion.rollout import LOCK_MIN_WEIGHT
+from latentrl.constants import SUCCESS_RADIUS_M
+from latentrl.envs.settings import StepSettings
 from latentrl.motion.skeleton import FPS
 
 
@@ -57,8 +57,13 @@ def physical_memory() -> int | None:
 
 
 @dataclass
-class EvalSettings:
-    """How an evaluation runs; stored in ``report.json`` under ``settings``."""
+class EvalSettings(StepSettings):
+    """How an evaluation runs; stored in ``report.json`` under ``settings``.
+
+    The fields of :class:`~latentrl.envs.settings.StepSettings` (guidance, action bound, foot lock, autocast)
+    come first: they are the policy's training values (:meth:`take_training_env`), so the eval env steps the
+    motion as training did.
+    """
 
     episodes: int = 32
     """Episodes per path, run in parallel as one batch (DART: 32 envs)."""
@@ -70,40 +75,27 @@ class EvalSettings:
     seed: int = 0
     """Base seed; each path gets its own seed derived from it, the file stem and the path index."""
     device: str = "cpu"
-    guidance_scale: float = GUIDANCE_SCALE
-    """Classifier-free guidance of the motion model (DART's ``guidance_param``); the policy's training value."""
     success_threshold: float = SUCCESS_RADIUS_M
     """Waypoint radius, metres (xy, pelvis); DART 0.3."""
-    action_bound: float = ACTION_BOUND
-    """Actions are clamped to +/- this inside the env; the policy's training value."""
-    foot_lock: bool = False
-    """Keep planted feet from sliding (docs/motion.md, "Foot lock"); the policy's training value."""
-    foot_lock_min_weight: float = LOCK_MIN_WEIGHT
-    """The contact weight from which the lock pins a foot fully; the policy's training value."""
-    amp: str | None = None
-    """Autocast dtype the motion model samples in ('bf16', 'fp16' or None = float32); the policy's training value."""
     next_at_last: str = "repeat"
     """What a path or timed policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``,
     ``env.timed.next_at_last``); its training value."""
 
     def take_training_env(self, env_cfg: Any) -> None:
-        """Step the motion as the policy's training env did: its guidance, action bound, foot lock and autocast.
+        """Step the motion as the policy's training env did (its :class:`StepSettings`; None: the defaults).
 
         A path or timed policy also observes its last waypoint as in training (``next_at_last``).
         """
-        self.guidance_scale = float(getattr(env_cfg, "guidance_scale", GUIDANCE_SCALE))
-        self.action_bound = float(getattr(env_cfg, "action_bound", ACTION_BOUND))
-        self.foot_lock = bool(getattr(env_cfg, "foot_lock", False))
-        self.foot_lock_min_weight = float(getattr(env_cfg, "foot_lock_min_weight", LOCK_MIN_WEIGHT))
+        for name, value in StepSettings.of(env_cfg).step_kwargs().items():
+            setattr(self, name, value)
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
-        self.amp = getattr(env_cfg, "amp", None)
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""
-        return {"guidance_scale": self.guidance_scale, "action_bound": self.action_bound, "foot_lock": self.foot_lock,
-                "foot_lock_min_weight": self.foot_lock_min_weight, "amp": self.amp}
+        return self.step_kwargs()
 
     def validate(self) -> None:
+        """Episodes, budget, seed and memory in range, and the step settings (:meth:`StepSettings.validate`)."""
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
         require(self.episodes <= MAX_EPISODES, "episodes",
@@ -116,6 +108,7 @@ class EvalSettings:
                 f"{self.episodes} episodes x {self.max_steps} steps keep about {need / 2**30:.1f} GiB of motion; "
                 f"this machine has {(total or 0) / 2**30:.1f} GiB; lower --episodes or --max-steps")
         require(self.success_threshold > 0, "success_threshold", f"must be > 0, got {self.success_threshold}")
+        super().validate()
 
     def memory_bytes(self) -> int:
         """Rough memory the per-episode records need: joints and features of every frame (float32)."""

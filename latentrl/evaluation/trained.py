@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from latentrl.envs.settings import StepSettings
+
 
 def stored_env(policy: str | Path):
     """The ``EnvConfig`` stored in a policy checkpoint, or None (no config, or a file the loaders will refuse)."""
@@ -38,6 +40,17 @@ def _with_trained_file(env, sha256: str | None):
         return env
     moved = embedded_name_for(sha256)
     return dataclasses.replace(env, motion=moved) if moved else env
+
+
+def stored_step_settings(config) -> StepSettings:
+    """How a checkpoint's training env stepped the motion (its ``config``; defaults where it stores no env).
+
+    ``latentrl play`` and ``latentrl export onnx`` read it here, ``latentrl eval`` through
+    :meth:`~latentrl.evaluation.config.EvalSettings.take_training_env`: one reading for all.
+    """
+    from latentrl.envs.config import stored_env_config
+
+    return StepSettings.of(stored_env_config(config))
 
 
 def motion_of(env) -> str:

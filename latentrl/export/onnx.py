@@ -58,11 +58,14 @@ from typing import Any
 import torch
 from torch import nn
 
+from latentrl.constants import OBS_GOAL_ANGLE_CLIP_DEG, OBS_GOAL_DIST_CLIP_M
+from latentrl.envs.config import stored_env_config
 from latentrl.envs.goal import goal_features
+from latentrl.envs.settings import StepSettings
 from latentrl.errors import CheckpointError, ConfigError, TextError
 from latentrl.motion.canonical import WorldTransform
 from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, joints_of
-from latentrl.motion.rollout import LOCK_MIN_WEIGHT, MotionModel, RolloutState, StepResult
+from latentrl.motion.rollout import MotionModel, RolloutState, StepResult
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS, PELVIS
 
 FORMAT = "latentrl.onnx-controller/2"  # 2: the airborne flag is part of the state
@@ -110,29 +113,30 @@ class ControllerStep(nn.Module):
         policy: a PPO ``ActorCritic`` (eval mode; its frozen observation normalizer is part of it).
         model: the motion model the policy was trained on.
         batch: B, fixed in the exported graph.
-        guidance_scale: classifier-free guidance of the sampler (the training env's, DART 5).
-        action_bound: actions are clamped to +-this, as the env does.
+        settings: how the training env stepped the motion (guidance, action bound, foot lock; traced as constants).
+            The graph runs in float32 whatever its ``amp`` (which the metadata records). None: the defaults.
         observe_next: the policy observes a second goal (FollowPath ``observe_next``): adds ``next_goal``.
         text_embedding: (E,) or (1, E) prompt embedding baked in as a constant; ``None`` adds the
             ``text_embedding`` input.
         goal_angle_clip_deg, goal_dist_clip, floor_height: the env's observation settings.
     """
 
-    def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, guidance_scale: float = 5.0,
-                 action_bound: float = 4.0, observe_next: bool = False, text_embedding: torch.Tensor | None = None,
-                 goal_angle_clip_deg: float = 60.0, goal_dist_clip: float = 5.0, floor_height: float = 0.0,
-                 foot_lock: bool = False, foot_lock_min_weight: float = LOCK_MIN_WEIGHT):
+    def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, settings: StepSettings | None = None,
+                 observe_next: bool = False, text_embedding: torch.Tensor | None = None,
+                 goal_angle_clip_deg: float = OBS_GOAL_ANGLE_CLIP_DEG, goal_dist_clip: float = OBS_GOAL_DIST_CLIP_M,
+                 floor_height: float = 0.0):
         super().__init__()
         if int(batch) < 1:
             raise ConfigError(f"--batch must be >= 1, got {batch}")
         self.policy, self.model = policy.eval(), model.eval()
         self.batch = int(batch)
-        self.guidance_scale, self.action_bound = float(guidance_scale), float(action_bound)
+        self.settings = settings.step_settings() if settings is not None else StepSettings()
+        self.settings.validate()
+        self.guidance_scale, self.action_bound = self.settings.guidance_scale, self.settings.action_bound
         self.observe_next = bool(observe_next)
         self.goal_angle_clip_deg, self.goal_dist_clip = float(goal_angle_clip_deg), float(goal_dist_clip)
         self.floor_height = float(floor_height)
-        self.foot_lock = bool(foot_lock)  # the training env's (a traced constant)
-        self.foot_lock_min_weight = float(foot_lock_min_weight)
+        self.foot_lock, self.foot_lock_min_weight = self.settings.foot_lock, self.settings.foot_lock_min_weight
         self.baked_text = text_embedding is not None
         if self.baked_text:
             emb = torch.as_tensor(text_embedding, dtype=torch.float32).reshape(1, model.text_dim)
@@ -242,6 +246,7 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
             f"motion model {motion} ({model.text_dim}-D text, {model.latent_dim}-D latent); export it with the "
             "motion model it was trained on (--motion)")
     env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
+    stored = stored_env_config(loaded.checkpoint.get("config"))
     trained = [str(t) for t in env_cfg.get("texts") or []]
     texts = {}
     for prompt in dict.fromkeys([*trained, *([text] if text else [])]):
@@ -250,14 +255,12 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
         except TextError:  # a prompt the model cannot encode is left out of the table (``--text`` re-raises below)
             continue
     baked = model.encode_text([text]) if text else None
-    step = ControllerStep(policy, model, batch, guidance_scale=float(env_cfg.get("guidance_scale", 5.0)),
-                          action_bound=float(env_cfg.get("action_bound", 4.0)), observe_next=goal_size == 8,
-                          text_embedding=baked, foot_lock=bool(env_cfg.get("foot_lock", False)),
-                          foot_lock_min_weight=float(env_cfg.get("foot_lock_min_weight", LOCK_MIN_WEIGHT)))
+    step = ControllerStep(policy, model, batch, settings=StepSettings.of(stored), observe_next=goal_size == 8,
+                          text_embedding=baked)
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
             "motion": ident, "texts": texts, "text": text, "trained_texts": trained,
-            "next_at_last": (env_cfg.get("path") or {}).get("next_at_last", "repeat") if goal_size == 8 else None}
+            "next_at_last": (stored.next_at_last if stored is not None else "repeat") if goal_size == 8 else None}
     return step, info
 
 
@@ -283,6 +286,7 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
                 "action_bound": step.action_bound, "goal_angle_clip_deg": step.goal_angle_clip_deg,
                 "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
                 "foot_lock": step.foot_lock, "foot_lock_min_weight": step.foot_lock_min_weight,
+                "training_amp": step.settings.amp,
                 "observe_next": step.observe_next, "next_at_last": info.get("next_at_last"),
                 "text": info.get("text") if step.baked_text else None}
     meta = {

@@ -52,7 +52,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     from latentrl.ppo import load_policy
     from latentrl.ppo.checkpoint import check_shapes
     from latentrl.preflight import check_device
-    from latentrl.viewer.live import ENV_FIELDS, LiveController, SteeredReachEnv
+    from latentrl.viewer.live import LiveController, play_env
 
     device = device or ("cuda" if torch.cuda.is_available() else "cpu")
     check_device(device, "--device")
@@ -60,12 +60,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     model = load_motion_model(motion, device=device)
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)
-    env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
-    prompts = list(getattr(model.text_encoder, "prompts", None) or [])
-    texts = list(dict.fromkeys([*([text] if text else []), *(env_cfg.get("texts") or []), *prompts])) or ["walk"]
-    settings = {k: env_cfg[k] for k in ENV_FIELDS if env_cfg.get(k) is not None}
-    env = SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
-                          autoreset_mode="Disabled", **settings)
+    env = play_env(loaded.checkpoint, model, text, device)
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
     server = start_server(host, port, label=f"latentrl play {policy.name}")
     title = (f"**latentrl play** `{policy}` on motion `{motion}`  \n"

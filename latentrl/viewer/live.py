@@ -11,13 +11,14 @@ from __future__ import annotations
 import collections
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import torch
 
 from latentrl.envs.reach import ReachLocationEnv
+from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
 from latentrl.viewer.scene import SkeletonScene
@@ -27,9 +28,6 @@ MAX_GOAL_DISTANCE_M = 50.0
 TRAIL_FRAMES = 6000
 START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
 """Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
-ENV_FIELDS = ("guidance_scale", "action_bound", "obs_goal_angle_clip_deg", "obs_goal_dist_clip", "success_threshold",
-              "foot_lock", "foot_lock_min_weight")
-"""Env settings taken from the policy's training config, so the policy sees what it was trained on."""
 
 
 class SteeredReachEnv(ReachLocationEnv):
@@ -88,6 +86,20 @@ def floor_point(origin: Sequence[float], direction: Sequence[float], floor: floa
         return None
     t = (floor - o[2]) / d[2]
     return o + t * d if t > 0 else None
+
+
+def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str) -> SteeredReachEnv:
+    """The env of ``latentrl play``: one :class:`SteeredReachEnv` that steps the motion as the policy's training env.
+
+    Its texts are ``text``, the training texts and the prompts the model knows; its
+    :class:`~latentrl.envs.settings.StepSettings` are the checkpoint's (:func:`stored_step_settings`).
+    """
+    env_cfg = (checkpoint.get("config") or {}).get("env") or {}
+    prompts = list(getattr(model.text_encoder, "prompts", None) or [])
+    texts = list(dict.fromkeys([*([text] if text else []), *(env_cfg.get("texts") or []), *prompts])) or ["walk"]
+    settings = stored_step_settings(checkpoint.get("config"))
+    return SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
+                           autoreset_mode="Disabled", **settings.step_kwargs())
 
 
 class LiveController:
