@@ -34,7 +34,7 @@ APART = {
     "envs": ("ppo", "datasets", "motion_training"),
     "rewards": ("datasets", "render"),
     "motion_training": ("envs", "ppo", "rewards", "render"),
-    "optim": ("ppo", "motion_training", "datasets"),
+    "optim": ("motion_training", "datasets"),
     "evaluation": ("optim",),
 }
 """unit -> units it must not import, whatever their floor."""
