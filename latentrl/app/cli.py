@@ -235,6 +235,30 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--foot-lock", action="store_true",
                         help="roll out with the foot lock (planted feet do not slide; docs/motion.md)")
     motion.set_defaults(func=_bench_motion)
+    _bench_optimize_command(bsub)
+
+
+def _bench_optimize_command(bsub) -> None:
+    opt = bsub.add_parser("optimize", help="noise optimization on the shipped constraint suites: error, skate, jerk, "
+                                           "time to 1 cm, cost per 100 steps vs DART")
+    opt.add_argument("--suites", nargs="+", default=["inbetween", "inbetween_mid", "joint_targets"])
+    opt.add_argument("--steps", type=_pos_int, default=100)
+    opt.add_argument("--batch", type=_pos_int, default=16)
+    opt.add_argument("--lr", type=_pos_float, default=0.05)
+    opt.add_argument("--warm", metavar="POLICY", help="also run every suite warm-started from this policy's noises")
+    opt.add_argument("--cost-steps", type=_pos_int, default=5, help="timed steps of the cost rows")
+    opt.add_argument("--models", nargs="+", default=["default", "official"], help="models of the cost rows")
+    opt.add_argument("--device", action="append", type=_device, help="repeat for several (default: cpu and cuda)")
+    opt.add_argument("--threads", type=_pos_int)
+    opt.add_argument("--skip-suites", action="store_true", help="only the cost rows")
+    opt.add_argument("--json", help="write all figures to this JSON file")
+    opt.set_defaults(func=_bench_optimize)
+
+
+def _bench_optimize(args: argparse.Namespace) -> int:
+    from latentrl.app.bench.optimize import OptimizeBenchRequest, bench_optimize
+
+    return bench_optimize(request(OptimizeBenchRequest, args))
 
 
 def _eval_commands(sub) -> None:

@@ -63,7 +63,7 @@ def optimize_command(req: OptimizeRequest) -> int:
     if req.init not in INITS:
         from latentrl.optim.warm import policy_warm_start
 
-        warm = policy_warm_start(req.init, req.guidance)
+        warm = policy_warm_start(req.init)
     out_dir = Path(req.out) if req.out else Path.cwd() / f"optimize-{path.stem}"
     check_writable(out_dir, "--out")
     model = load_motion_model(req.motion, device=req.device)

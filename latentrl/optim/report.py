@@ -67,6 +67,13 @@ def write_outputs(results: list[Result], out_dir: str | Path, settings: Optimize
     return atomic_write_text(out / "report.json", json.dumps(report, indent=1))
 
 
+def hardware_label(hw: dict) -> str:
+    """One line naming the CPU (cores, torch threads), the GPU if any, and torch."""
+    gpu = f", {hw['gpu']}" if hw.get("gpu") else ""
+    return (f"{hw.get('cpu', 'unknown CPU')} ({hw.get('cpu_count', '?')} cores, {hw.get('torch_threads', '?')} torch "
+            f"threads){gpu}, torch {hw.get('torch', '?')}")
+
+
 def _fmt(v) -> str:
     if v is None:
         return "–"
@@ -82,7 +89,7 @@ def markdown(report: dict) -> str:
     lines = [f"# Noise optimization: {report.get('suite', '')}", "",
              f"Motion model `{report.get('motion_model', '')}`, {report['settings']['steps']} steps, lr "
              f"{report['settings']['lr']}, init `{report['settings']['init']}`, post-processing: none. "
-             f"Hardware: {report.get('hardware', {}).get('label', 'unknown')}.", "",
+             f"Hardware: {hardware_label(report.get('hardware', {}))}.", "",
              "| problem | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for e in report["problems"]:
         lines.append(f"| {e['name']} | " + " | ".join(_fmt(e["metrics"].get(c)) for c in cols) + " |")

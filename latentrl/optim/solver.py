@@ -270,9 +270,9 @@ def unconstrained_jerk(model, problem: Problem, guidance: float, samples: int = 
 
 
 def optimize(model, problems: list[Problem], settings: OptimizeSettings | None = None,
-             warm_start: Callable[[list[Problem]], torch.Tensor] | None = None,
+             warm_start: Callable[[object, list[Problem]], torch.Tensor] | None = None,
              on_step: Callable[[int], None] | None = None) -> list[Result]:
-    """Solve every problem; results in suite order. ``warm_start(problems) -> (S, B, 1, D)`` gives start noises."""
+    """Solve every problem; results in suite order. ``warm_start(model, problems) -> (S, B, 1, D)``: start noises."""
     settings = settings or OptimizeSettings()
     settings.check()
     if not hasattr(model, "differentiable_step"):
@@ -281,7 +281,7 @@ def optimize(model, problems: list[Problem], settings: OptimizeSettings | None =
     results: list[Result | None] = [None] * len(problems)
     for idx in group_problems(problems, settings.batch):
         chunk = [problems[i] for i in idx]
-        warm = warm_start(chunk) if warm_start is not None else None
+        warm = warm_start(model, chunk) if warm_start is not None else None
         for i, r in zip(idx, solve_batch(model, chunk, settings, warm, on_step)):
             results[i] = r
     return results

@@ -235,3 +235,26 @@ def test_bad_suite_file_and_flags(tmp_path, capsys):
     assert "weights.floor: expected a finite number >= 0" in capsys.readouterr().err
     assert main(["optimize", "joint_targets", "--problem", "nope", "--no-progress"]) == 2
     assert "--problem 'nope': not in" in capsys.readouterr().err
+
+
+def test_warm_start_takes_a_policys_clamped_noises(tmp_path):
+    """``--init POLICY``: the first step starts from the shipped reach policy's actions, not from randn."""
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.optim.warm import pelvis_goal, policy_warm_start
+
+    model = load_motion_model("default")
+    problem = load_suite(suites_folder("constraints") / "joint_targets.json")[0]
+    assert pelvis_goal(problem) == pytest.approx(tuple(problem.targets[-1, :2]))
+    warm = policy_warm_start("reach_walk_default")
+    z = warm(model, [problem])
+    assert z.shape == (problem.primitives, 1, *model.latent_shape)
+    assert float(z.abs().max()) <= 4.0 + 1e-6 and float(z.std()) > 0.2  # policy actions, not N(0, 0.1^2)
+    r = optimize(model, [problem], OptimizeSettings(steps=1), warm_start=warm)[0]
+    cold = optimize(model, [problem], OptimizeSettings(steps=1))[0]
+    assert r.metrics["goal_error_start_cm"] != pytest.approx(cold.metrics["goal_error_start_cm"])
+
+
+def test_warm_start_refuses_a_non_steering_policy(tmp_path, capsys):
+    assert main(["optimize", "joint_targets", "--init", "joystick_walk_default", "--no-progress",
+                 "--out", str(tmp_path / "o")]) == 2
+    assert "expected 'zeros', 'randn' or a reach/path policy" in capsys.readouterr().err

@@ -1,0 +1,133 @@
+"""``latentrl bench optimize``: noise optimization's quality and cost on the shipped constraint suites.
+
+Rows: per suite, the mean goal error, history error, skate, floor, jerk against plain rollouts of the same
+starts and prompts, the share of problems within 1 cm and the wall time to 1 cm (cold start; and warm, from
+a policy's noises, with ``--warm``); then the cost of 100 steps over 64 frames (8 primitives) on the embedded
+default model and on DART's released architecture (random weights), per device, beside DART's figure (74 s for
+100 steps over 60 frames on an RTX 4090, its App. F).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import torch
+
+from latentrl.app.bench.common import default_devices, official_size_model, write_json
+from latentrl.motion.checkpoint import load_motion_model
+from latentrl.optim import OptimizeSettings, load_suite, optimize
+from latentrl.optim.report import summary
+from latentrl.optim.solver import rollout, unconstrained_jerk
+from latentrl.resources import task_file
+from latentrl.timing import hardware, synchronizer
+
+DART_SECONDS_PER_100_STEPS_60_FRAMES = 74.0
+"""DART App. F: "60 frames and 100 optimization steps costs around 74 seconds" (RTX 4090)."""
+
+
+@dataclass
+class OptimizeBenchRequest:
+    """``latentrl bench optimize`` flags."""
+
+    suites: list[str] = field(default_factory=lambda: ["inbetween", "inbetween_mid", "joint_targets"])
+    steps: int = 100
+    batch: int = 16
+    lr: float = 0.05
+    warm: str | None = None
+    """A reach/path policy whose noises warm-start a second run of every suite."""
+    cost_steps: int = 5
+    """Timed steps of the cost rows (the figure is scaled to 100 steps)."""
+    models: list[str] = field(default_factory=lambda: ["default", "official"])
+    device: list[str] | None = None
+    threads: int | None = None
+    skip_suites: bool = False
+    json: str | None = None
+
+
+def _suite_rows(req: OptimizeBenchRequest, device: str, warm_fn) -> list[dict]:
+    model = load_motion_model("default", device=device)
+    rows = []
+    for name in req.suites:
+        problems = load_suite(task_file(name, "constraints") or name)
+        starts = [("cold", None)] + ([("warm", warm_fn)] if warm_fn is not None else [])
+        for label, fn in starts:
+            settings = OptimizeSettings(steps=req.steps, lr=req.lr, batch=req.batch)
+            t0 = time.perf_counter()
+            results = optimize(model, problems, settings, warm_start=fn)
+            wall = time.perf_counter() - t0
+            for r in results:
+                r.metrics["jerk_unconstrained"] = unconstrained_jerk(model, r.problem, settings.guidance)
+            s = summary(results)
+            to_1cm = [r.metrics["seconds_to_1cm"] / r.metrics["batch"] for r in results
+                      if r.metrics["seconds_to_1cm"] is not None]
+            row = {"suite": name, "start": label, "device": device, "problems": len(results), "wall_s": wall,
+                   "seconds_per_problem": wall / len(results),
+                   "amortized_seconds_to_1cm_mean": sum(to_1cm) / len(to_1cm) if to_1cm else None, **s}
+            rows.append(row)
+            print(f"{name:>14} {label:>4} {device}: goal {s['goal_error_cm']:.3f} cm, within 1 cm "
+                  f"{s['share_within_1cm']:.0%}, history {s['history_error_cm']:.3f} cm, skate "
+                  f"{s['skate_cm_s']:.2f} cm/s, floor {s['floor_cm']:.2f} cm, jerk {s['jerk']:.0f} (plain rollouts "
+                  f"{s['jerk_unconstrained']:.0f}), {wall / len(results):.2f} s per problem "
+                  f"({len(results)} problems, batch {req.batch}, {wall:.1f} s)")
+    return rows
+
+
+def _cost_row(name: str, device: str, steps: int) -> dict:
+    """Seconds per optimizer step (forward + backward) at batch 1 over 8 primitives, scaled to 100 steps."""
+    if name == "official":
+        model = official_size_model().to(device)
+        default = load_motion_model("default", device=device)
+        model.pelvis_delta = default.pelvis_delta
+        model.seed_history = default.seed_history
+        text = torch.zeros(1, model.text_dim, device=device)
+    else:
+        model = load_motion_model(name, device=device)
+        text = model.encode_text(["walk"])
+    start = model.initial_state(1, seed_index=torch.tensor([0]))
+    z = torch.zeros(8, 1, *model.latent_shape, device=device, requires_grad=True)
+    sync = synchronizer(device)
+
+    def one_step():
+        joints, _ = rollout(model, start, [text] * 8, z, 5.0)
+        joints[:, -1].square().sum().backward()
+
+    one_step()  # warm-up
+    sync()
+    times = []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        one_step()
+        sync()
+        times.append(time.perf_counter() - t0)
+    times.sort()
+    per_step = times[len(times) // 2]
+    per_100 = per_step * 100
+    row = {"model": name, "device": device, "seconds_per_step": per_step, "seconds_per_100_steps_64_frames": per_100,
+           "seconds_per_100_steps_60_frames": per_100 * 60 / 64,
+           "dart_ratio": DART_SECONDS_PER_100_STEPS_60_FRAMES / (per_100 * 60 / 64)}
+    print(f"cost {name:>8} {device}: {per_step * 1000:.0f} ms per step, {per_100:.1f} s per 100 steps x 64 frames "
+          f"({per_100 * 60 / 64:.1f} s scaled to 60 frames; DART: 74 s on an RTX 4090, x{row['dart_ratio']:.1f})")
+    return row
+
+
+def bench_optimize(req: OptimizeBenchRequest) -> int:
+    """Run the rows and print them; all figures go to ``--json`` with the hardware label."""
+    if req.threads:
+        torch.set_num_threads(req.threads)
+    devices = default_devices(req.device)
+    hw = hardware()
+    print(f"hardware: {hw}")
+    warm_fn = None
+    if req.warm:
+        from latentrl.optim.warm import policy_warm_start
+
+        warm_fn = policy_warm_start(req.warm)
+    out = {"hardware": hw, "steps": req.steps, "batch": req.batch, "suites": [], "cost": []}
+    for device in devices:
+        if not req.skip_suites:
+            out["suites"] += _suite_rows(req, device, warm_fn)
+        for name in req.models:
+            out["cost"].append(_cost_row(name, device, req.cost_steps))
+    write_json(req.json, out)
+    return 0
