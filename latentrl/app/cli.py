@@ -215,6 +215,8 @@ def _bench_commands(sub) -> None:
     tr.add_argument("--max-steps", type=_pos_int, default=None, help="env-step cap for the success run")
     tr.add_argument("--iterations", type=_pos_int, default=5, help="iterations per trainer in the side-by-side run")
     tr.add_argument("--skip-success", action="store_true", help="only the native vs SB3 comparison")
+    tr.add_argument("--no-side-by-side", dest="side_by_side", action="store_false",
+                    help="only the success run (no native vs SB3 comparison)")
     tr.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
     tr.add_argument("--run-dir", help="where the benchmark's runs go (default: a temporary folder)")
     tr.add_argument("--no-progress", action="store_true")

@@ -114,3 +114,18 @@ def test_ppo_trains_on_cuda_and_its_checkpoint_loads_on_the_cpu(tmp_path, traine
     assert main(args) == 0
     policy = read_checkpoint(run / "final.pt")["policy"]
     assert policy and all(t.device.type == "cpu" and torch.isfinite(t).all() for t in policy.values())
+
+
+def test_noise_optimization_on_cuda_matches_the_cpu(cuda_model):
+    """``latentrl optimize --device cuda``: the same problems give the same noises and errors as on the CPU."""
+    from latentrl.optim import OptimizeSettings, optimize
+    from tests.optim.test_optim import suite, target_problem
+
+    cpu_model = make_tiny_model()
+    probs = suite(target_problem(cpu_model, "a", seed=1), target_problem(cpu_model, "b", seed=2, text="run"))
+    settings = OptimizeSettings(steps=5, lr=0.05, batch=2)
+    on_cpu = optimize(cpu_model, probs, settings)
+    on_gpu = optimize(cuda_model, probs, settings)
+    for c, g in zip(on_cpu, on_gpu):
+        assert abs(c.metrics["goal_error_cm"] - g.metrics["goal_error_cm"]) < 1e-2
+        assert float(abs(torch.as_tensor(c.noise) - torch.as_tensor(g.noise)).max()) < 1e-3

@@ -35,6 +35,8 @@ class TrainBenchRequest:
     run_dir: str | None = None
     progress: bool = True
     json: str | None = None
+    side_by_side: bool = True
+    """Also time the native and SB3 trainers side by side (``--no-side-by-side``: only the success run)."""
     nproc: list[int] | None = None
     """Rank counts to compare (``--nproc 1 2``); replaces the other two measurements."""
 
@@ -122,6 +124,9 @@ def bench_train(req: TrainBenchRequest) -> int:
                              "last_eval": metrics, **_iteration_summary(res.times)}
         print(f"{'reached' if res.stopped_early else 'did NOT reach'} eval success {req.target} after "
               f"{res.env_steps} env steps, {wall:.0f} s wall (last eval: {metrics})")
+    if not req.side_by_side:
+        write_json(req.json, out)
+        return 0
     side = {}
     for trainer in ("native", "sb3"):
         cfg = load_train_config(base, req.overrides)
