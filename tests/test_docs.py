@@ -2,7 +2,8 @@
 
 Links are checked in README.md, CHANGELOG.md, docs/, zoo/ and the policy cards: markdown links and images and
 HTML ``src``/``href``, outside code; a ``#fragment`` into a markdown file must name one of its headings (as
-GitHub derives anchors). Milestone words ("stop 12", "stop-25") are checked in every tracked text file.
+GitHub derives anchors). Milestone words (the word "stop" joined to a number) are checked in every tracked
+text file.
 """
 
 from __future__ import annotations
