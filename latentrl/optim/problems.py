@@ -126,7 +126,11 @@ def _axes(value, where: _Where, fld: str) -> list[float]:
     return [1.0 if a in value else 0.0 for a in AXES]
 
 
-def _rows_of(c: dict, where: _Where, fld: str, frames_total: int) -> list[tuple[int, int, list[float], list[float], float]]:
+Row = tuple[int, int, list[float], list[float], float]
+"""(frame, joint, target, axis mask, weight): one point target."""
+
+
+def _rows_of(c: dict, where: _Where, fld: str, frames_total: int) -> list[Row]:
     """(frame, joint, target, mask, weight) rows of one constraint, checked."""
     if not isinstance(c, dict):
         raise where.error(fld, f"expected an object, got {str(c)[:40]}")
@@ -149,7 +153,8 @@ def _rows_of(c: dict, where: _Where, fld: str, frames_total: int) -> list[tuple[
         if isinstance(joints, dict):
             if not joints:
                 raise where.error(f"{fld}.joints", "is empty")
-            pairs = [(_joint(k, where, f"{fld}.joints"), _point(v, where, f"{fld}.joints.{k}")) for k, v in joints.items()]
+            pairs = [(_joint(k, where, f"{fld}.joints"), _point(v, where, f"{fld}.joints.{k}"))
+                     for k, v in joints.items()]
         elif isinstance(joints, list) and len(joints) == NUM_JOINTS:
             pairs = [(j, _point(v, where, f"{fld}.joints[{j}]")) for j, v in enumerate(joints)]
         else:
@@ -171,7 +176,8 @@ def _rows_of(c: dict, where: _Where, fld: str, frames_total: int) -> list[tuple[
     if not isinstance(positions, list) or len(positions) != count:
         got = len(positions) if isinstance(positions, list) else type(positions).__name__
         raise where.error(f"{fld}.positions", f"expected {count} rows [x, y, z] (frames {first}-{end}), got {got}")
-    return [(first + i, joint, _point(p, where, f"{fld}.positions[{i}]"), mask, weight) for i, p in enumerate(positions)]
+    return [(first + i, joint, _point(p, where, f"{fld}.positions[{i}]"), mask, weight)
+            for i, p in enumerate(positions)]
 
 
 def parse_problem(raw, source: str, index: int, base: Path | None = None) -> Problem:

@@ -257,8 +257,10 @@ def group_problems(problems: list[Problem], batch: int) -> list[list[int]]:
 
 
 def unconstrained_jerk(model, problem: Problem, guidance: float, samples: int = 4, seed: int = 0) -> float:
-    """Mean jerk of ``samples`` plain rollouts (prior noise) of the problem's start and prompts: the reference
-    the result's jerk is compared with (DART: constrained 0.61 vs data 0.74)."""
+    """Mean jerk of ``samples`` plain rollouts (prior noise) of the problem's start and prompts.
+
+    The reference the result's jerk is compared with (DART: constrained 0.61 vs data 0.74).
+    """
     torch.manual_seed(seed)
     with torch.no_grad():
         start = start_states(model, [problem] * samples)

@@ -100,6 +100,7 @@ class Player:
             self.slider.max = max(clip.frames - 1, 1)
             self.scene.set_floor(*floor_extent(clip.joints, clip.waypoints))
             self.scene.set_waypoints(clip.waypoints)
+            self.scene.set_targets(clip.targets, clip.keyframes())
             move_cameras(self.server, *frame_camera(clip.joints, clip.waypoints))
             self._draw()
 
@@ -125,6 +126,7 @@ class Player:
         if i % TRAIL_EVERY == 0 or not self.playing:
             self.scene.show_trail(clip.joints[: i + 1, PELVIS])
         self.scene.show_goal(None if clip.goals is None else clip.goals[i])
+        self.scene.show_targets_at(i, clip.target_frames)
         self.slider.value = i
         text = clip.texts[i] or "(seed frames)"
         self.status.content = f"frame {i + 1}/{clip.frames} · {i / clip.fps:.2f} s · text: **{text}**"

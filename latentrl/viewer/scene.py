@@ -18,6 +18,8 @@ CONTACT_HEIGHT_M = 0.03
 LEFT, RIGHT, CENTRE = (60, 120, 220), (225, 105, 60), (90, 90, 100)
 CONTACT, AIRBORNE = (40, 190, 80), (150, 150, 150)
 GOAL, WAYPOINT, TRAIL = (220, 40, 60), (250, 180, 40), (70, 70, 200)
+TARGET_DIM, TARGET_ON = (150, 150, 160), (40, 200, 90)
+"""Optimization targets and ghost keyframes: grey, green on their own frame."""
 BONES = np.array([(PARENTS[j], j) for j in range(len(PARENTS)) if PARENTS[j] >= 0], dtype=np.int64)
 """(21, 2) parent, child joint index of every bone."""
 
@@ -119,6 +121,9 @@ class SkeletonScene:
                                             visible=False)
         self.goal = scene.add_icosphere("/goal", radius=0.12, color=GOAL, visible=False)
         self.waypoints: list[Any] = []
+        self.target_nodes: list[Any] = []
+        self.ghosts: dict[int, Any] = {}
+        self.targets: Any = None
 
     def set_floor(self, centre_xy: np.ndarray, size: float) -> None:
         self.grid.width = self.grid.height = float(size)
@@ -158,6 +163,36 @@ class SkeletonScene:
             return
         self.goal.position = (float(goal[0]), float(goal[1]), 0.12)
         self.goal.visible = True
+
+    def set_targets(self, targets: np.ndarray | None, keyframes: dict[int, np.ndarray] | None = None) -> None:
+        """Markers for an optimized motion's point targets and ghost skeletons for its keyframes (or none)."""
+        for handle in self.target_nodes:
+            handle.remove()
+        self.target_nodes, self.ghosts = [], {}
+        if targets is None or not len(targets):
+            return
+        pts = np.asarray(targets, dtype=np.float32)
+        colours = np.tile(np.asarray(TARGET_DIM, dtype=np.uint8), (len(pts), 1))
+        self.targets = self.server.scene.add_point_cloud("/targets", pts, colours, point_size=0.06,
+                                                         point_shape="diamond", precision="float32",
+                                                         point_shading="flat")
+        self.target_nodes.append(self.targets)
+        for frame, joints in (keyframes or {}).items():
+            ghost = self.server.scene.add_line_segments(f"/ghosts/{frame}", bone_segments(joints), TARGET_DIM,
+                                                        thickness=0.03)
+            self.ghosts[frame] = ghost
+            self.target_nodes.append(ghost)
+
+    def show_targets_at(self, frame: int, target_frames: np.ndarray | None) -> None:
+        """Brighten the targets and the ghost keyframe of ``frame``; dim the others."""
+        if target_frames is None or not self.target_nodes:
+            return
+        on = np.asarray(target_frames) == frame
+        colours = np.where(on[:, None], np.asarray(TARGET_ON, dtype=np.uint8), np.asarray(TARGET_DIM, dtype=np.uint8))
+        self.targets.colors = colours.astype(np.uint8)
+        for f, ghost in self.ghosts.items():
+            colour = np.asarray(TARGET_ON if f == frame else TARGET_DIM, dtype=np.uint8)
+            ghost.colors = np.broadcast_to(colour, np.asarray(ghost.points).shape).copy()
 
     def set_body_visible(self, visible: bool) -> None:
         self.body.visible = bool(visible)

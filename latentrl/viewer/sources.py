@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from latentrl.errors import DataError
+from latentrl.motion.skeleton import NUM_JOINTS
 
 REPORT_JSON = "report.json"
 RUN_MARKERS = ("config.yaml", "final.pt", "checkpoints")
@@ -41,10 +42,25 @@ class Clip:
     texts: list[str]
     goals: np.ndarray | None = None
     waypoints: np.ndarray | None = None
+    targets: np.ndarray | None = None
+    """(K, 3) world positions of an optimized motion's point targets (``latentrl optimize``), or None."""
+    target_frames: np.ndarray | None = None
+    """(K,) the motion frame each target is for."""
 
     @property
     def frames(self) -> int:
         return len(self.joints)
+
+    def keyframes(self) -> dict[int, np.ndarray]:
+        """Frame -> (22, 3) for every frame whose targets name all 22 joints (drawn as ghost skeletons)."""
+        if self.targets is None or self.target_frames is None:
+            return {}
+        out = {}
+        for f in np.unique(self.target_frames):
+            rows = self.targets[self.target_frames == f]
+            if len(rows) == NUM_JOINTS:
+                out[int(f)] = rows
+        return out
 
 
 @dataclass
@@ -55,9 +71,15 @@ class Entry:
     path: Path
     metrics: dict[str, Any] = field(default_factory=dict)
     waypoints: np.ndarray | None = None
+    targets: list[dict] | None = None
+    """An optimized motion's targets as ``report.json`` lists them (``motion_frame``, ``position``)."""
 
     def load(self) -> Clip:
-        return load_clip(self.path, self.waypoints)
+        clip = load_clip(self.path, self.waypoints)
+        if self.targets:
+            clip.targets = np.asarray([t["position"] for t in self.targets], dtype=np.float32).reshape(-1, 3)
+            clip.target_frames = np.asarray([t["motion_frame"] for t in self.targets], dtype=np.int64)
+        return clip
 
 
 @dataclass
@@ -65,7 +87,7 @@ class Source:
     """Everything ``latentrl view`` offers for one PATH."""
 
     title: str
-    kind: str  # "motion", "evaluation", "run" or "folder"
+    kind: str  # "motion", "evaluation", "optimize", "run" or "folder"
     entries: list[Entry]
     summary: str = ""
 
@@ -128,6 +150,7 @@ def _fmt(value: Any, digits: int = 2) -> str:
 METRIC_LABELS = (
     ("success", "success"),
     ("end", "end"),
+    ("goal_error_cm", "goal error (cm)"),
     ("reach_time_s", "reach time (s)"),
     ("skate_cm_s", "skate (cm/s)"),
     ("floor_cm", "floor (cm)"),
@@ -151,6 +174,8 @@ def open_source(path: str | Path) -> Source:
         raise DataError(f"{path}: no such file or folder (give a motion .npz, an evaluation folder or a run folder)")
     if path.is_file():
         if path.name == REPORT_JSON:
+            if _report_format(path) == OPTIMIZE_FORMAT:
+                return optimize_source(path.parent)
             return evaluation_source(path.parent)
         if path.suffix == ".npz":
             return motion_source(path)
@@ -158,6 +183,8 @@ def open_source(path: str | Path) -> Source:
             raise DataError(f"{path}: a checkpoint, not a motion; to steer a policy live use: latentrl play {path}")
         raise DataError(f"{path}: expected a motion .npz, an evaluation folder (report.json) or a training run folder")
     if (path / REPORT_JSON).is_file():
+        if _report_format(path / REPORT_JSON) == OPTIMIZE_FORMAT:
+            return optimize_source(path)
         return evaluation_source(path)
     if any((path / marker).exists() for marker in RUN_MARKERS):
         return run_source(path)
@@ -224,6 +251,63 @@ def evaluation_source(folder: Path, title: str | None = None) -> Source:
                f"reach time {_fmt(overall.get('reach_time_s'))} s, skate {_fmt(overall.get('skate_cm_s'))} cm/s, "
                f"floor {_fmt(overall.get('floor_cm'))} cm")
     return Source(title or str(folder), "evaluation", entries, summary)
+
+
+OPTIMIZE_FORMAT = "latentrl.optimize-report/1"
+MAX_REPORT_BYTES = 64 * 1024 * 1024
+
+
+def _report_format(path: Path) -> Any:
+    """The ``format`` field of a report file (None if it has none or is no JSON object)."""
+    from latentrl.safe_io import read_json_file
+
+    report = read_json_file(path, "report", MAX_REPORT_BYTES, DataError)
+    return report.get("format") if isinstance(report, dict) else None
+
+
+def _target_rows(targets: Any, where: str) -> list[dict]:
+    """The checked targets of one problem: ``motion_frame`` an int >= 0, ``position`` three finite numbers."""
+    if not isinstance(targets, list):
+        raise DataError(f"{where}: 'targets' must be a list")
+    rows = []
+    for t in targets:
+        pos = t.get("position") if isinstance(t, dict) else None
+        frame = t.get("motion_frame") if isinstance(t, dict) else None
+        if (not isinstance(frame, int) or isinstance(frame, bool) or frame < 0 or not isinstance(pos, list)
+                or len(pos) != 3 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in pos)):
+            raise DataError(f"{where}: a target needs 'motion_frame' (int >= 0) and 'position' [x, y, z], got "
+                            f"{str(t)[:60]}")
+        rows.append({"motion_frame": frame, "position": [float(v) for v in pos]})
+    return rows
+
+
+def optimize_source(folder: Path) -> Source:
+    """Every problem of a ``latentrl optimize`` output, with its targets (markers and ghost keyframes)."""
+    from latentrl.safe_io import read_json_file
+
+    path = folder / REPORT_JSON
+    report = read_json_file(path, "report", MAX_REPORT_BYTES, DataError)
+    problems = report.get("problems")
+    if not isinstance(problems, list) or not problems:
+        raise DataError(f"{path}: an optimize report needs a non-empty 'problems' list")
+    entries = []
+    for i, e in enumerate(problems):
+        if not isinstance(e, dict) or not isinstance(e.get("motion"), str) or not isinstance(e.get("name"), str):
+            raise DataError(f"{path}: problems[{i}] needs 'name' and 'motion' strings")
+        motion = (folder / e["motion"]).resolve()
+        if folder.resolve() not in motion.parents:
+            raise DataError(f"{path}: problems[{i}].motion {e['motion']!r} points outside {folder}")
+        if not motion.is_file():
+            raise DataError(f"{motion}: motion file named in {path} is missing")
+        metrics = e.get("metrics") if isinstance(e.get("metrics"), dict) else {}
+        shown = {k: metrics.get(k) for k in ("goal_error_cm", "skate_cm_s", "floor_cm", "steps") if k in metrics}
+        label = f"{e['name']} ({_fmt(metrics.get('goal_error_cm'))} cm)"
+        entries.append(Entry(label, motion, shown, None, _target_rows(e.get("targets", []), f"{path} problems[{i}]")))
+    overall = report.get("overall") if isinstance(report.get("overall"), dict) else {}
+    summary = (f"noise optimization of `{report.get('suite', '?')}`, {len(entries)} problems; mean goal error "
+               f"{_fmt(overall.get('goal_error_cm'))} cm, {_fmt(overall.get('share_within_1cm'))} within 1 cm; "
+               "targets: markers (bright on their frame), keyframes: ghost skeletons")
+    return Source(str(folder), "optimize", entries, summary)
 
 
 def latest_evaluation(run: Path) -> Path | None:

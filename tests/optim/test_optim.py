@@ -2,7 +2,6 @@
 
 import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -93,7 +92,8 @@ def test_constraint_losses_are_zero_exactly_on_a_motion_that_meets_them():
     joints = walking_clip(16)["joints"][None].float()  # (1, 16, 22, 3), a hand-made walk
     j = JOINT_NAMES.index
     probs = suite(
-        {"name": "key", "primitives": 2, "constraints": [{"type": "keyframe", "frame": 9, "joints": rows(joints[0, 9])}]},
+        {"name": "key", "primitives": 2,
+         "constraints": [{"type": "keyframe", "frame": 9, "joints": rows(joints[0, 9])}]},
         {"name": "sub", "primitives": 2, "constraints": [{"type": "keyframe", "frame": 3, "joints": {
             "head": rows(joints[0, 3, j("head")]), "left_wrist": rows(joints[0, 3, j("left_wrist")])}}]},
         {"name": "joint", "primitives": 2, "constraints": [{"type": "joint", "frame": 12, "joint": "left_foot",

@@ -107,3 +107,72 @@ def test_load_clip_rejects_nonfinite(tmp_path):
     np.savez(path, joints=joints, fps=np.float32(30))
     with pytest.raises(DataError, match="non-finite|NaN or inf"):
         load_clip(path)
+
+
+def _optimize_output(folder):
+    """A real ``latentrl optimize`` output folder (tiny model, 2 steps): one keyframe problem, one joint problem."""
+    from latentrl.optim import OptimizeSettings, optimize, parse_suite
+    from latentrl.optim.report import write_outputs
+    from tests.helpers import make_tiny_model
+
+    model = make_tiny_model()
+    key = walking(16)[15].tolist()
+    problems = parse_suite({"format": "latentrl.constraints/1", "problems": [
+        {"name": "key", "primitives": 2, "constraints": [{"type": "keyframe", "frame": 15, "joints": key}]},
+        {"name": "wrist", "primitives": 2, "constraints": [{"type": "joint", "frame": 5, "joint": "right_wrist",
+                                                            "position": [0.3, 0.5, 1.0]}]}]})
+    settings = OptimizeSettings(steps=2)
+    write_outputs(optimize(model, problems, settings), folder, settings, {"suite": "hand-made"}, plot=False)
+    return folder
+
+
+def test_optimize_folder_shows_targets_and_ghost_keyframes(tmp_path):
+    folder = _optimize_output(tmp_path / "opt")
+    source = open_source(folder)
+    assert source.kind == "optimize" and len(source.entries) == 2
+    assert source.entries[0].label.startswith("key (") and "hand-made" in source.summary
+    assert open_source(folder / "report.json").kind == "optimize"
+    key = source.entries[0].load()
+    assert key.targets.shape == (22, 3) and set(key.target_frames) == {2 + 15}
+    assert list(key.keyframes()) == [17] and key.keyframes()[17].shape == (22, 3)
+    wrist = source.entries[1].load()
+    assert wrist.targets.shape == (1, 3) and wrist.keyframes() == {}
+    assert "| goal error (cm) |" in metrics_table(source.entries[0].metrics)
+
+
+def test_optimize_report_naming_a_file_outside_its_folder_is_refused(tmp_path):
+    import json
+
+    folder = _optimize_output(tmp_path / "opt")
+    report = json.loads((folder / "report.json").read_text())
+    report["problems"][0]["motion"] = "../../etc/passwd"
+    (folder / "report.json").write_text(json.dumps(report))
+    with pytest.raises(DataError, match="points outside"):
+        open_source(folder)
+    report["problems"][0]["motion"] = "motions/key.npz"
+    report["problems"][0]["targets"] = [{"motion_frame": -1, "position": [0, 0, 0]}]
+    (folder / "report.json").write_text(json.dumps(report))
+    with pytest.raises(DataError, match="motion_frame"):
+        open_source(folder)
+
+
+def test_scene_draws_targets_in_a_real_viser_server(tmp_path):
+    viser = pytest.importorskip("viser")
+    from latentrl.viewer.scene import TARGET_DIM, TARGET_ON, SkeletonScene
+
+    clip = open_source(_optimize_output(tmp_path / "opt")).entries[0].load()
+    server = viser.ViserServer(host="127.0.0.1", port=0)
+    try:
+        scene = SkeletonScene(server)
+        scene.set_targets(clip.targets, clip.keyframes())
+        assert len(scene.target_nodes) == 2 and list(scene.ghosts) == [17]
+        scene.show_targets_at(17, clip.target_frames)
+        assert (np.asarray(scene.targets.colors) == TARGET_ON).all()
+        assert (np.asarray(scene.ghosts[17].colors) == TARGET_ON).all()
+        scene.show_targets_at(3, clip.target_frames)
+        assert (np.asarray(scene.targets.colors) == TARGET_DIM).all()
+        assert (np.asarray(scene.ghosts[17].colors) == TARGET_DIM).all()
+        scene.set_targets(None)
+        assert scene.target_nodes == []
+    finally:
+        server.stop()
