@@ -258,3 +258,16 @@ def test_warm_start_refuses_a_non_steering_policy(tmp_path, capsys):
     assert main(["optimize", "joint_targets", "--init", "joystick_walk_default", "--no-progress",
                  "--out", str(tmp_path / "o")]) == 2
     assert "expected 'zeros', 'randn' or a reach/path policy" in capsys.readouterr().err
+
+
+def test_a_dart_checkpoint_optimizes_too(parity_dir):
+    """DART's checkpoint layout (the parity model, with its mean-pose seed) goes through the same solver."""
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.motion.text import HashedTextEncoder, TableTextEncoder
+
+    dart = load_motion_model(parity_dir / "mld_denoiser/mld_parity_A/checkpoint_1.pt")
+    hashed = HashedTextEncoder(dart.text_dim)
+    dart.text_encoder = TableTextEncoder({"walk": hashed.encode(["walk"])[0]}, name=hashed.name)
+    r = optimize(dart, suite(target_problem(dart, primitives=2, seed=3)),
+                 OptimizeSettings(steps=30, lr=0.1, init="zeros", weights=NO_REG))[0]
+    assert r.metrics["goal_error_cm"] < r.metrics["goal_error_start_cm"] / 3
