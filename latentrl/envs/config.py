@@ -33,7 +33,7 @@ from latentrl.errors import ConfigError, closest
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
-from latentrl.rewards import TERM_NAMES, RewardConfig
+from latentrl.rewards import REWARD_TERMS, RewardConfig
 
 MAX_NUM_ENVS = 1 << 20
 """Parallel envs, at most (each holds a motion-model history on the device)."""
@@ -244,8 +244,8 @@ class EnvConfig:
         require(self.max_episode_steps is None or self.max_episode_steps >= 1, "max_episode_steps",
                 f"must be >= 1, got {self.max_episode_steps}")
         for name in self.reward_weights:
-            require(name in TERM_NAMES, "reward_weights",
-                    f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known: {', '.join(TERM_NAMES)}")
+            require(name in REWARD_TERMS, "reward_weights", f"unknown reward term '{name}'"
+                    f"{closest(name, tuple(REWARD_TERMS))}; known: {', '.join(REWARD_TERMS)}")
 
     def step_settings(self) -> StepSettings:
         """How the env steps the motion (guidance, action bound, foot lock, autocast): the fields above."""

@@ -10,10 +10,12 @@ memory); call :meth:`HistoryRecorder.clear` to bound host memory.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
 
+from latentrl.motion.canonical import features_to_world
 from latentrl.motion.clip import MotionClip, primitive_layout
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS
@@ -124,3 +126,48 @@ class HistoryRecorder:
             primitive=primitive_layout(len(ep.steps)),
             meta={"from_reset": ep.start.from_reset},
         )
+
+
+class RecordedEpisodes:
+    """The env side of history recording (mixed into ``LatentMotionVectorEnv``): export and clear episodes."""
+
+    def export_history(self, env_index: int, episode: int = -1) -> dict[str, Any]:
+        """One recorded episode of one env in the shared motion format (see ``latentrl.render``).
+
+        Returns numpy arrays: ``joints`` (T, 22, 3) world metres including the 2 seed frames,
+        ``fps``, ``texts`` (T,) ('' for seed frames), ``actions`` (S, D) as clamped,
+        ``primitive`` (T,) (-1 for seed frames), ``goals`` (S, 3), ``features`` (T, 276) when
+        recorded, and ``from_reset`` (whether the episode's start was recorded).
+        ``contacts`` (T, 2) and ``floor`` come with them (:class:`~latentrl.motion.clip.MotionClip`).
+        ``save_motion_npz(path, **env.export_history(i))`` or ``env.export_clip(i).save(path)`` writes it.
+        """
+        return self.export_clip(env_index, episode).to_dict()
+
+    def export_clip(self, env_index: int, episode: int = -1) -> MotionClip:
+        """:meth:`export_history` as a :class:`~latentrl.motion.clip.MotionClip` (``meta["from_reset"]``)."""
+        if self._history is None:
+            raise ValueError("this env records no history; build it with record_history=True")
+        if not 0 <= env_index < self.num_envs:
+            raise IndexError(f"env_index {env_index} out of range for {self.num_envs} envs")
+        return self._history.export_clip(env_index, episode, self.texts, self.floor_height)
+
+    def clear_history(self) -> None:
+        """Drop recorded steps (keeps each env's current 2 frames as the start of its episode)."""
+        if self._history is not None:
+            self._history.clear()
+            if self._state is not None:
+                idx = torch.arange(self.num_envs, device=self.device)
+                self._history.on_reset(
+                    idx, self.history_world(), self._text_idx, self._history_features(idx), from_reset=False
+                )
+
+    def _history_features(self, idx: torch.Tensor) -> torch.Tensor | None:
+        """(M, 2, 276) world features of the current history of envs ``idx``, if they are recorded."""
+        if self._history is None or not self._history.record_features:
+            return None
+        s = self._state
+        return features_to_world(s.history[idx], s.world.index(idx), self.motion.pelvis_delta)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Drop the recorded history."""
+        self._history = None

@@ -17,7 +17,8 @@ from typing import Any
 
 from latentrl.config import require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE, MAX_GUIDANCE
-from latentrl.motion.rollout import LOCK_MIN_WEIGHT, amp_problem, lock_min_weight_problem
+from latentrl.errors import ConfigError
+from latentrl.motion.rollout import AMP_DTYPES, LOCK_MIN_WEIGHT, amp_problem, lock_min_weight_problem
 
 
 @dataclass
@@ -45,6 +46,16 @@ class StepSettings:
         require(problem is None, "foot_lock_min_weight", str(problem))
         problem = amp_problem(self.amp)
         require(problem is None, "amp", str(problem))
+
+    def set_autocast(self, motion: Any) -> None:
+        """Make ``motion`` sample in :attr:`amp` (its ``amp_dtype``; a model shared with other envs does so there too).
+
+        None leaves the model's own setting (float32 unless changed).
+        """
+        if self.amp is not None:
+            if not hasattr(motion, "amp_dtype"):
+                raise ConfigError(f"amp: the motion model ({type(motion).__name__}) has no amp_dtype to set")
+            motion.amp_dtype = AMP_DTYPES[self.amp]
 
     def step_kwargs(self) -> dict[str, Any]:
         """The env constructor's arguments of these settings."""

@@ -61,12 +61,13 @@ from torch import nn
 from latentrl.constants import OBS_GOAL_ANGLE_CLIP_DEG, OBS_GOAL_DIST_CLIP_M
 from latentrl.envs.config import stored_env_config
 from latentrl.envs.goal import goal_features
+from latentrl.envs.observation import observe
 from latentrl.envs.settings import StepSettings
 from latentrl.errors import CheckpointError, ConfigError, TextError
 from latentrl.motion.canonical import WorldTransform
 from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, joints_of
 from latentrl.motion.rollout import MotionModel, RolloutState, StepResult
-from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS, PELVIS
+from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS
 
 FORMAT = "latentrl.onnx-controller/2"  # 2: the airborne flag is part of the state
 MIN_OPSET = 17
@@ -166,12 +167,11 @@ class ControllerStep(nn.Module):
                 "next_world_translation": (b, 3), "next_airborne": (b,)}
 
     def observe(self, state: RolloutState, goals: Sequence[torch.Tensor], text: torch.Tensor) -> torch.Tensor:
-        """(B, obs_dim) the env's observation ``[goal(s) | text | history | scene]``, as the env's ``_observe``."""
+        """(B, obs_dim) the env's observation ``[goal(s) | text | history | scene]``: the env's own :func:`observe`."""
         history_world = state.world.apply(joints_of(state.history))
         goal_obs = [goal_features(history_world[:, -1], state.world.rotation, g, self.goal_angle_clip_deg,
                                   self.goal_dist_clip) for g in goals]
-        scene = self.floor_height - history_world[:, 0, PELVIS, 2:3]
-        return torch.cat((*goal_obs, text, state.history.reshape(self.batch, -1), scene), dim=1)
+        return observe(state.history, history_world, torch.cat(goal_obs, dim=1), text, self.floor_height)
 
     def post_step(self, step: StepResult) -> StepResult:
         """World-space correction after the motion step; the identity, so the graph is exactly ``rollout_step``.

@@ -8,11 +8,13 @@ the envs changing.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 import torch
 
+from latentrl.errors import ConfigError
 from latentrl.motion.rollout import RolloutState, StepResult
 
 
@@ -24,6 +26,11 @@ class MotionPrior(Protocol):
     """(K, 2, 276) canonical seed histories episodes start from (None: the model cannot start episodes)."""
     pelvis_delta: torch.Tensor | None
     """(3,) rest pelvis offset used to place features in the world."""
+    mean: torch.Tensor | None
+    """(276,) mean of the motion data's features, or None; with :attr:`std`, the envs' divergence check
+    ends an episode whose history leaves the data's range (:mod:`latentrl.envs.divergence`)."""
+    std: torch.Tensor | None
+    """(276,) standard deviation of the motion data's features, or None (see :attr:`mean`)."""
 
     @property
     def device(self) -> torch.device: ...
@@ -65,3 +72,20 @@ class MotionPrior(Protocol):
         the contact weight from which the lock pins a foot fully.
         """
         ...
+
+
+def load_prior(motion: str | os.PathLike | MotionPrior, device: str | torch.device) -> MotionPrior:
+    """A prior that can start episodes: a loaded one moved to ``device``, or a model file or name loaded there.
+
+    Refuses one without ``seed_history`` or ``pelvis_delta`` (episodes start from its seeds).
+    """
+    from latentrl.motion.checkpoint import load_motion_model  # torch-heavy: only when a file or name is given
+
+    if isinstance(motion, (str, os.PathLike)):
+        model = load_motion_model(motion, device=device)
+    else:
+        model = motion.to(device)
+    if model.seed_history is None or model.pelvis_delta is None:
+        raise ConfigError("motion: the model has no seed history/pelvis_delta, so episodes cannot start; "
+                          "load it with seed_history=... (docs/motion.md)")
+    return model

@@ -4,12 +4,14 @@ from latentrl.rewards.compose import (
     COMMON_TERMS,
     DART_TERMS,
     DEFAULT_WEIGHTS,
+    REWARD_TERMS,
     TERM_NAMES,
     RewardComposer,
     RewardConfig,
     RewardInputs,
     RewardTerm,
+    reward_term,
 )
 
-__all__ = ["COMMON_TERMS", "DART_TERMS", "DEFAULT_WEIGHTS", "TERM_NAMES", "RewardComposer", "RewardConfig",
-           "RewardInputs", "RewardTerm"]
+__all__ = ["COMMON_TERMS", "DART_TERMS", "DEFAULT_WEIGHTS", "REWARD_TERMS", "TERM_NAMES", "RewardComposer",
+           "RewardConfig", "RewardInputs", "RewardTerm", "reward_term"]

@@ -29,6 +29,9 @@ name            weight   term
 Each task computes and reports only its own terms (``terms=`` of :class:`RewardComposer`; the envs'
 ``reward_terms``): ReachLocation and FollowPath the seven of :data:`DART_TERMS`, Joystick and TimedPath
 theirs. The task terms read the extra inputs their env fills (:attr:`RewardInputs.command` ...).
+
+Every term is one entry of :data:`REWARD_TERMS` (name -> kernel adapter, default weight, the task inputs
+it reads), made by decorating its adapter with :func:`reward_term`; the table above lists them.
 """
 
 from __future__ import annotations
@@ -54,27 +57,6 @@ DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient
 
 #: Terms every task computes besides its own (weight 0 unless a config sets one).
 COMMON_TERMS: tuple[str, ...] = ("prior", "skill")
-
-#: Every term name, in reporting order: DART's, then the terms of the Joystick and TimedPath tasks.
-TERM_NAMES: tuple[str, ...] = (*DART_TERMS, "heading", "speed", "pace", "timing", *COMMON_TERMS)
-
-#: DART's README weights (``fixtext_repeat_floor100_hop10_skate100``), then the task terms' (1 each).
-DEFAULT_WEIGHTS: dict[str, float] = {
-    "dist": 1.0,
-    "success": 1.0,
-    "foot_floor": 100.0,
-    "skate": 100.0,
-    "orient": 0.1,
-    "rotation": 10.0,
-    "jerk": 0.0,
-    "heading": 1.0,
-    "speed": 1.0,
-    "pace": 1.0,
-    "timing": 1.0,
-    "prior": 0.0,
-    "skill": 0.0,
-}
-
 
 @dataclass
 class RewardInputs:
@@ -149,9 +131,10 @@ class RewardConfig:
         """Unknown term names, non-finite weights and negative thresholds are errors."""
         for name, weight in self.weights.items():
             require(
-                name in TERM_NAMES,
+                name in REWARD_TERMS,
                 "weights",
-                f"unknown reward term '{name}'{closest(name, TERM_NAMES)}; known terms: {', '.join(TERM_NAMES)}",
+                f"unknown reward term '{name}'{closest(name, tuple(REWARD_TERMS))}; known terms: "
+                f"{', '.join(REWARD_TERMS)}",
             )
             require(
                 isinstance(weight, (int, float)) and math.isfinite(weight),
@@ -176,98 +159,121 @@ class RewardConfig:
 
 
 class RewardTerm(NamedTuple):
-    """A named, weighted term; ``compute(inputs, config)`` returns the (N,) unweighted value."""
+    """A reward term: ``compute(inputs, config)`` returns the (N,) unweighted value.
+
+    ``weight`` is its default weight in :data:`REWARD_TERMS` and the weight in use in a
+    :class:`RewardComposer`; ``inputs`` names the optional :class:`RewardInputs` fields it reads (a task
+    that computes it must fill them).
+    """
 
     name: str
     weight: float
     compute: Callable[[RewardInputs, RewardConfig], torch.Tensor]
+    inputs: tuple[str, ...] = ()
 
 
+REWARD_TERMS: dict[str, RewardTerm] = {}
+"""The reward-term registry: name -> kernel, default weight and inputs, in reporting order."""
+
+
+def reward_term(name: str, weight: float, inputs: tuple[str, ...] = ()) -> Callable:
+    """Register the decorated ``(RewardInputs, RewardConfig) -> (N,)`` function as the reward term ``name``."""
+
+    def add(compute: Callable[[RewardInputs, RewardConfig], torch.Tensor]) -> Callable:
+        REWARD_TERMS[name] = RewardTerm(name, float(weight), compute, tuple(inputs))
+        return compute
+
+    return add
+
+
+@reward_term("dist", 1.0)
 def _dist(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.goal_progress` from the pelvis before the step to the pelvis after it."""
     return terms.goal_progress(*x.pelvis_before_after(), x.goal_world)
 
 
+@reward_term("success", 1.0)
 def _success(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.success` of the env's reached mask."""
     return terms.success(x.reached)
 
 
+@reward_term("foot_floor", 100.0)
 def _foot_floor(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.foot_floor` over the new frames, scaled per text."""
     height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2]
     return terms.foot_floor(height, x.floor_height, cfg.contact_threshold, x.floor_scale)
 
 
+@reward_term("skate", 100.0)
 def _skate(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.foot_skate` from the last history frame through the new frames."""
     feet = terms.foot_joints(x.joints_world[:, x.history_length - 1 :])
     return terms.foot_skate(feet, x.floor_height, cfg.contact_threshold)
 
 
+@reward_term("orient", 0.1)
 def _orient(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.moving_orientation` of the step's pelvis displacement."""
     return terms.moving_orientation(*x.pelvis_before_after(), x.goal_world)
 
 
+@reward_term("rotation", 10.0)
 def _rotation(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.yaw_rate` from the last history frame through the new frames."""
     return terms.yaw_rate(x.joints_world[:, x.history_length - 1 :])
 
 
+@reward_term("jerk", 0.0)
 def _jerk(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.jerk` over the history and new frames."""
     return terms.jerk(x.joints_world)
 
 
+@reward_term("heading", 1.0, inputs=('command',))
 def _heading(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.heading_tracking` of the step's pelvis displacement against the commanded heading."""
-    return terms.heading_tracking(*x.pelvis_before_after(), x.need("command", "heading")[:, :2])
+    return terms.heading_tracking(*x.pelvis_before_after(), x.command[:, :2])
 
 
+@reward_term("speed", 1.0, inputs=('command',))
 def _speed(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.speed_tracking` of the step's mean pelvis speed against the commanded speed."""
-    return terms.speed_tracking(*x.pelvis_before_after(), x.need("command", "speed")[:, 2], x.step_seconds())
+    return terms.speed_tracking(*x.pelvis_before_after(), x.command[:, 2], x.step_seconds())
 
 
+@reward_term("pace", 1.0, inputs=('target_speed',))
 def _pace(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.pace_tracking` toward the goal at the env's on-time speed."""
-    return terms.pace_tracking(*x.pelvis_before_after(), x.goal_world, x.need("target_speed", "pace"),
+    return terms.pace_tracking(*x.pelvis_before_after(), x.goal_world, x.target_speed,
                                x.step_seconds())
 
 
+@reward_term("timing", 1.0, inputs=('arrival_error',))
 def _timing(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.arrival_timing` of the waypoint reached in the step."""
-    return terms.arrival_timing(x.reached, x.need("arrival_error", "timing"), cfg.timing_tolerance)
+    return terms.arrival_timing(x.reached, x.arrival_error, cfg.timing_tolerance)
 
 
+@reward_term("prior", 0.0, inputs=('actions',))
 def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.noise_prior` of the step's action."""
-    return terms.noise_prior(x.need("actions", "prior"))
+    return terms.noise_prior(x.actions)
 
 
+@reward_term("skill", 0.0, inputs=('skill',))
 def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.skill_fidelity` of the step against its text's skill rule (the evaluation's contact height)."""
     height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2] - x.floor_height
-    return terms.skill_fidelity(*x.pelvis_before_after(), height, x.need("skill", "skill"), x.step_seconds(),
+    return terms.skill_fidelity(*x.pelvis_before_after(), height, x.skill, x.step_seconds(),
                                 scale=cfg.skill_multipliers() if cfg.skill_scale else None)
 
 
-_COMPUTE: dict[str, Callable[[RewardInputs, RewardConfig], torch.Tensor]] = {
-    "dist": _dist,
-    "success": _success,
-    "foot_floor": _foot_floor,
-    "skate": _skate,
-    "orient": _orient,
-    "rotation": _rotation,
-    "jerk": _jerk,
-    "heading": _heading,
-    "speed": _speed,
-    "pace": _pace,
-    "timing": _timing,
-    "prior": _prior,
-    "skill": _skill,
-}
+TERM_NAMES: tuple[str, ...] = tuple(REWARD_TERMS)
+"""The shipped terms' names, in reporting order: DART's, then the Joystick and TimedPath tasks', then the common."""
+
+DEFAULT_WEIGHTS: dict[str, float] = {name: term.weight for name, term in REWARD_TERMS.items()}
+"""DART's README weights (``fixtext_repeat_floor100_hop10_skate100``), the task terms' (1 each), 0 for the common."""
 
 
 class RewardComposer:
@@ -287,16 +293,17 @@ class RewardComposer:
     def __init__(self, config: RewardConfig | None = None, weights: Mapping[str, float] | None = None,
                  terms: Sequence[str] = DART_TERMS):
         config = config or RewardConfig()
-        merged = {**DEFAULT_WEIGHTS, **config.weights, **dict(weights or {})}
+        defaults = {name: term.weight for name, term in REWARD_TERMS.items()}
+        merged = {**defaults, **config.weights, **dict(weights or {})}
         config = dataclasses.replace(config, weights=merged, floor_scale_words=tuple(config.floor_scale_words))
         config.validate()
         for name in terms:
-            require(name in TERM_NAMES, "terms", f"unknown reward term '{name}'{closest(name, TERM_NAMES)}")
+            require(name in REWARD_TERMS, "terms", f"unknown reward term '{name}'{closest(name, tuple(REWARD_TERMS))}")
         for name in weights or {}:  # explicit overrides of a term the task never computes are mistakes
             require(name in terms, "reward_weights",
                     f"the task has no reward term '{name}'{closest(name, tuple(terms))}; its terms: {', '.join(terms)}")
         self.config = config
-        self.terms = tuple(RewardTerm(name, float(config.weights[name]), _COMPUTE[name]) for name in terms)
+        self.terms = tuple(REWARD_TERMS[name]._replace(weight=float(config.weights[name])) for name in terms)
 
     @property
     def weights(self) -> dict[str, float]:
@@ -317,6 +324,9 @@ class RewardComposer:
 
     def __call__(self, inputs: RewardInputs) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Returns ``(total (N,), {name: (N,) unweighted term})``, float32."""
+        for t in self.terms:
+            for name in t.inputs:
+                inputs.need(name, t.name)
         values = {t.name: t.compute(inputs, self.config).float() for t in self.terms}
         total = torch.zeros_like(next(iter(values.values())))
         for t in self.terms:

@@ -316,7 +316,7 @@ def test_text_weights_select_texts(make_reach):
     env = make_reach(8, texts=("walk", "run"), text_weights=(0.0, 1.0))
     env.reset(seed=0)
     assert [env.texts[i] for i in env._text_idx] == ["run"] * 8
-    assert env._floor_scale.tolist() == pytest.approx([1.0, 0.1])
+    assert env.text_table.floor_scale.tolist() == pytest.approx([1.0, 0.1])
 
 
 # --------------------------------------------------------------------------- every task, every id

@@ -1,0 +1,52 @@
+"""The observation of a latent-motion env: its layout and the one pure function that assembles it.
+
+An observation is ``[goal | text | motion | scene]``: the task's goal fields, the prompt embedding,
+the canonical 2-frame history and the pelvis height above the floor. The env and the exported ONNX
+controller (:mod:`latentrl.export.onnx`) both build it with :func:`observe`, so a policy sees the same
+vector in both.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Sequence
+
+import torch
+
+from latentrl.motion.representation import FEATURE_DIM, HISTORY_LENGTH
+from latentrl.motion.skeleton import PELVIS
+
+
+class ObservationLayout:
+    """Where each field and group sits in the observation vector.
+
+    Args:
+        goal_fields: the task's ``(name, size)`` goal fields, in order.
+        text_dim: E, the size of a prompt embedding.
+    """
+
+    def __init__(self, goal_fields: Sequence[tuple[str, int]], text_dim: int):
+        named = (*goal_fields, ("text", text_dim), ("motion", HISTORY_LENGTH * FEATURE_DIM), ("scene", 1))
+        self.fields: OrderedDict[str, tuple[int, int]] = OrderedDict()
+        """Field name -> ``[start, stop)``: the goal fields, text, motion, scene."""
+        start = 0
+        for name, size in named:
+            self.fields[name] = (start, start + size)
+            start += size
+        self.size = start
+        """Length of the observation vector."""
+        goal_stop = self.fields[goal_fields[-1][0]][1]
+        self.groups: OrderedDict[str, tuple[int, int]] = OrderedDict(
+            goal=(0, goal_stop), **{k: self.fields[k] for k in ("text", "motion", "scene")})
+        """Group name -> ``[start, stop)``: goal, text, motion, scene (what trainers split observations by)."""
+
+
+def observe(history: torch.Tensor, history_world: torch.Tensor, goal: torch.Tensor, text: torch.Tensor,
+            floor_height: float) -> torch.Tensor:
+    """(N, obs_dim) float32 ``[goal | text | motion | scene]``.
+
+    ``history`` (N, 2, 276) canonical features, ``history_world`` (N, 2, 22, 3) their world joints,
+    ``goal`` (N, G) the task's goal observation, ``text`` (N, E) the prompt embeddings.
+    """
+    scene = floor_height - history_world[:, 0, PELVIS, 2:3]
+    return torch.cat((goal, text, history.reshape(history.shape[0], -1), scene), dim=1)
