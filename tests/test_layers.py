@@ -173,3 +173,34 @@ def test_the_checker_passes_a_clean_tree(tmp_path):
     pkg = _plant(tmp_path, {"motion/__init__.py": "from latentrl.errors import E\n", "errors.py": "E = 1\n",
                             "app/__init__.py": "import latentrl.motion\n"})
     assert violations(pkg) == []
+
+
+ARCHITECTURE = PACKAGE.parent / "docs" / "architecture.md"
+
+
+def documented_floors(text: str) -> dict[str, int]:
+    """Unit -> floor from the module map of docs/architecture.md.
+
+    Each table row gives its floor and, backticked in its package cell, its units (``app/`` and ``render.py``
+    name the units ``app`` and ``render``).
+    """
+    import re
+
+    found = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 4 and cells[0].isdigit():
+            for name in re.findall(r"`([A-Za-z_]\w*)(?:/|\.py)?`", cells[1]):  # not `python -m latentrl`
+                found[name] = int(cells[0])
+    return found
+
+
+def test_the_architecture_table_matches_the_enforced_floors():
+    enforced = {name: i for i, units in enumerate(FLOORS) for name in units}
+    assert documented_floors(ARCHITECTURE.read_text(encoding="utf-8")) == enforced
+
+
+def test_the_table_parser_reads_rows_and_names():
+    table = "| floor | package | what | may import |\n|---|---|---|---|\n| 0 | `errors`, `runlock` | x | y |\n" \
+            "| 6 | `app/` (and `cli.py`, `python -m latentrl`) | x | `motion` |\n"
+    assert documented_floors(table) == {"errors": 0, "runlock": 0, "app": 6, "cli": 6}

@@ -36,6 +36,15 @@ def _device(text: str) -> str:
     return text
 
 
+def _trainer(name: str) -> str:
+    """Argument type of ``--trainer``: a name in the trainer registry (``ppo.run.TRAINERS``)."""
+    from latentrl.ppo.run import TRAINERS
+
+    if name not in TRAINERS:
+        raise argparse.ArgumentTypeError(f"invalid choice: '{name}' (choose from {', '.join(map(repr, TRAINERS))})")
+    return name
+
+
 def _seed(text: str) -> int:
     """Argument type of ``--seed``: an integer in [0, 2**32 - 1]."""
     from latentrl.config import seed_problem
@@ -144,7 +153,8 @@ def _train_commands(sub) -> None:
     train = sub.add_parser("train", help="train a controller with PPO from a YAML config")
     train.add_argument("config", nargs="?", help="YAML config (e.g. configs/quick.yaml)")
     train.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
-    train.add_argument("--trainer", default="native", choices=["native", "sb3"], help="PPO implementation")
+    train.add_argument("--trainer", default="native", type=_trainer, help="PPO implementation: native or sb3 "
+                       "(or a trainer registered with latentrl.ppo.run.register_trainer)")
     train.add_argument("--device", type=_device, help="torch device (sets ppo.device), e.g. cpu or cuda")
     train.add_argument("--seed", type=_seed, help="random seed (sets ppo.seed)")
     train.add_argument("--total-steps", type=int, help="env steps to train (sets ppo.total_steps)")
