@@ -52,6 +52,7 @@ class TrainConfig:
     """Keys of earlier versions (the flat ``env:`` section) -> where they live now."""
 
     def validate(self) -> None:
+        """Threads in range, and the PPO batch splits into minibatches for ``env.num_envs`` envs."""
         require(0 <= self.threads <= MAX_THREADS, "threads",
                 f"must lie in [0, {MAX_THREADS}] (0: torch's default), got {self.threads}")
         try:  # the batch must split into minibatches for this many envs
@@ -116,6 +117,7 @@ def trained_suites(suites: tuple[str, ...], texts: list[str] | tuple[str, ...]) 
 
 
 def load_motion(cfg: EnvConfig, device: str):
+    """The motion model of the config (``env.motion``, ``env.seed_history``) on ``device``."""
     from latentrl.motion import load_motion_model
 
     return load_motion_model(cfg.motion, device=device, seed_history=cfg.seed_history)

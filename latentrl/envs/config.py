@@ -49,9 +49,11 @@ class ReachConfig:
     """Goal distance range (m)."""
 
     def validate(self) -> None:
+        """``goal_distance`` is a [min, max] pair."""
         require(len(self.goal_distance) == 2, "goal_distance", f"must be [min, max], got {self.goal_distance}")
 
     def kwargs(self) -> dict[str, Any]:
+        """The constructor arguments of :class:`~latentrl.envs.ReachLocationEnv`."""
         return {"goal_angle_deg": self.goal_angle_deg, "goal_distance": tuple(self.goal_distance)}
 
 
@@ -76,6 +78,7 @@ class PathConfig:
     """Each random segment turns by up to +/- this many degrees."""
 
     def validate(self) -> None:
+        """Segment range, turn, waypoint count and ``next_at_last`` in range."""
         require(len(self.random_segment) == 2 and 0 < self.random_segment[0] <= self.random_segment[1],
                 "random_segment", f"must be [min, max] metres with 0 < min <= max, got {self.random_segment}")
         require(0 <= self.random_turn_deg <= 180, "random_turn_deg",
@@ -85,6 +88,7 @@ class PathConfig:
         require(problem is None, "next_at_last", str(problem))
 
     def kwargs(self) -> dict[str, Any]:
+        """The constructor arguments of :class:`~latentrl.envs.FollowPathEnv` (file names resolved)."""
         paths = str(resolve_task_file(self.paths)) if self.paths else None
         return {"paths": paths, "observe_next": self.observe_next, "next_at_last": self.next_at_last,
                 "random_waypoints": self.random_waypoints,
@@ -107,6 +111,7 @@ class JoystickConfig:
     """A command-timeline file (or suite name in tasks/joystick) to train on instead of random commands."""
 
     def validate(self) -> None:
+        """Speed range, heading change and command durations in range."""
         require(len(self.speed_range) == 2 and 0 <= self.speed_range[0] <= self.speed_range[1], "speed_range",
                 f"must be [min, max] m/s with 0 <= min <= max, got {self.speed_range}")
         require(0 <= self.heading_change_deg <= 180, "heading_change_deg",
@@ -116,6 +121,7 @@ class JoystickConfig:
                 f"must be [min, max] seconds with 0 < min <= max, got {self.heading_change_seconds}")
 
     def kwargs(self) -> dict[str, Any]:
+        """The constructor arguments of :class:`~latentrl.envs.JoystickEnv` (file names resolved)."""
         commands = str(resolve_task_file(self.commands, "joystick")) if self.commands else None
         return {"speed_range": tuple(self.speed_range), "heading_change_deg": self.heading_change_deg,
                 "heading_change_seconds": tuple(self.heading_change_seconds), "commands": commands}
@@ -142,6 +148,7 @@ class TimedConfig:
     """The time-left observation is clipped to +/- this many seconds."""
 
     def validate(self) -> None:
+        """Speed range, clip, waypoint count and ``next_at_last`` in range."""
         require(len(self.speed_range) == 2 and 0 < self.speed_range[0] <= self.speed_range[1], "speed_range",
                 f"must be [min, max] m/s with 0 < min <= max, got {self.speed_range}")
         require(self.time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {self.time_left_clip}")
@@ -150,6 +157,7 @@ class TimedConfig:
         require(problem is None, "next_at_last", str(problem))
 
     def kwargs(self) -> dict[str, Any]:
+        """The constructor arguments of :class:`~latentrl.envs.TimedPathEnv` (file names resolved)."""
         paths = str(resolve_task_file(self.paths, "timed")) if self.paths else None
         return {"paths": paths, "speed_range": tuple(self.speed_range), "observe_next": self.observe_next,
                 "next_at_last": self.next_at_last, "random_waypoints": self.random_waypoints,
@@ -225,6 +233,7 @@ class EnvConfig:
     """Arguments of a registered task that has no section of its own above (its spec's ``config`` fields)."""
 
     def validate(self) -> None:
+        """Every field in range: a registered task (and its ``options``), sizes, step settings, texts, weights."""
         require(self.task in TASKS, "task", f"expected one of {tuple(TASKS)}, got '{self.task}'")
         if not self._has_section():
             section = self.section

@@ -56,6 +56,7 @@ class Sb3VecEnv(VecEnv):
         self.metadata = {**env.metadata, "render_modes": self.metadata["render_modes"]}
 
     def reset(self) -> np.ndarray:
+        """Reset every env (with the seed of :meth:`seed`, if one was set); numpy observations."""
         obs, _ = self.env.reset(seed=self._seeds[0])
         self._reset_seeds()
         self._reset_options()
@@ -63,9 +64,11 @@ class Sb3VecEnv(VecEnv):
         return _numpy(obs).astype(np.float32, copy=False)
 
     def step_async(self, actions: np.ndarray) -> None:
+        """Keep the actions for :meth:`step_wait` (the torch env steps synchronously)."""
         self._actions = actions
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        """Step the torch env; numpy observations, rewards, dones and per-env SB3 infos."""
         obs, reward, terminated, truncated, infos = self.env.step(self._actions)
         terminated, truncated = _numpy(terminated), _numpy(truncated)
         dones = terminated | truncated
@@ -93,28 +96,34 @@ class Sb3VecEnv(VecEnv):
         return [{k: values[i] for k, values in terms.items()} for i in range(self.num_envs)]
 
     def close(self) -> None:
+        """Close the torch env."""
         self.env.close()
 
     def _indices(self, indices: None | int | Sequence[int]) -> list[int]:
         return list(self._get_indices(indices))
 
     def get_attr(self, attr_name: str, indices: None | int | Sequence[int] = None) -> list[Any]:
+        """The torch env's attribute, once per selected env (they share one object)."""
         value = getattr(self.env, attr_name)
         return [value for _ in self._indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: None | int | Sequence[int] = None) -> None:
+        """Set the attribute on the torch env (shared by every index)."""
         setattr(self.env, attr_name, value)
 
     def env_method(
         self, method_name: str, *method_args, indices: None | int | Sequence[int] = None, **method_kwargs
     ) -> list[Any]:
+        """Call the torch env's method once, and return its result once per selected env."""
         result = getattr(self.env, method_name)(*method_args, **method_kwargs)
         return [result for _ in self._indices(indices)]
 
     def env_is_wrapped(
         self, wrapper_class: type[gym.Wrapper], indices: None | int | Sequence[int] = None
     ) -> list[bool]:
+        """False for every selected env: the torch env sits in no Gymnasium wrapper."""
         return [False for _ in self._indices(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
+        """No images: these envs do not render (export histories and render them with :mod:`latentrl.render`)."""
         return [None for _ in range(self.num_envs)]

@@ -34,15 +34,18 @@ class SingleEnv(gym.Env):
         self.action_space = env.single_action_space
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        """Reset the one env; its observation as a numpy vector."""
         super().reset(seed=seed)
         obs, _ = self.env.reset(seed=seed, options=options)
         return obs[0].cpu().numpy(), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Step the one env with ``action`` (D,); the reward terms come as floats in ``info``."""
         obs, reward, terminated, truncated, infos = self.env.step(np.asarray(action, dtype=np.float32)[None])
         info = {k: float(v[0]) for k, v in infos.items() if k.startswith("reward/")}
         info["is_success"] = bool(infos["is_success"][0])
         return obs[0].cpu().numpy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), info
 
     def close(self) -> None:
+        """Close the wrapped vector env."""
         self.env.close()

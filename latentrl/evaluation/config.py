@@ -36,6 +36,7 @@ class EvalConfig:
     """Stop training once eval success reaches this (used by `bench train`)."""
 
     def validate(self) -> None:
+        """Episodes and step budget are >= 1."""
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
 

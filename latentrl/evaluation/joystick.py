@@ -141,6 +141,7 @@ def timeline_steps(timeline: CommandTimeline) -> int:
 
 
 def timeline_label(timeline: CommandTimeline) -> str:
+    """How reports name a timeline: its text, command count and duration."""
     return f"{timeline.text}, {len(timeline.commands)} commands, {timeline.duration:g} s"
 
 

@@ -50,6 +50,8 @@ class EpisodeResult:
 
 @dataclass
 class PathResult:
+    """Every episode of one path of a suite, and the wall time they took."""
+
     suite: str
     index: int
     path: WaypointPath
@@ -59,6 +61,8 @@ class PathResult:
 
 @dataclass
 class SuiteResult:
+    """Every path of one suite file, in file order."""
+
     name: str
     """File stem, e.g. ``dart_walk_long``."""
     file: str

@@ -155,12 +155,14 @@ class ControllerStep(nn.Module):
         return super().train(False)
 
     def input_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Input name -> shape, for this batch and this policy (next goal, baked text)."""
         b = self.batch
         shapes = {"history": (b, HISTORY_LENGTH, FEATURE_DIM), "world_rotation": (b, 3, 3), "world_translation": (b, 3),
                   "airborne": (b,), "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim)}
         return {name: shapes[name] for name in self.input_names}
 
     def output_shapes(self) -> dict[str, tuple[int, ...]]:
+        """Output name -> shape, for this batch."""
         b = self.batch
         return {"action": (b, self.model.latent_dim), "joints_world": (b, FUTURE_LENGTH, NUM_JOINTS, 3),
                 "next_history": (b, HISTORY_LENGTH, FEATURE_DIM), "next_world_rotation": (b, 3, 3),

@@ -33,7 +33,9 @@ class MotionPrior(Protocol):
     """(276,) standard deviation of the motion data's features, or None (see :attr:`mean`)."""
 
     @property
-    def device(self) -> torch.device: ...
+    def device(self) -> torch.device:
+        """Where the prior computes."""
+        ...
 
     @property
     def latent_shape(self) -> tuple[int, int]:
@@ -41,9 +43,13 @@ class MotionPrior(Protocol):
         ...
 
     @property
-    def latent_dim(self) -> int: ...
+    def latent_dim(self) -> int:
+        """D, the number of values of one action: the product of :attr:`latent_shape`."""
+        ...
 
-    def to(self, device: str | torch.device) -> MotionPrior: ...
+    def to(self, device: str | torch.device) -> MotionPrior:
+        """The prior on ``device`` (in place for torch modules)."""
+        ...
 
     def encode_text(self, texts: Sequence[str]) -> torch.Tensor:
         """(len(texts), E) text embeddings."""

@@ -44,6 +44,7 @@ class SteeredReachEnv(ReachLocationEnv):
         super().__init__(num_envs, **kwargs)
 
     def set_goal(self, xy: Sequence[float]) -> None:
+        """Put the goal at world ``xy`` on the floor (kept across resets until cleared)."""
         goal = torch.tensor([float(xy[0]), float(xy[1]), self.floor_height], device=self.device)
         self._user_goal = goal
         self._goal[:] = goal
@@ -53,11 +54,13 @@ class SteeredReachEnv(ReachLocationEnv):
         self._user_goal = None
 
     def set_text(self, text: str) -> None:
+        """Use ``text`` (one of :attr:`texts`) from now on, across resets."""
         self._text_choice = self.texts.index(text)
         self._text_idx[:] = self._text_choice
 
     @property
     def text(self) -> str:
+        """The text the env steps with now."""
         return self.texts[int(self._text_idx[0])]
 
     def _sample_goals(self, idx: torch.Tensor) -> torch.Tensor:
@@ -148,6 +151,7 @@ class LiveController:
         self.thread = threading.Thread(target=self._run, name="latentrl-play", daemon=True)
 
     def start(self) -> None:
+        """Start the generation loop thread."""
         self.thread.start()
 
     # ------------------------------------------------------------------ user input
@@ -195,6 +199,7 @@ class LiveController:
             move_cameras(self.server, *(np.array(v) for v in START_CAMERA))
 
     def pelvis(self) -> np.ndarray:
+        """(3,) world position of the pelvis in the frame shown now."""
         return self.current[PELVIS]
 
     # ------------------------------------------------------------------ the loop
@@ -234,6 +239,7 @@ class LiveController:
                 self.follower.reset()
 
     def status_text(self) -> str:
+        """The status panel: message, pelvis, goal, distance and generation speed (markdown)."""
         p = self.pelvis()
         goal = "none" if self.goal is None else f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) m"
         dist = "–" if self.goal is None else f"{np.hypot(*(self.goal[:2] - p[:2])):.2f} m"

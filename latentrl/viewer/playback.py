@@ -41,9 +41,11 @@ class CameraFollower:
         self.target: np.ndarray | None = None
 
     def reset(self) -> None:
+        """Forget the followed point: the next update moves the cameras."""
         self.target = None
 
     def update(self, pelvis: np.ndarray, height: float = 0.8) -> None:
+        """Move the cameras to follow ``pelvis`` once it moved :data:`FOLLOW_STEP_M` from the last point followed."""
         target = np.array([pelvis[0], pelvis[1], height], dtype=np.float64)
         if self.target is not None and np.linalg.norm(target - self.target) < FOLLOW_STEP_M:
             return
@@ -87,6 +89,7 @@ class Player:
         self.thread = threading.Thread(target=self._run, name="latentrl-view", daemon=True)
 
     def start(self) -> None:
+        """Start the playback thread."""
         self.thread.start()
 
     def select(self, label: str) -> None:
@@ -105,6 +108,7 @@ class Player:
             self._draw()
 
     def toggle(self) -> None:
+        """Play or pause (playing from the end starts over)."""
         with self.lock:
             self.playing = not self.playing
             if self.playing and self.clip is not None and self.frame >= self.clip.frames - 1:

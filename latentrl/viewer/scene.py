@@ -25,6 +25,7 @@ BONES = np.array([(PARENTS[j], j) for j in range(len(PARENTS)) if PARENTS[j] >= 
 
 
 def side_colour(joint: int) -> tuple[int, int, int]:
+    """The colour of a joint's side of the body: left, right or centre."""
     name = JOINT_NAMES[joint]
     return LEFT if name.startswith("left") else RIGHT if name.startswith("right") else CENTRE
 
@@ -126,6 +127,7 @@ class SkeletonScene:
         self.targets: Any = None
 
     def set_floor(self, centre_xy: np.ndarray, size: float) -> None:
+        """Centre the floor grid at ``centre_xy`` with sides of ``size`` metres."""
         self.grid.width = self.grid.height = float(size)
         self.grid.position = (float(centre_xy[0]), float(centre_xy[1]), 0.0)
 
@@ -158,6 +160,7 @@ class SkeletonScene:
         self.trail.points = trail_segments(pelvis)
 
     def show_goal(self, goal: np.ndarray | None) -> None:
+        """Show the goal marker at ``goal`` (world metres), or hide it for None."""
         if goal is None:
             self.goal.visible = False
             return
@@ -195,4 +198,5 @@ class SkeletonScene:
             ghost.colors = np.broadcast_to(colour, np.asarray(ghost.points).shape).copy()
 
     def set_body_visible(self, visible: bool) -> None:
+        """Show or hide the skeleton."""
         self.body.visible = bool(visible)

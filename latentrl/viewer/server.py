@@ -52,6 +52,7 @@ def check_port(host: str, port: int) -> None:
 
 
 def url_of(host: str, port: int) -> str:
+    """The URL to open for a server bound to ``host:port`` (a wildcard host shows 127.0.0.1)."""
     shown = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
     return f"http://{shown}:{port}"
 

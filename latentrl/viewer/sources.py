@@ -49,6 +49,7 @@ class Clip:
 
     @property
     def frames(self) -> int:
+        """Number of frames of the clip."""
         return len(self.joints)
 
     def keyframes(self) -> dict[int, np.ndarray]:
@@ -75,6 +76,7 @@ class Entry:
     """An optimized motion's targets as ``report.json`` lists them (``motion_frame``, ``position``)."""
 
     def load(self) -> Clip:
+        """The entry's clip, with its point targets and their frames when it has any."""
         clip = load_clip(self.path, self.waypoints)
         if self.targets:
             clip.targets = np.asarray([t["position"] for t in self.targets], dtype=np.float32).reshape(-1, 3)
@@ -194,6 +196,7 @@ def open_source(path: str | Path) -> Source:
 
 
 def motion_source(path: Path) -> Source:
+    """One motion file as a source, with its stored outcome and its motion metrics."""
     clip = load_clip(path)  # checks the file now, not when the browser connects
     scalars = _npz_scalars(path)
     metrics = {k: scalars[k] for k in ("success", "end", "reach_time_s") if k in scalars}
@@ -216,6 +219,7 @@ def _npz_scalars(path: Path) -> dict[str, Any]:
 
 
 def folder_source(path: Path) -> Source:
+    """Every motion file of a folder as a source, one entry each, in name order."""
     files = sorted(path.glob("*.npz"))
     entries = [Entry(f.name, f) for f in files]
     return Source(str(path), "folder", entries, f"{len(files)} motion files")
@@ -319,6 +323,7 @@ def latest_evaluation(run: Path) -> Path | None:
 
 
 def run_source(run: Path) -> Source:
+    """A training run as a source: the entries of its latest evaluation folder."""
     folder = latest_evaluation(run)
     if folder is None:
         final = run / "final.pt"
