@@ -264,6 +264,7 @@ def _bench_optimize_command(bsub) -> None:
     opt.add_argument("--threads", type=_pos_int)
     opt.add_argument("--skip-suites", action="store_true", help="only the cost rows")
     opt.add_argument("--json", help="write all figures to this JSON file")
+    opt.add_argument("--plot", metavar="PNG", help="mean goal error against wall time, per suite and start")
     opt.set_defaults(func=_bench_optimize)
 
 

@@ -271,3 +271,19 @@ def test_a_dart_checkpoint_optimizes_too(parity_dir):
     r = optimize(dart, suite(target_problem(dart, primitives=2, seed=3)),
                  OptimizeSettings(steps=30, lr=0.1, init="zeros", weights=NO_REG))[0]
     assert r.metrics["goal_error_cm"] < r.metrics["goal_error_start_cm"] / 3
+
+
+def test_bench_optimize_writes_rows_curves_and_plot(tmp_path, capsys):
+    """``latentrl bench optimize`` on one shipped suite, 2 steps: a row with its figures, a curve, the plot."""
+    out = tmp_path / "b.json"
+    assert main(["bench", "optimize", "--suites", "joint_targets", "--steps", "2", "--cost-steps", "1",
+                 "--models", "default", "--device", "cpu", "--json", str(out), "--plot", str(tmp_path / "b.png")]) == 0
+    data = json.loads(out.read_text())
+    (row,) = data["suites"]
+    assert row["suite"] == "joint_targets" and row["problems"] == 7 and row["goal_error_cm"] > 0
+    assert row["history_error_cm"] == 0.0 and row["jerk_unconstrained"] > 0
+    t, e = data["curves"]["joint_targets cold (cpu)"]
+    assert len(t) == len(e) == 2 and t[1] > t[0] > 0
+    (cost,) = data["cost"]
+    assert cost["model"] == "default" and cost["seconds_per_100_steps_64_frames"] > 0
+    assert (tmp_path / "b.png").read_bytes()[:4] == b"\x89PNG"

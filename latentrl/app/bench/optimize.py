@@ -43,9 +43,11 @@ class OptimizeBenchRequest:
     threads: int | None = None
     skip_suites: bool = False
     json: str | None = None
+    plot: str | None = None
+    """PNG: mean goal error against wall time per suite, cold and warm (one line each)."""
 
 
-def _suite_rows(req: OptimizeBenchRequest, device: str, warm_fn) -> list[dict]:
+def _suite_rows(req: OptimizeBenchRequest, device: str, warm_fn, curves: dict) -> list[dict]:
     model = load_motion_model("default", device=device)
     rows = []
     for name in req.suites:
@@ -65,12 +67,48 @@ def _suite_rows(req: OptimizeBenchRequest, device: str, warm_fn) -> list[dict]:
                    "seconds_per_problem": wall / len(results),
                    "amortized_seconds_to_1cm_mean": sum(to_1cm) / len(to_1cm) if to_1cm else None, **s}
             rows.append(row)
+            curves[f"{name} {label} ({device})"] = mean_curve(results)
             print(f"{name:>14} {label:>4} {device}: goal {s['goal_error_cm']:.3f} cm, within 1 cm "
                   f"{s['share_within_1cm']:.0%}, history {s['history_error_cm']:.3f} cm, skate "
                   f"{s['skate_cm_s']:.2f} cm/s, floor {s['floor_cm']:.2f} cm, jerk {s['jerk']:.0f} (plain rollouts "
                   f"{s['jerk_unconstrained']:.0f}), {wall / len(results):.2f} s per problem "
                   f"({len(results)} problems, batch {req.batch}, {wall:.1f} s)")
     return rows
+
+
+def mean_curve(results) -> tuple[list[float], list[float]]:
+    """(seconds per problem, mean goal error cm) at each step, over the problems of a suite (per batch time / size)."""
+    steps = min(len(r.trace) for r in results)
+    t = [sum(r.trace[k][0] / r.metrics["batch"] for r in results) / len(results) for k in range(steps)]
+    e = [sum(r.trace[k][1] for r in results) / len(results) for k in range(steps)]
+    return t, e
+
+
+def plot_curves(curves: dict, path: str) -> None:
+    """Write the error-against-time plot (log scale) of every suite and start."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from latentrl.safe_io import atomic_write_bytes
+
+    fig, ax = plt.subplots(figsize=(6.5, 4), dpi=100)
+    for label, (t, e) in curves.items():
+        ax.plot(t, e, lw=1.2, ls="--" if " warm " in label else "-", label=label)
+    ax.axhline(1.0, color="gray", lw=0.8, ls=":")
+    ax.set_yscale("log")
+    ax.set_xlabel("wall time per problem (s)")
+    ax.set_ylabel("mean goal error (cm)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue())
+    print(f"wrote {path}")
 
 
 def _cost_row(name: str, device: str, steps: int) -> dict:
@@ -123,11 +161,13 @@ def bench_optimize(req: OptimizeBenchRequest) -> int:
         from latentrl.optim.warm import policy_warm_start
 
         warm_fn = policy_warm_start(req.warm)
-    out = {"hardware": hw, "steps": req.steps, "batch": req.batch, "suites": [], "cost": []}
+    out = {"hardware": hw, "steps": req.steps, "batch": req.batch, "suites": [], "cost": [], "curves": {}}
     for device in devices:
         if not req.skip_suites:
-            out["suites"] += _suite_rows(req, device, warm_fn)
+            out["suites"] += _suite_rows(req, device, warm_fn, out["curves"])
         for name in req.models:
             out["cost"].append(_cost_row(name, device, req.cost_steps))
+    if req.plot and out["curves"]:
+        plot_curves(out["curves"], req.plot)
     write_json(req.json, out)
     return 0
