@@ -176,7 +176,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         self.text_table = TextTable(self.motion, self.rewards, tuple(texts), text_weights,
                                     self._all_texts(tuple(texts)), self.device)
         self.texts: tuple[str, ...] = self.text_table.texts
-        self._features = feature_range(self.motion)
+        self._feature_range = feature_range(self.motion)  # None: the prior declares no mean/std
         self._setup_spaces()
         self._generator = torch.Generator(device=self.device)
         self._history = HistoryRecorder(self.num_envs, self.motion.latent_dim, record_features) if record_history \
@@ -313,7 +313,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
             # priors without a lock keep working unlocked
             **({"foot_lock": True, "lock_min_weight": self.foot_lock_min_weight} if self.foot_lock else {}),
         )
-        diverged = diverged_envs(out.joints_world, out.state, self.divergence_limit, self.floor_height, self._features)
+        diverged = diverged_envs(out.joints_world, out.state, self.divergence_limit, self.floor_height,
+                                 self._feature_range)
         before = state.world.apply(joints_of(state.history))  # (N, 2, 22, 3)
         future = torch.where(diverged[:, None, None, None], before[:, -1:], out.joints_world)
         reached = self._reached(future, goal) & ~diverged
