@@ -162,3 +162,5 @@ def test_the_toy_tasks_arguments_come_from_env_options(toy_task, tiny_model):
     assert isinstance(env, ToyEnv) and env.distance == 2.5
     with pytest.raises(ConfigError, match="options"):
         _ = EnvConfig(task="toy", options={"speed": 1.0}).section
+    with pytest.raises(ConfigError, match=r"options: task 'reach' takes its arguments from env.reach"):
+        EnvConfig(task="reach", options={"goal_angle_deg": 30}).validate()

@@ -235,6 +235,9 @@ class EnvConfig:
     def validate(self) -> None:
         """Every field in range: a registered task (and its ``options``), sizes, step settings, texts, weights."""
         require(self.task in TASKS, "task", f"expected one of {tuple(TASKS)}, got '{self.task}'")
+        require(not (self.options and self._has_section()), "options",
+                f"task '{self.task}' takes its arguments from env.{self.task}, not env.options "
+                f"(got {sorted(self.options)})")
         if not self._has_section():
             section = self.section
             if callable(getattr(section, "validate", None)):
