@@ -17,6 +17,7 @@ import torch
 
 from latentrl.app.cli import main
 from latentrl.app.train import TrainConfig, run_training
+from latentrl.config import require
 from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.tasks import TASKS, TaskSpec, register_task
 from latentrl.evaluation.episodes import end_of, rollout
@@ -32,8 +33,7 @@ class ToyConfig:
     distance: float = 1.0
 
     def validate(self) -> None:
-        if self.distance <= 0:
-            raise ValueError("distance must be > 0")
+        require(self.distance > 0, "distance", f"must be > 0 metres, got {self.distance}")
 
     def kwargs(self) -> dict:
         return {"distance": self.distance}
@@ -162,5 +162,7 @@ def test_the_toy_tasks_arguments_come_from_env_options(toy_task, tiny_model):
     assert isinstance(env, ToyEnv) and env.distance == 2.5
     with pytest.raises(ConfigError, match="options"):
         _ = EnvConfig(task="toy", options={"speed": 1.0}).section
+    with pytest.raises(ConfigError, match=r"options.distance: must be > 0 metres, got -1"):
+        EnvConfig(task="toy", options={"distance": -1.0}).validate()
     with pytest.raises(ConfigError, match=r"options: task 'reach' takes its arguments from env.reach"):
         EnvConfig(task="reach", options={"goal_angle_deg": 30}).validate()
