@@ -52,11 +52,13 @@ _ITER_RE = re.compile(r"^iter_(\d+)\.pt$")
 
 
 class LoadedCheckpoint(NamedTuple):
+    """A checkpoint file and its loaded state, as found when resuming a run."""
     path: Path
     state: dict
 
 
 class LoadedPolicy(NamedTuple):
+    """A checkpoint's policy rebuilt for evaluation, with the metadata it was saved with."""
     policy: ActorCritic
     """In eval mode, on the requested device; its normalizer (if any) is frozen."""
     checkpoint: dict
@@ -227,6 +229,7 @@ MAX_SPEC_DIM = 1_000_000
 
 
 def iteration_path(run_dir: str | Path, iteration: int) -> Path:
+    """Where a run keeps iteration ``iteration``'s checkpoint (``<run>/checkpoints/iter_N.pt``)."""
     return Path(run_dir) / CHECKPOINT_DIR / f"iter_{iteration}.pt"
 
 
@@ -349,6 +352,7 @@ def check_resumable(state: Mapping[str, Any], path: Path, *, trainer: str, confi
 
 
 def check_shapes(state: Mapping[str, Any], path: Path, obs_dim: int, action_dim: int) -> None:
+    """Refuse a checkpoint whose policy sizes differ from the env's, naming the file and both shapes."""
     spec = state["policy_spec"]
     if (spec["obs_dim"], spec["action_dim"]) != (obs_dim, action_dim):
         raise CheckpointError(f"{path}: policy expects observations of {spec['obs_dim']} and actions of "

@@ -59,6 +59,7 @@ class PolicyConfig:
     """Normalized observations are clipped to +/- this many standard deviations."""
 
     def validate(self) -> None:
+        """Check every field once; a bad one raises a one-line ``ConfigError`` naming it."""
         require(self.architecture in ARCHITECTURES, "architecture",
                 f"expected one of {ARCHITECTURES}, got '{self.architecture}'")
         require(0 < self.latent_dim <= MAX_WIDTH, "latent_dim", f"must lie in [1, {MAX_WIDTH}], got {self.latent_dim}")
@@ -148,6 +149,7 @@ class PPOConfig:
     """Iterations between calls of the evaluation hook (0: never)."""
 
     def validate(self) -> None:
+        """Check every field once; a bad one raises a one-line ``ConfigError`` naming it."""
         require(self.total_steps > 0, "total_steps", f"must be > 0, got {self.total_steps}")
         require(self.num_steps > 0, "num_steps", f"must be > 0, got {self.num_steps}")
         require(self.num_minibatches > 0, "num_minibatches", f"must be > 0, got {self.num_minibatches}")

@@ -40,6 +40,7 @@ def launched() -> bool:
 
 
 def local_rank() -> int:
+    """This process's GPU index on its node (torchrun's ``LOCAL_RANK``; 0 outside torchrun)."""
     return int(os.environ.get("LOCAL_RANK", "0"))
 
 
@@ -66,6 +67,7 @@ class Collective:
 
     @property
     def enabled(self) -> bool:
+        """More than one rank: only then do the collectives communicate."""
         return self.world_size > 1
 
     @property
@@ -161,6 +163,7 @@ class Collective:
         return None
 
     def barrier(self) -> None:
+        """Wait until every rank gets here (nothing to wait for in one process)."""
         if self.enabled:
             torch.distributed.barrier()
 

@@ -23,6 +23,7 @@ from latentrl.ppo.distributed import SINGLE, Collective
 
 
 class RolloutSummary(NamedTuple):
+    """What one rollout reports to the log: window statistics, reward-term means, episode and divergence counts."""
     stats: RolloutStats
     """Means over the rolling window of finished episodes."""
     reward_terms: dict[str, float]
@@ -101,6 +102,7 @@ class EpisodeRecorder:
         return RolloutSummary(self.stats(), means, episodes, diverged)
 
     def stats(self) -> RolloutStats:
+        """Mean return, length and success over the rolling window of finished episodes."""
         def mean(values: deque[float]) -> float | None:
             return sum(values) / len(values) if values else None
 

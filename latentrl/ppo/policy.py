@@ -40,6 +40,7 @@ _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 
 
 class PolicyOutput(NamedTuple):
+    """The actor-critic's forward pass: action mean, log standard deviation and value."""
     mean: torch.Tensor
     """(B, A) action mean, ``action_scale * tanh(.)``."""
     log_std: torch.Tensor
@@ -49,6 +50,7 @@ class PolicyOutput(NamedTuple):
 
 
 class PolicyStep(NamedTuple):
+    """An action for the rollout, with the log-probability and value PPO stores beside it."""
     action: torch.Tensor
     """(B, A) sampled action (the mean when deterministic)."""
     log_prob: torch.Tensor
@@ -58,6 +60,7 @@ class PolicyStep(NamedTuple):
 
 
 class ActionEvaluation(NamedTuple):
+    """Stored actions scored under the current policy: the inputs of the PPO loss."""
     log_prob: torch.Tensor
     """(B,) log-density of the given actions."""
     entropy: torch.Tensor
@@ -127,6 +130,7 @@ class MLP(nn.Module):
         self.act = nn.LeakyReLU()
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Every layer followed by LeakyReLU."""
         for layer in self.layers:
             x = self.act(layer(x))
         return x
@@ -139,6 +143,7 @@ class ResidualBlock(MLP):
         super().__init__([dim, dim, dim])
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The input plus the two-layer MLP's output."""
         return x + super().forward(x)
 
 
@@ -151,6 +156,7 @@ class ResidualHead(nn.Module):
         self.out_fc = nn.Linear(dim, out_dim)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The residual blocks, then the linear output layer."""
         for block in self.layers:
             x = block(x)
         return self.out_fc(x)
@@ -165,6 +171,7 @@ class MLPHead(nn.Module):
         self.out_fc = nn.Linear(hidden[-1] if hidden else in_dim, out_dim)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The hidden MLP, then the linear output layer."""
         return self.out_fc(self.body(x))
 
 
@@ -186,6 +193,7 @@ class GroupEncoder(nn.Module):
         return torch.cat([obs[..., a:b] for a, b in ranges], dim=-1)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """Encode each observation group, concatenate the codes and embed them."""
         parts = [getattr(self, f"{g}_encoder")(self._take(obs, g)) for g in self.groups]
         return self.embedding_encoder(torch.cat(parts, dim=-1))
 

@@ -63,4 +63,5 @@ class RunProgress:
         self.write(" | ".join(parts))
 
     def close(self) -> None:
+        """Close the progress bar (``train.log`` is opened per line and needs no closing)."""
         self.bar.close()

@@ -43,6 +43,7 @@ Evaluator = Callable[[ActorCritic], EvalReport]
 
 
 class IterationTime(NamedTuple):
+    """Where one iteration's wall time went: collecting the rollout or updating the policy."""
     collection_s: float
     """Wall seconds collecting the rollout (GAE included)."""
     update_s: float
@@ -50,6 +51,7 @@ class IterationTime(NamedTuple):
 
 
 class TrainResult(NamedTuple):
+    """What a finished training run returns: where it wrote, how far it got and its last statistics."""
     run_dir: Path
     final_checkpoint: Path
     iterations: int
@@ -228,6 +230,7 @@ class Runner:
 
     # ------------------------------------------------------------------ backend
     def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
+        """Create the policy, optimizer and backend state for this env (each trainer implements it)."""
         raise NotImplementedError
 
     def learn(self) -> None:
@@ -235,19 +238,24 @@ class Runner:
         raise NotImplementedError
 
     def rollout_stats(self) -> RolloutStats:
+        """Episode statistics of the recent rollouts, for the log and the result."""
         raise NotImplementedError
 
     def checkpoint_extra(self) -> dict:
+        """Backend state stored in each checkpoint beside the common fields (none by default)."""
         return {}
 
     def load_extra(self, extra: Mapping[str, Any]) -> None:
+        """Restore what :meth:`checkpoint_extra` stored, when resuming (nothing by default)."""
         pass
 
     def after_save(self, path: Path) -> None:
+        """Called after a checkpoint was written to ``path`` (nothing by default)."""
         pass
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint(self) -> dict:
+        """The checkpoint state of this moment: weights, optimizer, configs, motion, env settings and world size."""
         state = ckpt.make_checkpoint(trainer=self.name, iteration=self.iteration, env_steps=self.env_steps,
                                      elapsed_s=self.elapsed_s, policy=self.policy, optimizer=self.optimizer,
                                      config=self.config, motion=self.motion, env=self.env,
@@ -292,6 +300,7 @@ class Runner:
 
     @property
     def policy_device(self) -> torch.device:
+        """The device the policy's parameters live on."""
         return next(self.policy.parameters()).device
 
     def restore_pending_rng(self) -> bool:

@@ -88,17 +88,21 @@ class LatentActorCriticPolicy(ActorCriticPolicy):
         return self.net.log_std
 
     def forward(self, obs: torch.Tensor, deterministic: bool = False):
+        """SB3's rollout call: sampled action, value (B, 1) and log-probability from our actor-critic."""
         step = self.net.act(obs.float(), deterministic)
         return step.action, step.value[:, None], step.log_prob
 
     def evaluate_actions(self, obs: torch.Tensor, actions: torch.Tensor):
+        """SB3's loss inputs: value (B, 1), log-probability and entropy of the stored actions."""
         out = self.net.evaluate(obs.float(), actions)
         return out.value[:, None], out.log_prob, out.entropy
 
     def predict_values(self, obs: torch.Tensor) -> torch.Tensor:
+        """Value (B, 1), for SB3's bootstrap at the end of a rollout."""
         return self.net.value(obs.float())[:, None]
 
     def get_distribution(self, obs: torch.Tensor):
+        """SB3's Gaussian action distribution built from our mean and log standard deviation."""
         out = self.net(obs.float())
         return self.action_dist.proba_distribution(out.mean, out.log_std)
 
@@ -118,6 +122,7 @@ class IterationLinearSchedule:
         self.lr, self.total, self.batch, self.iterations = lr, total_steps, batch_size, num_iterations
 
     def __call__(self, progress_remaining: float) -> float:
+        """The learning rate SB3 asks for at ``progress_remaining``: iteration k's linear anneal."""
         k = round((1.0 - progress_remaining) * self.total / self.batch) - 1
         return self.lr * (1.0 - max(k, 0) / self.iterations)
 
@@ -151,10 +156,12 @@ class MonitorOutput(KVWriter):
         self.latest: dict[str, Any] = {}
 
     def write(self, key_values: dict[str, Any], key_excluded: dict[str, Any], step: int = 0) -> None:
+        """Keep SB3's latest values and write them through the monitor."""
         self.latest.update(key_values)
         self.monitor.log_sb3(step, key_values, key_excluded)
 
     def close(self) -> None:
+        """Nothing to release: the monitor belongs to the runner, which closes it."""
         pass
 
 
@@ -242,6 +249,7 @@ class Sb3Trainer(Runner):
     checkpoint_suffixes = (SB3_ZIP_SUFFIX,)
 
     def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
+        """SB3's PPO with our actor-critic policy on this env."""
         from stable_baselines3 import PPO
 
         kwargs = sb3_ppo_kwargs(self.cfg, policy_cfg, self.plan, plain_layout(observation_layout(self.env, layout)))
@@ -256,9 +264,11 @@ class Sb3Trainer(Runner):
 
     # ------------------------------------------------------------------ checkpoints
     def checkpoint_extra(self) -> dict:
+        """SB3's step and update counters, so a resumed run continues its schedule."""
         return {"num_timesteps": self.env_steps, "n_updates": int(self.model._n_updates)}
 
     def load_extra(self, extra: Mapping[str, Any]) -> None:
+        """Put back SB3's step and update counters."""
         self.model.num_timesteps = extra["num_timesteps"]
         self.model._n_updates = extra["n_updates"]
 
@@ -285,6 +295,7 @@ class Sb3Trainer(Runner):
         self.restart_clock()
 
     def rollout_stats(self) -> RolloutStats:
+        """Episode statistics from SB3's episode-info and success buffers."""
         eps, succ = self.model.ep_info_buffer or [], self.model.ep_success_buffer or []
         return RolloutStats(float(np.mean([e["r"] for e in eps])) if eps else None,
                             float(np.mean([e["l"] for e in eps])) if eps else None,

@@ -44,6 +44,7 @@ class NativeTrainer(Runner):
     name = "native"
 
     def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
+        """Our PPO, its rollout buffer and the episode recorder, sized for this env."""
         env, ppo = self.env, self.cfg
         self.device = torch.device(ppo.device)
         obs_dim = int(np.prod(env.single_observation_space.shape))
@@ -57,6 +58,7 @@ class NativeTrainer(Runner):
         self.action_high = torch.as_tensor(space.high, dtype=torch.float32, device=self.device)
 
     def rollout_stats(self) -> RolloutStats:
+        """Statistics of the episode recorder's rolling window."""
         return self.episodes.stats()
 
     def _reset_env(self) -> torch.Tensor:
@@ -87,9 +89,11 @@ class NativeTrainer(Runner):
         return obs
 
     def update(self) -> dict[str, float]:
+        """One PPO update over the collected rollout; returns its statistics."""
         return self.algorithm.update()
 
     def learn(self) -> None:
+        """Collect, update, log, evaluate and checkpoint until the planned iterations are done or a stop is asked."""
         obs = self._reset_env()
         self.restart_clock()
         while self.iteration < self.plan.num_iterations and not self.stop_requested:
