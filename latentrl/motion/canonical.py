@@ -52,10 +52,12 @@ class WorldTransform(NamedTuple):
         return WorldTransform(self.rotation @ rotation, new_t)
 
     def index(self, mask_or_idx) -> WorldTransform:
+        """The transforms of the selected sequences (boolean mask or indices), e.g. the envs being reset."""
         return WorldTransform(self.rotation[mask_or_idx], self.translation[mask_or_idx])
 
     @staticmethod
     def identity(batch: int, device=None, dtype=torch.float32) -> WorldTransform:
+        """``batch`` transforms that leave points where they are (canonical frame = world frame)."""
         eye = torch.eye(3, device=device, dtype=dtype).expand(batch, 3, 3).clone()
         return WorldTransform(eye, torch.zeros(batch, 3, device=device, dtype=dtype))
 

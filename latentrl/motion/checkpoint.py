@@ -100,6 +100,7 @@ def _cached_sha256(path: str, mtime_ns: int) -> str:
 
 
 def file_sha256(path: str | Path) -> str:
+    """sha256 of a file's bytes, read in 1 MiB chunks so large weights never sit in memory twice."""
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):

@@ -106,6 +106,7 @@ class MotionClip:
 
     @property
     def frames(self) -> int:
+        """Number of frames in the clip."""
         return len(self.joints)
 
     @property

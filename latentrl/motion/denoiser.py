@@ -121,6 +121,7 @@ class Denoiser(nn.Module):
 
 
 class DenoiserTransformer(Denoiser):
+    """DART's transformer denoiser: timestep, text and history tokens, then the noisy latent tokens it reads out."""
     def __init__(self, config: DenoiserConfig):
         super().__init__()
         self.config = config
@@ -221,6 +222,7 @@ class DenoiserMLP(Denoiser):
         return text @ w[:, h : h + e].T + hist @ w[:, h + e : h + e + self.history_dim].T + self.input_project.bias
 
     def predict(self, x_t: torch.Tensor, timesteps: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """The network's raw output (x0 or v, ``config.prediction``), (B, n, D), from one MLP pass."""
         b = x_t.shape[0]
         h = self.config.h_dim
         w = self.input_project.weight

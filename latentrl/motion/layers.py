@@ -136,4 +136,5 @@ class LearnedPositionalEncoding(nn.Module):
         nn.init.uniform_(self.pe)
 
     def rows(self, length: int) -> torch.Tensor:
+        """(length, h) first rows, for adding to batch-first sequences."""
         return self.pe[:length, 0]

@@ -73,6 +73,7 @@ class PackedLinear(nn.Linear):
     pack_key: int
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The linear layer through the prepacked oneDNN weight (same result as ``nn.Linear``)."""
         return linear(x, self.weight, self.bias, self.pack_key)
 
 

@@ -149,6 +149,7 @@ class MotionModel(nn.Module):
     # ------------------------------------------------------------------ properties
     @property
     def device(self) -> torch.device:
+        """The device the model's buffers and weights live on."""
         return self.mean.device
 
     @property
@@ -158,14 +159,17 @@ class MotionModel(nn.Module):
 
     @property
     def latent_dim(self) -> int:
+        """Size of the flat latent (tokens * width) = the RL action size."""
         return self.latent_shape[0] * self.latent_shape[1]
 
     @property
     def text_dim(self) -> int:
+        """Size of the text embedding the denoiser is conditioned on."""
         return self.denoiser.config.clip_dim
 
     @property
     def normalizer(self) -> Normalizer:
+        """The feature normalizer of the model's mean and std, on the model's device."""
         return Normalizer(self.mean, self.std).to(self.device)
 
     def pack_for_cpu(self, rows: int = 10) -> int:

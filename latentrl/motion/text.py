@@ -73,6 +73,7 @@ class HashedTextEncoder:
         return feats
 
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
+        """(N,) prompts -> (N, dim) unit-norm signed hashes of their words, bigrams and character trigrams."""
         out = torch.zeros(len(texts), self.dim)
         for row, text in enumerate(texts):
             for feat in self._features(text):
@@ -119,6 +120,7 @@ class SentenceTextEncoder:
         return self._model
 
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
+        """(N,) prompts -> (N, 384) normalized sentence embeddings; empty prompts stay zero."""
         out = torch.zeros(len(texts), self.dim)
         idx = [i for i, t in enumerate(texts) if t.strip()]
         if idx:
@@ -177,9 +179,11 @@ class TableTextEncoder:
 
     @property
     def prompts(self) -> list[str]:
+        """The prompts the table knows, sorted (for error messages and listings)."""
         return sorted(k for k in self.table if k)
 
     def encode(self, texts: Sequence[str]) -> torch.Tensor:
+        """(N,) prompts -> (N, dim) table vectors; unknown prompts go to the fallback or raise ``TextError``."""
         out = torch.zeros(len(texts), self.dim)
         unknown = []
         for i, text in enumerate(texts):

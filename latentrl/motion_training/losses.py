@@ -59,6 +59,7 @@ class StageConfig:
     """Share of steps in the scheduled stage (rollout probability rising 0 -> 1); the rest is rollout."""
 
     def validate(self) -> None:
+        """Check every field once; a bad one raises a one-line ``ConfigError`` naming it."""
         require(self.steps >= 0, "steps", f"must be >= 0, got {self.steps}")
         require(self.batch_size > 0, "batch_size", f"must be > 0, got {self.batch_size}")
         require(self.learning_rate > 0, "learning_rate", f"must be > 0, got {self.learning_rate}")
@@ -85,6 +86,7 @@ class StageConfig:
 
 @dataclass
 class VAETrainConfig(StageConfig):
+    """Settings of the VAE stage: loss weights (KL, temporal consistency, planted feet) and its batch shape."""
     kl_weight: float = 1e-6
     aux_weight: float = 100.0
     """Weight of each temporal-difference consistency term."""
@@ -94,6 +96,7 @@ class VAETrainConfig(StageConfig):
     num_primitives: int = 8
 
     def validate(self) -> None:
+        """Check the common stage fields, then that the loss weights are not negative."""
         super().validate()
         require(self.kl_weight >= 0, "kl_weight", f"must be >= 0, got {self.kl_weight}")
         require(self.aux_weight >= 0, "aux_weight", f"must be >= 0, got {self.aux_weight}")
@@ -102,6 +105,7 @@ class VAETrainConfig(StageConfig):
 
 @dataclass
 class DenoiserTrainConfig(StageConfig):
+    """Settings of the denoiser stage: its reconstruction, consistency and planted-foot loss weights."""
     latent_rec_weight: float = 1.0
     feature_rec_weight: float = 1.0
     aux_weight: float = 1e4
@@ -111,6 +115,7 @@ class DenoiserTrainConfig(StageConfig):
     """Weight of the planted-foot loss on the decoded prediction (see ``VAETrainConfig.plant_weight``)."""
 
     def validate(self) -> None:
+        """Check the common stage fields, then that the loss weights are not negative."""
         super().validate()
         for name in ("latent_rec_weight", "feature_rec_weight", "aux_weight", "plant_weight"):
             require(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
@@ -194,6 +199,7 @@ class EMA:
 
     @torch.no_grad()
     def update(self, module: nn.Module) -> None:
+        """Move the average towards ``module``'s parameters (a plain copy when ``decay`` is 0); buffers are copied."""
         if self.decay <= 0:
             self.module.load_state_dict(module.state_dict())
             return
@@ -204,12 +210,14 @@ class EMA:
 
 
 def make_optimizer(module: nn.Module, cfg: StageConfig) -> torch.optim.Optimizer:
+    """AdamW over the trainable parameters, with the stage's learning rate and weight decay."""
     return torch.optim.AdamW(
         [p for p in module.parameters() if p.requires_grad], lr=cfg.learning_rate, weight_decay=cfg.weight_decay
     )
 
 
 def set_lr(optimizer: torch.optim.Optimizer, cfg: StageConfig, step: int) -> float:
+    """Set and return the learning rate of ``step``: linearly annealed to 0 over the stage, or constant."""
     lr = cfg.learning_rate * (1.0 - step / max(cfg.steps, 1)) if cfg.anneal_lr else cfg.learning_rate
     for group in optimizer.param_groups:
         group["lr"] = lr
@@ -325,10 +333,12 @@ def build_models(shape: ModelShapeConfig) -> tuple[PrimitiveVAE, torch.nn.Module
 
 
 def timer() -> float:
+    """Wall-clock seconds for measuring stage and step durations."""
     return time.perf_counter()
 
 
 def ensure_dir(path: str | Path) -> Path:
+    """The folder ``path``, created with its parents if missing."""
     p = Path(path)
     p.mkdir(parents=True, exist_ok=True)
     return p

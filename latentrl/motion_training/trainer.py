@@ -62,6 +62,7 @@ class _Stage:
 
 @dataclass
 class MotionDataConfig:
+    """Where the training motions come from and which segments seed the resets."""
     source: str = "locomotion"
     """'locomotion' (generate with the procedural generator) or a folder of motion-text .npz files."""
     locomotion: LocomotionConfig = field(default_factory=LocomotionConfig)
@@ -91,6 +92,7 @@ class MotionTrainConfig:
     """Steps between trainer checkpoints (0 = only at stage ends)."""
 
     def validate(self) -> None:
+        """Check every field once; a bad one raises a one-line ``ConfigError`` naming it."""
         require(0 <= self.threads <= MAX_THREADS, "threads",
                 f"must lie in [0, {MAX_THREADS}] (0: torch's default), got {self.threads}")
         require_seed(self.seed)
@@ -188,6 +190,7 @@ class MotionTrainer:
         return 2 * 4 * weights + weights + (16 << 20)
 
     def state_dict(self) -> dict:
+        """Everything a resumed run needs: stage, step, models, EMAs, optimizers, RNG states and the config."""
         return {
             "stage": self.stage,
             "step": self.step,
@@ -204,9 +207,11 @@ class MotionTrainer:
         }
 
     def save_checkpoint(self) -> Path:
+        """Write the trainer state atomically to ``<run>/checkpoints/state.pt``."""
         return save_torch_atomic(self.state_dict(), self.run_dir / "checkpoints" / "state.pt")
 
     def load_checkpoint(self, path: Path) -> None:
+        """Resume from a trainer checkpoint; refuse one of another kind or written with a different config."""
         state = load_torch(path, what="trainer checkpoint")
         keys = ("stage", "step", "elapsed", "vae", "vae_ema", "vae_opt", "denoiser", "den_ema", "den_opt", "generator",
                 "torch_rng", "config")
@@ -424,6 +429,7 @@ def _optimizer_step(loss: torch.Tensor, module, optimizer, ema: EMA, grad_clip: 
 
 
 def copy_module(module):
+    """A CPU copy of ``module``, so the saved model does not share weights with the training one."""
     import copy
 
     return copy.deepcopy(module).cpu()
