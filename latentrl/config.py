@@ -172,5 +172,6 @@ def seed_problem(value: object) -> str | None:
 
 
 def require_seed(value: object, field: str = "seed") -> None:
+    """Raise ``ConfigError('field: ...')`` unless ``value`` is a usable random seed."""
     problem = seed_problem(value)
     require(problem is None, field, str(problem))

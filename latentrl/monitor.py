@@ -127,6 +127,7 @@ class Monitor:
 
     def log_time(self, step: int, fps: float | None = None, collection_s: float | None = None,
                  update_s: float | None = None) -> None:
+        """Throughput and wall seconds of collection and update, each logged only when given."""
         self._scalar(FPS, fps, step)
         self._scalar(COLLECTION_S, collection_s, step)
         self._scalar(UPDATE_S, update_s, step)
@@ -170,9 +171,11 @@ class Monitor:
             self.writer.add_image(tag, fig, int(step), dataformats="HWC")
 
     def flush(self) -> None:
+        """Push pending events to disk, so a running TensorBoard sees them."""
         self.writer.flush()
 
     def close(self) -> None:
+        """Flush and close the events file."""
         self.writer.close()
 
 

@@ -49,6 +49,7 @@ class RunLock:
         return self
 
     def release(self) -> None:
+        """Give the lock back (closing the file drops it); nothing happens when it is not held."""
         if self._fd is not None:
             os.close(self._fd)  # closing drops the flock; the file stays (unlinking would race a waiting opener)
             self._fd = None

@@ -86,6 +86,7 @@ def _umask() -> int:
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` as UTF-8, atomically (temporary sibling, fsync, rename)."""
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 

@@ -405,6 +405,7 @@ def _optimize(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``latentrl`` argument parser with every subcommand (motion, data, train, eval, optimize, bench, ...)."""
     from latentrl import __version__
 
     parser = _Parser(prog="latentrl", description="Train RL controllers in DART's latent motion space.")

@@ -112,6 +112,7 @@ class PrimitiveDataset:
 
     @property
     def num_frames(self) -> int:
+        """Frames over all sequences (each sequence's features span its frames minus one)."""
         return sum(len(f) + 1 for f in self.features)
 
     def text_frame_counts(self) -> dict[str, int]:

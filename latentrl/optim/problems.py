@@ -71,6 +71,7 @@ class Problem:
 
     @property
     def num_frames(self) -> int:
+        """Frames the problem generates (8 per primitive)."""
         return self.primitives * FUTURE_LENGTH
 
 
@@ -278,6 +279,7 @@ class Targets:
 
     @property
     def valid(self) -> torch.Tensor:
+        """(B, K) mask of real target rows (padding has weight 0)."""
         return self.weights > 0
 
 

@@ -10,6 +10,7 @@ from latentrl.errors import LatentRLError
 
 
 def write_json(path: str | None, data: dict) -> None:
+    """Write a benchmark's results as JSON (atomically) when ``--json`` names a file; say where."""
     if path:
         from latentrl.safe_io import atomic_write_text
 
@@ -18,6 +19,7 @@ def write_json(path: str | None, data: dict) -> None:
 
 
 def default_devices(requested: list[str] | None) -> list[str]:
+    """The devices to time: those asked for (CUDA refused when absent), else CPU and CUDA when present."""
     if requested:
         for d in requested:
             if d.startswith("cuda") and not torch.cuda.is_available():
