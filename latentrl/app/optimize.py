@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from tqdm import tqdm
 
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import ConfigError
@@ -13,6 +14,7 @@ from latentrl.motion.checkpoint import load_motion_model
 from latentrl.optim import OptimizeSettings, load_suite, optimize
 from latentrl.optim.report import write_outputs
 from latentrl.optim.solver import INITS, unconstrained_jerk
+from latentrl.optim.warm import policy_warm_start
 from latentrl.preflight import NewOutput, check_device, check_writable
 from latentrl.resources import task_file
 from latentrl.timing import hardware
@@ -61,8 +63,6 @@ def optimize_command(req: OptimizeRequest) -> int:
     settings.check()
     warm = None
     if req.init not in INITS:
-        from latentrl.optim.warm import policy_warm_start
-
         warm = policy_warm_start(req.init)
     out_dir = Path(req.out) if req.out else Path.cwd() / f"optimize-{path.stem}"
     check_writable(out_dir, "--out")
@@ -70,23 +70,10 @@ def optimize_command(req: OptimizeRequest) -> int:
     torch.manual_seed(req.seed)
     bar = None
     if req.progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=settings.steps * len(problems), unit="step", desc="optimize", dynamic_ncols=True)
-    batch_sizes = {}
-
-    def on_step(_step: int) -> None:
-        if bar is not None:
-            bar.update(batch_sizes.get("n", 1))
-
     with NewOutput(out_dir):
-        from latentrl.optim.solver import group_problems
-
-        results = []
-        for idx in group_problems(problems, settings.batch):
-            chunk = [problems[i] for i in idx]
-            batch_sizes["n"] = len(chunk)
-            results += optimize(model, chunk, settings, warm_start=warm, on_step=on_step)
+        results = optimize(model, problems, settings, warm_start=warm,
+                           on_step=None if bar is None else (lambda _step, count: bar.update(count)))
         if bar is not None:
             bar.close()
         for r in results:

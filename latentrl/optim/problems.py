@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from latentrl.errors import DataError
+from latentrl.errors import DataError, closest
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS
 from latentrl.motion.text import prompt_problem
@@ -112,8 +112,6 @@ def _point(value, where: _Where, fld: str) -> list[float]:
 
 def _joint(value, where: _Where, fld: str) -> int:
     if not isinstance(value, str) or value not in JOINT_NAMES:
-        from latentrl.errors import closest
-
         hint = closest(value, JOINT_NAMES) if isinstance(value, str) else ""
         raise where.error(fld, f"unknown joint {value!r}{hint}; expected one of {', '.join(JOINT_NAMES)}")
     return JOINT_NAMES.index(value)

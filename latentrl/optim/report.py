@@ -7,6 +7,7 @@ the returned motion (post-processing: none; docs/optimize.md defines every metri
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from pathlib import Path
@@ -103,9 +104,7 @@ def markdown(report: dict) -> str:
 
 def plot_traces(results: list[Result]) -> bytes:
     """PNG: goal error (cm, log scale) against wall time, one line per problem."""
-    import io
-
-    import matplotlib
+    import matplotlib  # loaded only when a plot is drawn
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

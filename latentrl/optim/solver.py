@@ -12,6 +12,7 @@ returned motion is exactly the rollout of the returned noise (floor and skate ar
 from __future__ import annotations
 
 import time
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -21,8 +22,8 @@ import torch
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import DataError, LatentRLError
 from latentrl.motion.canonical import WorldTransform, features_to_world, world_to_canonical
-from latentrl.motion.clip import MotionClip
-from latentrl.motion.representation import HISTORY_LENGTH, joints_of
+from latentrl.motion.clip import MotionClip, primitive_layout
+from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH, joints_of
 from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import FPS
 from latentrl.optim.losses import REGULARIZERS, constraint_loss, goal_error_cm, regularizers
@@ -86,9 +87,7 @@ class Result:
 
     def clip(self) -> MotionClip:
         """The result as the shared motion type (BVH, GIF, the viewer)."""
-        texts = [""] * HISTORY_LENGTH + [t for t in self.problem.texts for _ in range(8)]
-        from latentrl.motion.clip import primitive_layout
-
+        texts = [""] * HISTORY_LENGTH + [t for t in self.problem.texts for _ in range(FUTURE_LENGTH)]
         meta = {"problem": self.problem.name, **{k: v for k, v in self.metrics.items() if v is not None}}
         return MotionClip(self.joints, float(FPS), texts, actions=self.noise, features=self.features,
                           primitive=primitive_layout(self.problem.primitives), meta=meta)
@@ -159,13 +158,12 @@ def initial_noise(problems: list[Problem], model, settings: OptimizeSettings, wa
 
 
 def _problem_seed(seed: int, name: str, sample: int) -> int:
-    import zlib
-
+    """A start seed of one problem and sample that depends on neither the batch nor the suite order."""
     return (seed * 1_000_003 + zlib.crc32(name.encode()) * 31 + sample) % (2**63)
 
 
 def solve_batch(model, problems: list[Problem], settings: OptimizeSettings,
-                warm: torch.Tensor | None = None, on_step: Callable[[int], None] | None = None) -> list[Result]:
+                warm: torch.Tensor | None = None, on_step: Callable[[int, int], None] | None = None) -> list[Result]:
     """Optimize problems of one length together; one :class:`Result` per problem (its best sample)."""
     steps_p = problems[0].primitives
     if any(p.primitives != steps_p for p in problems):
@@ -201,7 +199,7 @@ def solve_batch(model, problems: list[Problem], settings: OptimizeSettings,
         for i, (e, lo) in enumerate(zip(err.tolist(), loss.detach().tolist())):
             traces[i].append((elapsed, e, lo))
         if on_step is not None:
-            on_step(step)
+            on_step(step, len(problems))
         if settings.stop_cm is not None and bool((err <= settings.stop_cm).all()):
             break
     return _finish(model, problems, expanded, start, embeddings, z.detach(), targets, traces, settings, weights)
@@ -273,8 +271,12 @@ def unconstrained_jerk(model, problem: Problem, guidance: float, samples: int = 
 
 def optimize(model, problems: list[Problem], settings: OptimizeSettings | None = None,
              warm_start: Callable[[object, list[Problem]], torch.Tensor] | None = None,
-             on_step: Callable[[int], None] | None = None) -> list[Result]:
-    """Solve every problem; results in suite order. ``warm_start(model, problems) -> (S, B, 1, D)``: start noises."""
+             on_step: Callable[[int, int], None] | None = None) -> list[Result]:
+    """Solve every problem; results in suite order.
+
+    ``warm_start(model, problems) -> (S, B, 1, D)`` gives start noises; ``on_step(step, problems)`` is called after
+    every optimizer step of a batch of ``problems`` problems (a progress bar).
+    """
     settings = settings or OptimizeSettings()
     settings.check()
     if not hasattr(model, "differentiable_step"):

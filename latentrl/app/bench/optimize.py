@@ -9,6 +9,7 @@ default model and on DART's released architecture (random weights), per device, 
 
 from __future__ import annotations
 
+import io
 import time
 from dataclasses import dataclass, field
 
@@ -19,7 +20,9 @@ from latentrl.motion.checkpoint import load_motion_model
 from latentrl.optim import OptimizeSettings, load_suite, optimize
 from latentrl.optim.report import summary
 from latentrl.optim.solver import rollout, unconstrained_jerk
+from latentrl.optim.warm import policy_warm_start
 from latentrl.resources import task_file
+from latentrl.safe_io import atomic_write_bytes
 from latentrl.timing import hardware, synchronizer
 
 DART_SECONDS_PER_100_STEPS_60_FRAMES = 74.0
@@ -91,8 +94,6 @@ def plot_curves(curves: dict, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from latentrl.safe_io import atomic_write_bytes
-
     fig, ax = plt.subplots(figsize=(6.5, 4), dpi=100)
     for label, (t, e) in curves.items():
         ax.plot(t, e, lw=1.2, ls="--" if " warm " in label else "-", label=label)
@@ -102,8 +103,6 @@ def plot_curves(curves: dict, path: str) -> None:
     ax.set_ylabel("mean goal error (cm)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    import io
-
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     plt.close(fig)
@@ -158,8 +157,6 @@ def bench_optimize(req: OptimizeBenchRequest) -> int:
     print(f"hardware: {hw}")
     warm_fn = None
     if req.warm:
-        from latentrl.optim.warm import policy_warm_start
-
         warm_fn = policy_warm_start(req.warm)
     out = {"hardware": hw, "steps": req.steps, "batch": req.batch, "suites": [], "cost": [], "curves": {}}
     for device in devices:
