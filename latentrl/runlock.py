@@ -3,8 +3,9 @@
 ``latentrl train`` and ``motion train`` hold the lock from before their first write until they
 exit, so two processes never interleave checkpoints in one folder. The kernel drops the lock when
 its holder dies (``SIGKILL`` included), so a stale ``.lock`` file never blocks a later resume. The
-file keeps the holder's PID, which the refusal names. Where ``fcntl`` does not exist (Windows) no
-lock is taken.
+file keeps the holder's PID, which the refusal names. The file is opened without following a
+symbolic link (:func:`latentrl.safe_io.open_no_follow`): a linked ``.lock`` is refused, never
+emptied. Where ``fcntl`` does not exist (Windows) no lock is taken.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 from types import TracebackType
 
 from latentrl.errors import ConfigError
+from latentrl.safe_io import open_no_follow
 
 LOCK_FILE = ".lock"
 
@@ -35,7 +37,7 @@ class RunLock:
         except ImportError:  # no OS lock here; nothing to hold
             return self
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = open_no_follow(self.path, os.O_RDWR | os.O_CREAT, "lock file")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:

@@ -6,16 +6,22 @@
 - :func:`load_tyro_yaml` parses DART's ``args.yaml`` (YAML text inside YAML, with tyro and python
   tags) into plain dicts, lists and strings without constructing any Python object.
 - :func:`atomic_write_bytes` / :func:`save_torch_atomic` write to a temporary file in the same
-  folder, fsync, then ``os.replace`` it: a reader sees the old file or the new one, never half.
+  folder, fsync, then ``os.replace`` it: a reader sees the old file or the new one, never half. The
+  temporary file is created exclusively (never an existing file or link), and the rename replaces a
+  symbolic link at the final name instead of writing through it.
+- :func:`open_no_follow` opens files that are written in place (the run lock, ``train.log``): it
+  refuses a symbolic link, a hard-linked file or anything but a regular file at that name.
 """
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
 import pickle
 import re
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -24,7 +30,7 @@ import numpy as np
 import torch
 import yaml
 
-from latentrl.errors import CheckpointError
+from latentrl.errors import CheckpointError, ConfigError
 
 
 # --------------------------------------------------------------------------- torch files
@@ -62,9 +68,13 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (same-folder temp file + fsync + ``os.replace``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    # mkstemp opens with O_CREAT | O_EXCL (and O_NOFOLLOW where it exists): never an existing file or link
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file normal permissions
+        if hasattr(os, "fchmod"):  # mkstemp makes 0600; give the file normal permissions
+            os.fchmod(fd, 0o666 & ~_umask())
+        else:
+            os.chmod(tmp, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:
             f.write(data)
             f.flush()
@@ -77,6 +87,48 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             pass
         raise
     return path
+
+
+def open_no_follow(path: str | Path, flags: int, what: str = "file", mode: int = 0o644) -> int:
+    """``os.open(path, flags | O_NOFOLLOW)`` for a file written in place; ``ConfigError`` if it is not a plain file.
+
+    A symbolic link at ``path`` would make the write land in the file it points to (a lock's
+    truncation would empty it, a log would grow it); a hard link does the same to its other names;
+    a FIFO or device is no file at all. All three are refused with one line naming ``path`` and
+    ``what`` it is. Where the OS has no ``O_NOFOLLOW`` the link is checked with ``lstat`` first.
+    """
+    path = Path(path)
+    nofollow = getattr(os, "O_NOFOLLOW", 0)
+    if not nofollow and path.is_symlink():
+        raise ConfigError(_link_refusal(path, what))
+    try:  # O_NONBLOCK: a FIFO with no reader fails at once instead of hanging (regular files ignore it)
+        fd = os.open(path, flags | nofollow | getattr(os, "O_NONBLOCK", 0), mode)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP and path.is_symlink():
+            raise ConfigError(_link_refusal(path, what)) from None
+        if exc.errno == errno.ENXIO:
+            raise ConfigError(f"{path}: the {what} is not a regular file; refused to write to it; remove it and "
+                              "run again") from None
+        raise
+    info = os.fstat(fd)
+    problem = None
+    if not stat.S_ISREG(info.st_mode):
+        problem = "is not a regular file"
+    elif info.st_nlink > 1:
+        problem = f"has {info.st_nlink} hard links (writing it would change the other names too)"
+    if problem is not None:
+        os.close(fd)
+        raise ConfigError(f"{path}: the {what} {problem}; refused to write to it; remove it and run again")
+    return fd
+
+
+def _link_refusal(path: Path, what: str) -> str:
+    try:
+        target = os.readlink(path)
+    except OSError:
+        target = "?"
+    return (f"{path}: the {what} is a symbolic link (to {target}); refused to write through it; "
+            "remove the link and run again")
 
 
 def _umask() -> int:

@@ -13,6 +13,7 @@ Run directory::
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -39,7 +40,7 @@ from latentrl.motion_training.losses import (
     set_lr,
     vae_step,
 )
-from latentrl.safe_io import atomic_write_text, load_torch, save_torch_atomic
+from latentrl.safe_io import atomic_write_text, load_torch, open_no_follow, save_torch_atomic
 
 
 @dataclass
@@ -263,7 +264,8 @@ class MotionTrainer:
         line = f"{prefix} step {step}: " + " ".join(
             f"{k}={float(torch.as_tensor(v).detach()):.4g}" for k, v in terms.items()
         )
-        with open(self.run_dir / "train.log", "a") as f:
+        log = open_no_follow(self.run_dir / "train.log", os.O_WRONLY | os.O_APPEND | os.O_CREAT, "training log")
+        with os.fdopen(log, "a", encoding="utf-8") as f:  # never appended through a symbolic link
             f.write(line + "\n")
         if bar is not None:
             bar.set_postfix(stage=prefix, loss=f"{float(terms['loss'].detach()):.4g}")

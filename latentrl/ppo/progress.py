@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
 
 from latentrl.monitor import RolloutStats
+from latentrl.safe_io import open_no_follow
 
 LOG_FILE = "train.log"
 LINE_STATS = ("approx_kl", "clip_fraction", "value_loss", "policy_gradient_loss", "entropy_loss", "std",
@@ -28,12 +30,17 @@ class RunProgress:
         from tqdm import tqdm
 
         self.path = Path(run_dir) / LOG_FILE
+        os.close(self._open())  # a linked or hard-linked train.log is refused before training starts
         self.bar = tqdm(total=total_steps, initial=initial_steps, unit="step", unit_scale=True,
                         desc="train", disable=not enabled, dynamic_ncols=True)
 
+    def _open(self) -> int:
+        """``train.log`` for appending, never through a symbolic link (``ConfigError`` naming it)."""
+        return open_no_follow(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, "training log")
+
     def write(self, text: str) -> None:
         """Append one timestamped line to ``train.log``."""
-        with open(self.path, "a", encoding="utf-8") as f:
+        with os.fdopen(self._open(), "a", encoding="utf-8") as f:
             f.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {text}\n")
 
     def update(self, env_steps: int, fps: float, rollout: RolloutStats) -> None:
