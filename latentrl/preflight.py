@@ -12,10 +12,13 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 
 from latentrl.errors import ConfigError, LatentRLError, NonFiniteError
+from latentrl.runlock import RunLock
 
 MIB = 1 << 20
 
@@ -133,3 +136,21 @@ class NewOutput:
         bad_input = isinstance(exc, (LatentRLError, OSError)) and not isinstance(exc, NonFiniteError)
         if exc is not None and bad_input and not self.kept and self.created is not None and self.created.exists():
             shutil.rmtree(self.created, ignore_errors=True)
+
+
+@contextmanager
+def locked_output(folder: str | Path, what: str = "--out folder") -> Iterator[NewOutput]:
+    """:class:`NewOutput` for ``folder`` while holding its :class:`~latentrl.runlock.RunLock`: one writer per folder.
+
+    A second ``eval`` or ``optimize`` writing into the same folder is refused at once in one line
+    naming the folder and the PID that holds it, and never removes that holder's folder.
+    """
+    lock = RunLock(folder, what=what, hint="wait for it to finish or choose another --out")
+    with NewOutput(folder) as output:
+        try:
+            lock.acquire()
+        except ConfigError:
+            output.keep()  # the folder belongs to the process holding the lock
+            raise
+        with lock:
+            yield output

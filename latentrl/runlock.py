@@ -3,7 +3,9 @@
 ``latentrl train`` and ``motion train`` hold the lock from before their first write until they
 exit, so two processes never interleave checkpoints in one folder. The kernel drops the lock when
 its holder dies (``SIGKILL`` included), so a stale ``.lock`` file never blocks a later resume. The
-file keeps the holder's PID, which the refusal names. The file is opened without following a
+file keeps the holder's PID, which the refusal names. ``latentrl eval`` and ``latentrl optimize`` hold
+the same lock on their ``--out`` folder (:func:`latentrl.preflight.locked_output`), so two of them never
+mix their results in one folder. The file is opened without following a
 symbolic link (:func:`latentrl.safe_io.open_no_follow`): a linked ``.lock`` is refused, never
 emptied. Where ``fcntl`` does not exist (Windows) no lock is taken.
 """
@@ -20,12 +22,19 @@ from latentrl.safe_io import open_no_follow
 LOCK_FILE = ".lock"
 
 
-class RunLock:
-    """``with RunLock(run_dir): ...`` holds an exclusive, non-blocking lock; a second holder gets ``ConfigError``."""
+RUN_HINT = "wait for it to finish or stop it, then --resume"
 
-    def __init__(self, run_dir: str | Path):
+
+class RunLock:
+    """``with RunLock(run_dir): ...`` holds an exclusive, non-blocking lock; a second holder gets ``ConfigError``.
+
+    ``what`` names the folder in the refusal ("run directory", "--out folder"); ``hint`` says what to do.
+    """
+
+    def __init__(self, run_dir: str | Path, what: str = "run directory", hint: str = RUN_HINT):
         self.run_dir = Path(run_dir)
         self.path = self.run_dir / LOCK_FILE
+        self.what, self.hint = what, hint
         self._fd: int | None = None
 
     def acquire(self) -> RunLock:
@@ -43,8 +52,8 @@ class RunLock:
         except OSError:
             holder = os.read(fd, 64).decode("ascii", "replace").strip() or "unknown"
             os.close(fd)
-            raise ConfigError(f"run directory {self.run_dir} is in use by another latentrl process (PID {holder}); "
-                              "wait for it to finish or stop it, then --resume") from None
+            raise ConfigError(f"{self.what} {self.run_dir} is in use by another latentrl process (PID {holder}); "
+                              f"{self.hint}") from None
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode("ascii"))
         self._fd = fd

@@ -3,7 +3,8 @@
 Files written in place (a run folder's ``.lock``, ``train.log``) are opened with ``O_NOFOLLOW``: a
 link there is refused with one line and exit 2, and the file it points to keeps its bytes. Files written
 atomically (checkpoints, reports, motions) go to a fresh temporary file that is renamed over the final
-name, which replaces a link at that name instead of following it.
+name, which replaces a link at that name instead of following it. ``eval`` and ``optimize`` hold the run
+lock on their ``--out`` folder: a second one into the same folder is refused, naming the folder and the PID.
 """
 
 import os
@@ -146,3 +147,59 @@ def test_atomic_writes_replace_a_link_at_the_final_name_instead_of_following_it(
         assert target.read_text() == SECRET, name
     assert torch.load(out / "final.pt", weights_only=True)["w"].tolist() == [1.0, 1.0]
     assert sorted(p.name for p in out.iterdir()) == ["final.pt", "motion.npz", "report.json"]  # no temporaries
+
+
+# --------------------------------------------------------------------------- one eval or optimize per --out folder
+@pytest.fixture(scope="module")
+def eval_files(tmp_path_factory, tiny_model) -> dict[str, Path]:
+    """The tiny motion model as a file, a fresh policy checkpoint that fits it, and a one-path suite."""
+    from latentrl.motion.checkpoint import file_sha256
+    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
+    from tests.evaluation.conftest import NEAR, fresh_policy, write_paths
+
+    root = tmp_path_factory.mktemp("eval_files")
+    motion = save_motion_model(tiny_model, root / "tiny_motion.pt")
+    policy = fresh_policy(tiny_model)
+    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
+                            optimizer=torch.optim.Adam(policy.parameters()), config={"test": True},
+                            motion={"path": str(motion), "sha256": file_sha256(motion)})
+    return {"motion": motion, "policy": save_checkpoint(state, root / "policy.pt"),
+            "paths": write_paths(root, [NEAR], "near.json")}
+
+
+def refused_while_held(out: Path, argv: list[str], capsys) -> None:
+    """Run ``argv`` while this process holds ``out``'s lock: exit 2, one line naming the folder and our PID."""
+    out.mkdir()
+    (out / "report.json").write_text("the first writer's report\n")
+    with RunLock(out):  # the first eval or optimize, still writing
+        assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert f"--out folder {out} is in use by another latentrl process (PID {os.getpid()})" in err, err
+    assert (out / "report.json").read_text() == "the first writer's report\n"  # nothing of the second one
+    assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE, "report.json"]
+
+
+def test_a_second_eval_into_the_same_out_folder_is_refused(eval_files, tmp_path, capsys):
+    out = tmp_path / "out"
+    argv = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths",
+            str(eval_files["paths"]), "--episodes", "1", "--max-steps", "2", "--device", "cpu", "--render", "0",
+            "--out", str(out)]
+    refused_while_held(out, argv, capsys)
+    assert main(argv) == 0  # once the holder is gone, the folder is free again
+    assert (out / "report.json").read_text().startswith("{")
+
+
+def test_a_second_optimize_into_the_same_out_folder_is_refused(eval_files, tmp_path, capsys):
+    import json
+
+    suite = tmp_path / "suite.json"
+    suite.write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
+        {"name": "p", "start": {"seed": 0}, "text": "walk", "primitives": 2,
+         "constraints": [{"type": "joint", "frame": 3, "joint": "pelvis", "position": [0, 0, 1]}]}]}))
+    out = tmp_path / "out"
+    argv = ["optimize", str(suite), "--motion", str(eval_files["motion"]), "--steps", "1", "--out", str(out),
+            "--no-progress"]
+    refused_while_held(out, argv, capsys)
+    assert main(argv) == 0
+    assert (out / "report.json").read_text().startswith("{")

@@ -36,7 +36,7 @@ from latentrl.evaluation.trained import motion_of, stored_env
 from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
 from latentrl.motion.rollout import lock_min_weight_problem
 from latentrl.ppo import load_policy
-from latentrl.preflight import NewOutput, check_device, check_output_file, check_writable
+from latentrl.preflight import check_device, check_output_file, check_writable, locked_output
 from latentrl.resources import is_packaged, policy_file, suites_folder
 from latentrl.safe_io import atomic_write_text
 from latentrl.timing import hardware
@@ -178,7 +178,7 @@ def evaluate(req: EvalRequest) -> int:
     model, policy, motion, policy_info, observe_next = _load(req, settings)
     observe_next = evaluator.fit(policy, model, files, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
-    with NewOutput(out_dir):  # a failure from here on removes the output folder this command created
+    with locked_output(out_dir):  # one eval per folder; a failure from here on removes the folder this command created
         results = evaluator.run(act, model, files, settings, observe_next=observe_next, out_dir=out_dir,
                                 render=req.render, motions=req.motions)
         lines = evaluator.report(results, settings, out_dir, policy=policy_info, motion=motion, hardware=hardware())

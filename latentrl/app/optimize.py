@@ -15,7 +15,7 @@ from latentrl.optim import OptimizeSettings, load_suite, optimize
 from latentrl.optim.report import write_outputs
 from latentrl.optim.solver import INITS, unconstrained_jerk
 from latentrl.optim.warm import policy_warm_start
-from latentrl.preflight import NewOutput, check_device, check_writable
+from latentrl.preflight import check_device, check_writable, locked_output
 from latentrl.resources import task_file
 from latentrl.timing import hardware
 
@@ -71,7 +71,7 @@ def optimize_command(req: OptimizeRequest) -> int:
     bar = None
     if req.progress:
         bar = tqdm(total=settings.steps * len(problems), unit="step", desc="optimize", dynamic_ncols=True)
-    with NewOutput(out_dir):
+    with locked_output(out_dir):  # one optimize per folder; a failure removes the folder this command created
         results = optimize(model, problems, settings, warm_start=warm,
                            on_step=None if bar is None else (lambda _step, count: bar.update(count)))
         if bar is not None:
