@@ -53,6 +53,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     from latentrl.ppo.checkpoint import check_shapes
     from latentrl.preflight import check_device
     from latentrl.viewer.live import LiveController, play_env
+    from latentrl.viewer.markup import plain
 
     device = device or ("cuda" if torch.cuda.is_available() else "cpu")
     check_device(device, "--device")
@@ -63,7 +64,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     env = play_env(loaded.checkpoint, model, text, device)
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
     server = start_server(host, port, label=f"latentrl play {policy.name}")
-    title = (f"**latentrl play** `{policy}` on motion `{motion}`  \n"
+    title = (f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n"
              "Click on the floor to set the goal; pick the text below.")
     controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
                                 seed=seed)

@@ -20,6 +20,7 @@ import torch
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.viewer.markup import plain
 from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
 from latentrl.viewer.scene import SkeletonScene
 
@@ -112,7 +113,8 @@ class LiveController:
         server: a ``viser.ViserServer``.
         env: a one-env :class:`SteeredReachEnv`.
         policy: an ``ActorCritic`` (``act(obs, deterministic)``).
-        title: markdown shown at the top of the panel.
+        title: markdown shown at the top of the panel (strings from files in it must have gone through
+            :func:`~latentrl.viewer.markup.plain`).
         text: the prompt to start with (one of ``env.texts``).
         deterministic: start with the policy's mean action instead of sampling it.
         seed: seed of the env (seed pose) and of action sampling.
@@ -244,8 +246,8 @@ class LiveController:
         goal = "none" if self.goal is None else f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) m"
         dist = "–" if self.goal is None else f"{np.hypot(*(self.goal[:2] - p[:2])):.2f} m"
         return (f"{self.message}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ngoal: {goal}  \ndistance: {dist}  \n"
-                f"text: **{self.env.text}**  \ngeneration: {self.gen_fps:.0f} frames/s (policy + motion model)  \n"
-                f"display: {self.show_fps:.0f} frames/s")
+                f"text: **{plain(self.env.text)}**  \ngeneration: {self.gen_fps:.0f} frames/s (policy + motion model)"
+                f"  \ndisplay: {self.show_fps:.0f} frames/s")
 
     def _run(self) -> None:
         period = 1.0 / FPS

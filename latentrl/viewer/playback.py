@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from latentrl.motion.skeleton import PELVIS
+from latentrl.viewer.markup import plain
 from latentrl.viewer.scene import SkeletonScene, floor_extent, frame_camera
 from latentrl.viewer.sources import Clip, Source, metrics_table
 
@@ -70,7 +71,7 @@ class Player:
         self.playing = True
         self.follower = CameraFollower(server)
         gui = server.gui
-        gui.add_markdown(f"**{source.kind}** `{source.title}`  \n{source.summary}")
+        self.header = gui.add_markdown(f"**{source.kind}** {plain(source.title)}  \n{source.summary}")
         labels = [e.label for e in source.entries]
         self.picker = gui.add_dropdown("episode", labels, initial_value=labels[0], visible=len(labels) > 1)
         self.metrics = gui.add_markdown("")
@@ -133,7 +134,7 @@ class Player:
         self.scene.show_targets_at(i, clip.target_frames)
         self.slider.value = i
         text = clip.texts[i] or "(seed frames)"
-        self.status.content = f"frame {i + 1}/{clip.frames} · {i / clip.fps:.2f} s · text: **{text}**"
+        self.status.content = f"frame {i + 1}/{clip.frames} · {i / clip.fps:.2f} s · text: **{plain(text)}**"
         if self.follow.value:
             self.follower.update(clip.joints[i, PELVIS])
         else:

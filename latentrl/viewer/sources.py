@@ -17,6 +17,7 @@ import numpy as np
 
 from latentrl.errors import DataError
 from latentrl.motion.skeleton import NUM_JOINTS
+from latentrl.viewer.markup import plain
 
 REPORT_JSON = "report.json"
 RUN_MARKERS = ("config.yaml", "final.pt", "checkpoints")
@@ -92,6 +93,7 @@ class Source:
     kind: str  # "motion", "evaluation", "optimize", "run" or "folder"
     entries: list[Entry]
     summary: str = ""
+    """Markdown shown above the picker; every string in it that comes from a file went through :func:`plain`."""
 
 
 def per_frame_goals(goals: np.ndarray, frames: int, primitive: np.ndarray | None = None) -> np.ndarray:
@@ -164,7 +166,7 @@ METRIC_LABELS = (
 
 def metrics_table(metrics: dict[str, Any]) -> str:
     """A two-column markdown table of the metrics an entry carries (known keys, in a fixed order)."""
-    rows = [f"| {label} | {_fmt(metrics[key])} |" for key, label in METRIC_LABELS if key in metrics]
+    rows = [f"| {label} | {plain(_fmt(metrics[key]))} |" for key, label in METRIC_LABELS if key in metrics]
     return "\n".join(["| metric | value |", "|---|---|", *rows]) if rows else ""
 
 
@@ -204,7 +206,7 @@ def motion_source(path: Path) -> Source:
     entry = Entry(path.name, path, metrics, clip.waypoints)
     seconds = clip.frames / clip.fps
     texts = ", ".join(dict.fromkeys(t for t in clip.texts if t)) or "–"
-    return Source(f"{path.name}", "motion", [entry], f"{clip.frames} frames ({seconds:.1f} s), texts: {texts}")
+    return Source(f"{path.name}", "motion", [entry], f"{clip.frames} frames ({seconds:.1f} s), texts: {plain(texts)}")
 
 
 def _npz_scalars(path: Path) -> dict[str, Any]:
@@ -251,9 +253,10 @@ def evaluation_source(folder: Path, title: str | None = None) -> Source:
                         f"({len(missing)} of {len(entries)} missing)")
     overall = report["overall"].get("metrics", {})
     policy = (report.get("policy") or {}).get("path", "?")
-    summary = (f"policy `{policy}`, {len(entries)} episodes; overall success {_fmt(overall.get('success_rate'))}, "
-               f"reach time {_fmt(overall.get('reach_time_s'))} s, skate {_fmt(overall.get('skate_cm_s'))} cm/s, "
-               f"floor {_fmt(overall.get('floor_cm'))} cm")
+    shown = {k: plain(_fmt(overall.get(k))) for k in ("success_rate", "reach_time_s", "skate_cm_s", "floor_cm")}
+    summary = (f"policy {plain(policy)}, {len(entries)} episodes; overall success {shown['success_rate']}, "
+               f"reach time {shown['reach_time_s']} s, skate {shown['skate_cm_s']} cm/s, "
+               f"floor {shown['floor_cm']} cm")
     return Source(title or str(folder), "evaluation", entries, summary)
 
 
@@ -308,8 +311,9 @@ def optimize_source(folder: Path) -> Source:
         label = f"{e['name']} ({_fmt(metrics.get('goal_error_cm'))} cm)"
         entries.append(Entry(label, motion, shown, None, _target_rows(e.get("targets", []), f"{path} problems[{i}]")))
     overall = report.get("overall") if isinstance(report.get("overall"), dict) else {}
-    summary = (f"noise optimization of `{report.get('suite', '?')}`, {len(entries)} problems; mean goal error "
-               f"{_fmt(overall.get('goal_error_cm'))} cm, {_fmt(overall.get('share_within_1cm'))} within 1 cm; "
+    summary = (f"noise optimization of {plain(report.get('suite', '?'))}, {len(entries)} problems; mean goal error "
+               f"{plain(_fmt(overall.get('goal_error_cm')))} cm, {plain(_fmt(overall.get('share_within_1cm')))} "
+               "within 1 cm; "
                "targets: markers (bright on their frame), keyframes: ghost skeletons")
     return Source(str(folder), "optimize", entries, summary)
 

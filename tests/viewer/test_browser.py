@@ -218,3 +218,32 @@ def test_play_walks_to_a_floor_click(browser):
         assert after < before - 0.5, f"pelvis {now['pelvis']} did not approach the goal {goal} ({before:.2f} m before)"
         still_screenshot(browser)
         keep(browser, "viewer_play.png")
+
+
+PWN = "<img src=x onerror=window.__pwned=1><script>window.__pwned=2</script>"
+"""A prompt, a report's policy path and an episode's end that would run a script if shown as HTML."""
+
+
+def test_view_shows_hostile_strings_as_text(browser, tmp_path):
+    import json
+
+    from latentrl.render import save_motion_npz
+    from tests.viewer.conftest import walking, write_eval
+
+    folder = write_eval(tmp_path / "eval")
+    report = json.loads((folder / "report.json").read_text())
+    report["policy"]["path"] = f"runs/{PWN}/final.pt"
+    first = report["suites"]["demo"]["paths"][0]["episodes"][0]
+    first["end"], first["success"] = PWN, False
+    (folder / "report.json").write_text(json.dumps(report))
+    save_motion_npz(folder / first["motion"], walking(50), texts=[PWN] * 50)
+    with serve("view", str(folder)) as (url, _):
+        open_page(browser, url, "frame ")
+        end = time.monotonic() + 20
+        while (shown := page_text(browser).count(PWN)) < 3 and time.monotonic() < end:
+            time.sleep(0.3)  # summary, metrics table (end) and status line (prompt)
+        injected = browser.execute_script(
+            "return [document.querySelectorAll('img[src=\"x\"], [onerror]').length,"
+            " [...document.scripts].filter(s => s.textContent.includes('__pwned')).length, window.__pwned || 0]")
+        assert injected == [0, 0, 0], f"[img elements, script elements, script ran]: {injected}"
+        assert shown >= 3, f"the strings did not show as text:\n{page_text(browser)}"
