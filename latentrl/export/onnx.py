@@ -239,6 +239,7 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     loaded = load_policy(policy_path, "cpu", motion={"path": ident["source"], "sha256": ident["sha256"]},
                          allow_motion_mismatch=allow_motion_mismatch)
     policy = loaded.policy
+    check_finite_weights(policy, policy_path)
     if model.seed_history is None or model.pelvis_delta is None:
         raise CheckpointError(f"motion model {motion} has no seed history/pelvis_delta; a controller cannot start")
     goal_size = policy.obs_dim - model.text_dim - HISTORY_LENGTH * FEATURE_DIM - 1
@@ -248,7 +249,10 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
             f"motion model {motion} ({model.text_dim}-D text, {model.latent_dim}-D latent); export it with the "
             "motion model it was trained on (--motion)")
     env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
-    stored = stored_env_config(loaded.checkpoint.get("config"))
+    try:
+        stored = stored_env_config(loaded.checkpoint.get("config"))
+    except ConfigError as exc:  # a stored value out of range (NaN guidance, ...): name the checkpoint
+        raise CheckpointError(f"{policy_path}: stored {str(exc).removeprefix('policy checkpoint: ')}") from None
     trained = [str(t) for t in env_cfg.get("texts") or []]
     texts = {}
     for prompt in dict.fromkeys([*trained, *([text] if text else [])]):
@@ -257,13 +261,32 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
         except TextError:  # a prompt the model cannot encode is left out of the table (``--text`` re-raises below)
             continue
     baked = model.encode_text([text]) if text else None
-    step = ControllerStep(policy, model, batch, settings=StepSettings.of(stored), observe_next=goal_size == 8,
-                          text_embedding=baked)
+    settings = StepSettings.of(stored)
+    try:
+        settings.validate()
+    except ConfigError as exc:  # name the checkpoint and the stored field
+        raise CheckpointError(f"{policy_path}: stored env: {exc}") from None
+    step = ControllerStep(policy, model, batch, settings=settings, observe_next=goal_size == 8, text_embedding=baked)
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
             "motion": ident, "texts": texts, "text": text, "trained_texts": trained,
             "next_at_last": (stored.next_at_last if stored is not None else "repeat") if goal_size == 8 else None}
     return step, info
+
+
+def check_finite_weights(policy: nn.Module, source: str | Path) -> None:
+    """``CheckpointError`` naming the first parameter or buffer of ``policy`` that holds NaN or inf.
+
+    Such a policy traces and exports, but every action it gives is NaN (or saturated by an inf): a
+    diverged or damaged checkpoint, never a controller.
+    """
+    for name, tensor in policy.state_dict().items():
+        if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all()):
+            bad = ~torch.isfinite(tensor)
+            kinds = " and ".join(k for k, hit in (("NaN", tensor.isnan().any()), ("inf", tensor.isinf().any())) if hit)
+            raise CheckpointError(f"{source}: policy weight '{name}' holds {int(bad.sum())} non-finite value(s) "
+                                  f"({kinds}); a diverged or damaged policy cannot be exported (export an earlier "
+                                  "checkpoint)")
 
 
 # --------------------------------------------------------------------------- writing and running
@@ -310,9 +333,15 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
 def export_onnx(step: ControllerStep, path: str | Path, example: Sequence[torch.Tensor] | None = None,
                 opset: int = DEFAULT_OPSET, metadata: Mapping[str, str] | None = None) -> Path:
     """Trace ``step`` on ``example`` (default: :meth:`ControllerStep.example_inputs`), check it, write it atomically."""
-    onnx, _ = _require_extra()
     from latentrl.safe_io import atomic_write_bytes
 
+    return atomic_write_bytes(path, controller_bytes(step, example, opset, metadata))
+
+
+def controller_bytes(step: ControllerStep, example: Sequence[torch.Tensor] | None = None,
+                     opset: int = DEFAULT_OPSET, metadata: Mapping[str, str] | None = None) -> bytes:
+    """The checked ONNX model of ``step`` (traced on ``example``, with ``metadata``) as bytes, nothing written."""
+    onnx, _ = _require_extra()
     example = tuple(example if example is not None else step.example_inputs())
     buffer = io.BytesIO()
     with torch.no_grad(), warnings.catch_warnings():
@@ -330,16 +359,17 @@ def export_onnx(step: ControllerStep, path: str | Path, example: Sequence[torch.
         entry = proto.metadata_props.add()
         entry.key, entry.value = key, value
     onnx.checker.check_model(proto)
-    return atomic_write_bytes(path, proto.SerializeToString())
+    return proto.SerializeToString()
 
 
-def onnx_session(path: str | Path, threads: int = 1):
-    """An onnxruntime CPU session with ``threads`` intra-op threads."""
+def onnx_session(path: str | Path | bytes, threads: int = 1):
+    """An onnxruntime CPU session with ``threads`` intra-op threads, of a file or of a model's bytes."""
     _, ort = _require_extra()
     options = ort.SessionOptions()
     options.intra_op_num_threads = int(threads)
     options.inter_op_num_threads = 1
-    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    model = path if isinstance(path, bytes) else str(path)
+    return ort.InferenceSession(model, options, providers=["CPUExecutionProvider"])
 
 
 def run_session(session, inputs: Sequence[torch.Tensor], names: Sequence[str]) -> list[torch.Tensor]:
@@ -358,10 +388,15 @@ def max_difference(step: ControllerStep, session, inputs: Sequence[torch.Tensor]
 
 def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: str | None = None,
                    opset: int = DEFAULT_OPSET, motion: str | None = None, allow_motion_mismatch: bool = False) -> int:
-    """``latentrl export onnx``: write the controller, check it (``onnx.checker``, onnxruntime), print one line.
+    """``latentrl export onnx``: build the controller, check it (``onnx.checker``, onnxruntime), write it, print a line.
 
-    ``motion`` None: the motion model named in the policy's stored config.
+    ``motion`` None: the motion model named in the policy's stored config. Every check runs on the
+    model in memory, so a failed export leaves no file at ``out``: non-finite policy weights or
+    stored settings, or outputs that are not finite, are refused (``CheckpointError``, exit 2); a
+    difference between onnxruntime and torch above :data:`MAX_DIFF` returns 1.
     """
+    from latentrl.safe_io import atomic_write_bytes
+
     _require_extra()
     from latentrl.preflight import check_output_file
 
@@ -380,19 +415,26 @@ def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: st
 
     step, info = load_controller(policy, trained_motion(policy, motion), batch, text, allow_motion_mismatch)
     example = step.example_inputs(next(iter(info["texts"].values()), None))
+    with torch.no_grad():
+        outputs = step(*example)
+    broken = [name for name, value in zip(step.output_names, outputs) if not bool(torch.isfinite(value).all())]
+    if broken:
+        raise CheckpointError(f"{policy}: the controller's {', '.join(broken)} hold NaN or inf after one step from a "
+                              "seed state; nothing exported")
     t0 = time.perf_counter()
-    path = export_onnx(step, out, example, opset, controller_metadata(step, info, opset))
+    data = controller_bytes(step, example, opset, controller_metadata(step, info, opset))
     seconds = time.perf_counter() - t0
-    diff = max_difference(step, onnx_session(path), example)
+    diff = max_difference(step, onnx_session(data), example)
+    if not diff <= MAX_DIFF:
+        print(f"latentrl: error: onnxruntime differs from torch by {diff:.2e} (> {MAX_DIFF:g}) over one step; "
+              f"nothing written to {out}", file=sys.stderr)
+        return 1
+    path = atomic_write_bytes(out, data)
     how = f"text '{text}' baked in" if text else "text_embedding input"
     trained = info["trained_texts"]
     note = ""
     if text and trained and text not in trained:
         note = f"; note: the policy was trained on {trained}, not '{text}'"
-    print(f"wrote {path} ({path.stat().st_size / 2**20:.1f} MiB, batch {step.batch}, opset {opset}, {how}) "
+    print(f"wrote {path} ({len(data) / 2**20:.1f} MiB, batch {step.batch}, opset {opset}, {how}) "
           f"in {seconds:.1f} s; onnxruntime vs torch over one step: max |diff| {diff:.1e}{note}")
-    if not diff <= MAX_DIFF:
-        print(f"latentrl: error: onnxruntime differs from torch by {diff:.2e} (> {MAX_DIFF:g}); the file is not "
-              "usable as is", file=sys.stderr)
-        return 1
     return 0
