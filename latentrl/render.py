@@ -24,7 +24,7 @@ from latentrl.motion.clip import (  # noqa: F401  (the old address)
     save_motion_npz,
 )
 from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS, PARENTS, SMPL_REST_OFFSETS, rest_offsets
-from latentrl.safe_io import atomic_write_bytes
+from latentrl.safe_io import atomic_write_bytes, atomic_write_with
 
 
 def render_gif(
@@ -99,13 +99,10 @@ def render_gif(
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
     anim = FuncAnimation(fig, draw, frames=frames, blit=False)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.gif")
-    anim.save(tmp, writer=PillowWriter(fps=fps / stride))
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    try:  # a fresh temporary file, renamed over the GIF: never written through a link
+        return atomic_write_with(path, lambda tmp: anim.save(tmp, writer=PillowWriter(fps=fps / stride)))
+    finally:
+        plt.close(fig)
 
 
 # --------------------------------------------------------------------------- BVH

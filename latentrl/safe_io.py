@@ -8,7 +8,8 @@
 - :func:`atomic_write_bytes` / :func:`save_torch_atomic` write to a temporary file in the same
   folder, fsync, then ``os.replace`` it: a reader sees the old file or the new one, never half. The
   temporary file is created exclusively (never an existing file or link), and the rename replaces a
-  symbolic link at the final name instead of writing through it.
+  symbolic link at the final name instead of writing through it. :func:`atomic_write_with` does the
+  same for writers that take a file name (matplotlib figures, GIFs).
 - :func:`open_no_follow` opens files that are written in place (the run lock, ``train.log``): it
   refuses a symbolic link, a hard-linked file or anything but a regular file at that name.
 """
@@ -23,6 +24,7 @@ import pickle
 import re
 import stat
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +81,30 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def atomic_write_with(path: str | Path, write: Callable[[Path], Any]) -> Path:
+    """Atomically write ``path`` with ``write(tmp)``, a writer that takes a file name (matplotlib, Pillow).
+
+    ``tmp`` is a fresh, exclusively created, randomly named sibling with ``path``'s suffix (never a
+    name someone could have linked in advance); it is renamed over ``path`` once ``write`` returns.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    try:
+        if hasattr(os, "fchmod"):
+            os.fchmod(fd, 0o666 & ~_umask())
+        os.close(fd)
+        write(Path(tmp))
         os.replace(tmp, path)
     except BaseException:
         try:

@@ -149,6 +149,24 @@ def test_atomic_writes_replace_a_link_at_the_final_name_instead_of_following_it(
     assert sorted(p.name for p in out.iterdir()) == ["final.pt", "motion.npz", "report.json"]  # no temporaries
 
 
+def test_plots_and_gifs_never_write_through_a_link_at_their_final_or_temporary_name(tmp_path):
+    """matplotlib and Pillow open files by name: they write a fresh, randomly named temporary file."""
+    from latentrl.evaluation.plots import save_paths_png
+    from latentrl.render import render_gif
+    from tests.helpers import walking_clip
+
+    target = victim(tmp_path)
+    out = tmp_path / "eval"
+    for name in ("paths.png", "ep.gif"):  # the final names, and the fixed temporary names used before
+        linked(out, name, target)
+        linked(out, f".{name}.tmp{Path(name).suffix}", target)
+    save_paths_png(out / "paths.png", [])
+    render_gif(out / "ep.gif", walking_clip(6)["joints"].numpy(), stride=3)
+    assert target.read_text() == SECRET
+    assert (out / "paths.png").read_bytes()[:4] == b"\x89PNG" and (out / "ep.gif").read_bytes()[:3] == b"GIF"
+    assert not any(p.name.endswith((".tmp.png", ".tmp.gif")) and not p.is_symlink() for p in out.iterdir())
+
+
 # --------------------------------------------------------------------------- one eval or optimize per --out folder
 @pytest.fixture(scope="module")
 def eval_files(tmp_path_factory, tiny_model) -> dict[str, Path]:

@@ -70,14 +70,13 @@ def paths_figure(suites: Sequence[SuiteResult], columns: int = 5):
 
 
 def save_paths_png(path: str | Path, suites: Sequence[SuiteResult], dpi: int = 110) -> Path:
-    """Write :func:`paths_figure` as a PNG (through a temporary file, then renamed)."""
+    """Write :func:`paths_figure` as a PNG (through a fresh temporary file, then renamed)."""
     import matplotlib.pyplot as plt
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    from latentrl.safe_io import atomic_write_with
+
     fig = paths_figure(suites)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=dpi)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    try:
+        return atomic_write_with(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    finally:
+        plt.close(fig)
