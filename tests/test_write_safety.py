@@ -147,6 +147,11 @@ def test_atomic_writes_replace_a_link_at_the_final_name_instead_of_following_it(
         assert target.read_text() == SECRET, name
     assert torch.load(out / "final.pt", weights_only=True)["w"].tolist() == [1.0, 1.0]
     assert sorted(p.name for p in out.iterdir()) == ["final.pt", "motion.npz", "report.json"]  # no temporaries
+    from latentrl.datasets.motion_text import META_FILE, write_meta
+
+    linked(out, f"{META_FILE}.tmp", target)  # the fixed temporary name a dataset's meta.json once went through
+    write_meta(out, {"name": "tiny"})
+    assert target.read_text() == SECRET and (out / META_FILE).read_text().startswith("{")
 
 
 def test_plots_and_gifs_never_write_through_a_link_at_their_final_or_temporary_name(tmp_path):

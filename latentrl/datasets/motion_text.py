@@ -33,6 +33,7 @@ import numpy as np
 
 from latentrl.errors import DataError
 from latentrl.motion.skeleton import FPS, JOINT_NAMES, NUM_JOINTS
+from latentrl.safe_io import atomic_write_text
 
 #: Field name -> (dtype kind, shape template) in file order; "T" and "S" are the frame and segment counts.
 FIELDS: dict[str, tuple[str, tuple]] = {
@@ -249,12 +250,7 @@ def list_dataset(folder: str | os.PathLike) -> list[Path]:
 
 def write_meta(folder: str | os.PathLike, meta: Mapping) -> Path:
     """Write ``meta.json`` (name, generator settings, seed, licence, frame counts...) into ``folder``."""
-    path = Path(folder) / META_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(meta, indent=2, sort_keys=False) + "\n")
-    os.replace(tmp, path)
-    return path
+    return atomic_write_text(Path(folder) / META_FILE, json.dumps(meta, indent=2, sort_keys=False) + "\n")
 
 
 def read_meta(folder: str | os.PathLike) -> dict | None:
