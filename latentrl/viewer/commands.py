@@ -63,7 +63,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                          allow_motion_mismatch=allow_motion_mismatch)
     env = play_env(loaded.checkpoint, model, text, device)
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
-    server = start_server(host, port, label=f"latentrl play {policy.name}")
+    server = start_server(host, port, label=f"latentrl play {policy.name}", command="play")
     title = (f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n"
              "Click on the floor to set the goal; pick the text below.")
     controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,

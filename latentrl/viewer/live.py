@@ -20,12 +20,15 @@ import torch
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.viewer.guard import choice, complain, vector
 from latentrl.viewer.markup import plain
 from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
 from latentrl.viewer.scene import SkeletonScene
 
 MAX_GOAL_DISTANCE_M = 50.0
 """Clicks farther than this from the body are ignored (the env ends episodes 100 m from the goal)."""
+MAX_RAY_COORD_M = 1e6
+"""A click ray's origin and direction components must be finite and within this (else the click is ignored)."""
 TRAIL_FRAMES = 6000
 START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
 """Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
@@ -157,13 +160,23 @@ class LiveController:
         self.thread.start()
 
     # ------------------------------------------------------------------ user input
-    def _set_text(self, text: str) -> None:
+    def _set_text(self, text: Any) -> None:
+        if choice(text, self.env.texts) is None:
+            complain("play", f"ignored text {str(text)[:80]!r}: not one of the texts offered")
+            self.text.value = self.env.text
+            return
         with self.lock:
             self.env.set_text(text)
 
     def _clicked(self, event: Any) -> None:
-        point = floor_point(event.ray_origin, event.ray_direction, self.env.floor_height)
-        if point is None:
+        origin = vector(event.ray_origin, 3, MAX_RAY_COORD_M)
+        direction = vector(event.ray_direction, 3, MAX_RAY_COORD_M)
+        if origin is None or direction is None:
+            ray = f"{str(event.ray_origin)[:60]}, {str(event.ray_direction)[:60]}"
+            complain("play", f"ignored a click: its ray ({ray}) is not two vectors of 3 finite numbers")
+            return
+        point = floor_point(origin, direction, self.env.floor_height)
+        if point is None or not np.isfinite(point).all():
             return
         self.set_goal(point[:2])
 
@@ -171,7 +184,7 @@ class LiveController:
         """Send the character to ``xy`` (world metres); ignored beyond :data:`MAX_GOAL_DISTANCE_M`."""
         with self.lock:
             pelvis = self.pelvis()
-            if float(np.hypot(xy[0] - pelvis[0], xy[1] - pelvis[1])) > MAX_GOAL_DISTANCE_M:
+            if not float(np.hypot(xy[0] - pelvis[0], xy[1] - pelvis[1])) <= MAX_GOAL_DISTANCE_M:  # NaN too
                 self.message = f"goal ignored: more than {MAX_GOAL_DISTANCE_M:.0f} m away"
                 return
             self.goal = np.array([float(xy[0]), float(xy[1]), 0.0])
@@ -256,20 +269,26 @@ class LiveController:
         last_status = 0.0
         while not self.stop.is_set():
             with self.lock:
-                if self.active and len(self.frames) < 8:
-                    self._generate()
-                now = time.perf_counter()
-                if self.frames and now >= next_frame:
-                    self._show_next()
-                    shown += 1
-                    next_frame = max(next_frame + period, now - period)
-                elif not self.frames:
-                    next_frame = now
-                if now - count_since >= 1.0:
-                    self.show_fps, shown, count_since = shown / (now - count_since), 0, now
-                if now - last_status >= 0.25:
-                    text = self.status_text()
-                    if text != self.status.content:  # an idle page gets no messages
-                        self.status.content = text
-                    last_status = now
+                try:
+                    if self.active and len(self.frames) < 8:
+                        self._generate()
+                    now = time.perf_counter()
+                    if self.frames and now >= next_frame:
+                        self._show_next()
+                        shown += 1
+                        next_frame = max(next_frame + period, now - period)
+                    elif not self.frames:
+                        next_frame = now
+                    if now - count_since >= 1.0:
+                        self.show_fps, shown, count_since = shown / (now - count_since), 0, now
+                    if now - last_status >= 0.25:
+                        text = self.status_text()
+                        if text != self.status.content:  # an idle page gets no messages
+                            self.status.content = text
+                        last_status = now
+                except Exception as exc:  # never end the thread: the page would freeze with no way back
+                    self.active = False
+                    self.frames.clear()
+                    self.message = "generation failed; press Reset"
+                    complain("play", f"live control paused: {type(exc).__name__}: {exc}")
             time.sleep(max(0.0, min(next_frame - time.perf_counter(), 0.01)))

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from latentrl.motion.skeleton import PELVIS
+from latentrl.viewer.guard import choice, complain, number
 from latentrl.viewer.markup import plain
 from latentrl.viewer.scene import SkeletonScene, floor_extent, frame_camera
 from latentrl.viewer.sources import Clip, Source, metrics_table
@@ -81,9 +82,12 @@ class Player:
         self.follow = gui.add_checkbox("follow camera", False)
         self.show_body = gui.add_checkbox("skeleton", True)
         self.status = gui.add_markdown("")
-        self.picker.on_update(lambda event: self.select(self.picker.value))
+        self.rate = 1.0
+        """Playback speed, a checked copy of the speed dropdown (a client may send any string)."""
+        self.picker.on_update(self._picked)
         self.play.on_click(lambda event: self.toggle())
         self.slider.on_update(self._scrubbed)
+        self.speed.on_update(self._speed_changed)
         self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
         self.stop = threading.Event()
         self.select(labels[0])
@@ -98,7 +102,7 @@ class Player:
         entry = next(e for e in self.source.entries if e.label == label)
         clip = entry.load()
         with self.lock:
-            self.clip, self.frame = clip, 0.0
+            self.clip, self.frame, self.label = clip, 0.0, label
             self.follower.reset()
             self.metrics.content = metrics_table(entry.metrics)
             self.slider.max = max(clip.frames - 1, 1)
@@ -116,11 +120,34 @@ class Player:
                 self.frame = 0.0
             self.play.label = "Pause" if self.playing else "Play"
 
+    def _picked(self, event: Any) -> None:
+        label = choice(self.picker.value, [e.label for e in self.source.entries])
+        if label is None:
+            complain("view", f"ignored episode {str(self.picker.value)[:80]!r}: not one of this source's entries")
+            self.picker.value = self.label
+            return
+        if label != self.label:
+            self.select(label)
+
+    def _speed_changed(self, event: Any) -> None:
+        value = choice(self.speed.value, SPEEDS)
+        if value is None:
+            complain("view", f"ignored speed {str(self.speed.value)[:80]!r}: expected one of {', '.join(SPEEDS)}")
+            self.speed.value = f"{self.rate:g}"
+            return
+        self.rate = float(value)
+
     def _scrubbed(self, event: Any) -> None:
         if event.client is None:  # our own update from the playback thread
             return
         with self.lock:
-            self.frame = float(self.slider.value)
+            frame = number(self.slider.value, 0, self.clip.frames - 1)
+            if frame is None:
+                complain("view", f"ignored frame {str(self.slider.value)[:80]!r}: expected a number in "
+                                 f"0..{self.clip.frames - 1}")
+                self.slider.value = int(self.frame)
+                return
+            self.frame = frame
             self._draw()
 
     def _draw(self) -> None:
@@ -148,8 +175,17 @@ class Player:
             with self.lock:
                 if not self.playing or self.clip is None:
                     continue
-                self.frame += dt * self.clip.fps * float(self.speed.value)
-                if self.frame > self.clip.frames - 1:  # loop
-                    self.frame = 0.0
-                with self.server.atomic():
-                    self._draw()
+                try:
+                    self._advance(dt)
+                except Exception as exc:  # never end the thread: the page would freeze with no way back
+                    self.playing = False
+                    self.play.label = "Play"
+                    complain("view", f"playback paused: {type(exc).__name__}: {exc}")
+
+    def _advance(self, dt: float) -> None:
+        """Move ``dt`` seconds on at the chosen speed and draw (caller holds the lock)."""
+        self.frame += dt * self.clip.fps * self.rate
+        if not self.frame <= self.clip.frames - 1:  # loop (and recover from a non-finite frame)
+            self.frame = 0.0
+        with self.server.atomic():
+            self._draw()

@@ -10,6 +10,7 @@ import threading
 from typing import Any
 
 from latentrl.errors import ConfigError, LatentRLError
+from latentrl.viewer.guard import ConnectionGuard, complain, guarded_websockets
 
 EXTRA_HINT = "pip install 'latentrl[viewer]'"
 
@@ -57,12 +58,20 @@ def url_of(host: str, port: int) -> str:
     return f"http://{shown}:{port}"
 
 
-def start_server(host: str, port: int, label: str) -> Any:
-    """A running ``viser.ViserServer`` on exactly ``host:port`` (port 0: any free port)."""
+def start_server(host: str, port: int, label: str, command: str = "view") -> Any:
+    """A running ``viser.ViserServer`` on exactly ``host:port`` (port 0: any free port).
+
+    Its WebSocket handshake goes through a :class:`~latentrl.viewer.guard.ConnectionGuard`: pages of
+    other sites and connections beyond :data:`~latentrl.viewer.guard.MAX_CLIENTS` are refused.
+    """
     viser = require_viser()
     check_port(host, port)
-    with contextlib.redirect_stdout(io.StringIO()):  # Viser's own banner; we print one line of ours
+    guard = ConnectionGuard(command, host)
+    with contextlib.redirect_stdout(io.StringIO()), guarded_websockets(guard):  # Viser's banner: we print ours
         server = viser.ViserServer(host=host, port=int(port), label=label, verbose=False)
+    if not guard.installed:
+        complain(command, f"warning: viser {getattr(viser, '__version__', '?')} started its server in a way "
+                          "this latentrl does not know: other web pages could connect to it")
     if port and server.get_port() != int(port):  # taken between the check and the bind
         with contextlib.redirect_stdout(io.StringIO()):
             server.stop()

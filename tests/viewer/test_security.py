@@ -3,6 +3,8 @@
 import html
 import json
 import re
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +13,8 @@ from latentrl.render import save_motion_npz
 from latentrl.viewer.markup import plain
 from tests.viewer.conftest import walking, write_eval
 
+ROOT = Path(__file__).resolve().parents[2]
+POLICY = ROOT / "policies" / "reach_walk_default.pt"
 IMG = "<img src=x onerror=alert(1)>"
 SCRIPT = "<script>alert(2)</script>"
 HOSTILE = f"{IMG} {SCRIPT} ![p](/etc/hostname) [l](javascript:alert(3)) `c` **b** {{x}} a|b & &amp;"
@@ -87,3 +91,227 @@ def test_report_strings_are_shown_as_text(server, tmp_path):
     player.select(player.source.entries[1].label)
     assert_text_only(markdown_shown(player), IMG)
     assert np.isfinite(player.frame)
+
+
+# --------------------------------------------------------------------------- origin, connection bound, messages
+class RawClient:
+    """A WebSocket client speaking Viser's protocol by hand, as a hostile page's script could."""
+
+    def __init__(self, port: int, origin: str | None = "own", host: str = "127.0.0.1"):
+        import viser
+        from websockets.sync.client import connect
+
+        origin = f"http://{host}:{port}" if origin == "own" else origin
+        self.ws = connect(f"ws://{host}:{port}", subprotocols=[f"viser-v{viser.__version__}"], origin=origin,
+                          open_timeout=10, max_size=None)
+        # Viser counts a client as connected (and runs its GUI callbacks) from its first camera message
+        self.send(type="ViewerCameraMessage", wxyz=[1.0, 0.0, 0.0, 0.0], position=[0.0, -3.0, 2.0], fov=1.0,
+                  near=0.01, far=100.0, image_height=480, image_width=640, look_at=[0.0, 0.0, 0.0],
+                  up_direction=[0.0, 0.0, 1.0])
+
+    def send(self, **message) -> None:
+        import msgspec
+
+        self.ws.send(msgspec.msgpack.encode(message))
+
+    def gui(self, handle, value) -> None:
+        """What a GUI element sends when the user changes it (any value: the page decides)."""
+        self.send(type="GuiUpdateMessage", uuid=handle._impl.uuid, updates={"value": value})
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+def refused_status(port: int, **kwargs) -> int | None:
+    """The HTTP status a raw client's handshake was refused with, or None when it was accepted."""
+    from websockets.exceptions import InvalidStatus
+
+    try:
+        RawClient(port, **kwargs).close()
+    except InvalidStatus as exc:
+        return exc.response.status_code
+    return None
+
+
+def wait_for(check, what: str, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < end, f"not within {timeout} s: {what}"
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def guarded():
+    """A Viser server started as ``latentrl view`` starts it (origin check, connection bound)."""
+    pytest.importorskip("viser")
+    from latentrl.viewer.server import start_server
+
+    srv = start_server("127.0.0.1", 0, "test", "view")
+    yield srv
+    srv.stop()
+
+
+def test_pages_of_other_sites_are_refused(guarded, capsys):
+    port = guarded.get_port()
+    assert refused_status(port, origin="http://evil.example") == 403
+    assert refused_status(port, origin=f"http://evil.example:{port}") == 403
+    assert refused_status(port, origin="null") == 403  # a sandboxed frame or a file:// page
+    assert refused_status(port, origin=f"http://127.0.0.1:{port + 1}") == 403  # another local server's page
+    assert "refused a browser connection: origin 'http://evil.example'" in capsys.readouterr().err
+    assert refused_status(port) is None  # the viewer's own page
+    assert refused_status(port, origin=f"http://localhost:{port}", host="localhost") is None
+    assert refused_status(port, origin=None) is None  # no web page: a script can forge any header anyway
+
+
+def test_origin_rules():
+    from latentrl.viewer.guard import ConnectionGuard
+
+    guard = ConnectionGuard("view", "127.0.0.1")
+    assert guard.refusal(["http://127.0.0.1:9000"], "127.0.0.1:9000", "127.0.0.1", 0) is None  # ssh -L 9000:...
+    assert guard.refusal(["http://[::1]:8080"], "[::1]:8080", "::1", 0) is None
+    assert guard.refusal(["http://rebind.example:8080"], "rebind.example:8080", "127.0.0.1", 0)[0] == 403
+    assert guard.refusal(["http://evil.example", "http://127.0.0.1:8080"], "127.0.0.1:8080", "127.0.0.1", 0)[0] == 403
+    assert guard.refusal(["http://10.1.2.3:8080"], "10.1.2.3:8080", "10.1.2.3", 0) is None  # --host 0.0.0.0
+    assert guard.refusal([], "127.0.0.1:8080", "127.0.0.1", 16)[0] == 503
+
+
+def test_connections_are_bounded(guarded, capsys):
+    from latentrl.viewer.guard import MAX_CLIENTS
+
+    port = guarded.get_port()
+    clients = [RawClient(port) for _ in range(MAX_CLIENTS)]
+    try:
+        assert refused_status(port) == 503
+        assert f"at most {MAX_CLIENTS}" in capsys.readouterr().err
+        clients.pop().close()
+        wait_for(lambda: refused_status(port) is None, "a slot frees when a client leaves")
+    finally:
+        for client in clients:
+            client.close()
+
+
+def test_bad_gui_values_are_ignored_and_playback_goes_on(guarded, eval_folder, capsys):
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    player = Player(guarded, open_source(eval_folder))
+    player.start()
+    client = RawClient(guarded.get_port())
+    try:
+        for bad in ("abc", "nan", "inf", "-1", "1e308", ""):
+            client.gui(player.speed, bad)
+            wait_for(lambda line=f"ignored speed {bad!r}": line in capsys.readouterr().err, f"speed {bad!r} ignored")
+            wait_for(lambda: player.speed.value == "1", "the speed dropdown put back")
+            assert player.rate == 1.0
+        client.gui(player.speed, "2")  # the same channel with a good value
+        wait_for(lambda: player.rate == 2.0, "speed 2 taken")
+        for bad in (-5, 10**9):
+            client.gui(player.slider, bad)
+            wait_for(lambda: "ignored frame" in capsys.readouterr().err, f"frame {bad} ignored")
+        client.gui(player.slider, float("nan"))  # Viser's int() cast refuses it before our handler
+        client.gui(player.picker, "<no such episode>")
+        wait_for(lambda: "ignored episode" in capsys.readouterr().err, "unknown episode ignored")
+        assert player.label == player.source.entries[0].label
+        client.gui(player.picker, player.source.entries[1].label)
+        wait_for(lambda: player.label == player.source.entries[1].label, "a real episode picked")
+        before = player.frame
+        wait_for(lambda: player.frame != before and np.isfinite(player.frame), "playback still moving")
+        assert player.thread.is_alive()
+    finally:
+        client.close()
+        player.stop.set()
+        player.thread.join(2)
+
+
+@pytest.fixture
+def live(guarded):
+    """``latentrl play``'s controller with the shipped walk policy, its loop running."""
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.ppo import load_policy
+    from latentrl.viewer.live import LiveController, SteeredReachEnv
+
+    model = load_motion_model("default")
+    policy = load_policy(POLICY).policy
+    env = SteeredReachEnv(1, motion=model, texts=["walk", "run"], max_episode_steps=10**9, autoreset_mode="Disabled",
+                          foot_lock=True)
+    controller = LiveController(guarded, env, policy, "test", "walk", seed=0)
+    controller.start()
+    yield controller
+    controller.stop.set()
+    controller.thread.join(5)
+
+
+def test_bad_clicks_and_texts_are_ignored_and_live_control_goes_on(guarded, live, capsys):
+    env = live.env
+    client = RawClient(guarded.get_port())
+
+    def click(origin, direction):
+        client.send(type="ScenePointerMessage", event_type="click", ray_origin=origin, ray_direction=direction,
+                    screen_pos=[[0.5, 0.5]], modifier=None)
+
+    try:
+        nan, inf = float("nan"), float("inf")
+        for origin, direction in (((nan, 0.0, 1.0), (0.0, 0.0, -1.0)), ((0.0, -4.0, 3.0), (nan, nan, nan)),
+                                  ((inf, 0.0, 1.0), (0.0, 0.0, -1.0)), ((0.0, 0.0, 1.0), (0.0, -1.0))):
+            click(origin, direction)
+            wait_for(lambda: "ignored a click" in capsys.readouterr().err, f"click {origin} {direction} ignored")
+            assert live.goal is None and live.thread.is_alive()
+        client.gui(live.text, "<no such text>")
+        wait_for(lambda: "ignored text" in capsys.readouterr().err, "unknown text ignored")
+        wait_for(lambda: live.text.value == "walk", "the text dropdown put back")
+        assert env.text == "walk"
+        click(("a", 0.0, 1.0), (0.0, 0.0, -1.0))  # Viser cannot decode it and drops that connection
+        time.sleep(0.5)
+        assert live.thread.is_alive() and live.goal is None
+        client.close()
+        client = RawClient(guarded.get_port())
+        click((0.0, -4.0, 3.0), (0.3, 0.8, -0.5))  # a good click, as a page sends it
+        wait_for(lambda: live.goal is not None, "a good click sets the goal")
+        assert np.isfinite(live.goal).all()
+        before = live.pelvis().copy()
+        wait_for(lambda: np.linalg.norm(live.pelvis() - before) > 0.05, "the body moves", timeout=60)
+        assert live.thread.is_alive()
+    finally:
+        client.close()
+
+
+def test_an_error_in_the_control_loop_stops_the_walk_and_the_thread_lives(live, capsys):
+    class BrokenPolicy:
+        def act(self, obs, deterministic=False):
+            raise RuntimeError("policy failed")
+
+    policy, live.policy = live.policy, BrokenPolicy()
+    live.set_goal((1.0, 2.0))
+    wait_for(lambda: not live.active, "the walk stopped")
+    assert "live control paused: RuntimeError: policy failed" in capsys.readouterr().err
+    assert live.thread.is_alive() and "press Reset" in live.message
+    live.policy = policy
+    live.reset()
+    live.set_goal((1.0, 2.0))
+    before = live.pelvis().copy()
+    wait_for(lambda: np.linalg.norm(live.pelvis() - before) > 0.05, "the body moves again", timeout=60)
+
+
+def test_an_error_in_the_playback_loop_pauses_it_and_the_thread_lives(guarded, eval_folder, capsys, monkeypatch):
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    player = Player(guarded, open_source(eval_folder))
+    draw = player.scene.show_pose
+
+    def broken(joints):
+        raise RuntimeError("drawing failed")
+
+    monkeypatch.setattr(player.scene, "show_pose", broken)
+    player.start()
+    try:
+        wait_for(lambda: not player.playing, "playback paused")
+        assert "playback paused: RuntimeError: drawing failed" in capsys.readouterr().err
+        assert player.thread.is_alive() and player.play.label == "Play"
+        monkeypatch.setattr(player.scene, "show_pose", draw)
+        player.toggle()  # the Play button
+        before = player.frame
+        wait_for(lambda: player.frame != before, "playback moves again")
+    finally:
+        player.stop.set()
+        player.thread.join(2)
