@@ -388,7 +388,7 @@ def _optimize_commands(sub) -> None:
     opt.add_argument("--init-scale", type=float, default=0.1, help="standard deviation of the 'randn' start")
     opt.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
     opt.add_argument("--stop-cm", type=_positive(float), help="end a batch once every problem is within this (cm)")
-    for name, default, what in (("floor", 1.0, "floor distance (m)"), ("skate", 0.1, "foot skate (m/s)"),
+    for name, default, what in (("floor", 1.0, "floor distance (m)"), ("skate", 1.0, "foot skate (m/s)"),
                                 ("jerk", 0.0, "jerk (m/s^3)"), ("prior", 0.1, "noise above the Gaussian shell")):
         opt.add_argument(f"--{name}", type=float, default=default, help=f"weight of the {what} regularizer")
     opt.add_argument("--problem", dest="problems", action="append", metavar="NAME", help="solve only this problem")

@@ -38,7 +38,7 @@ class OptimizeRequest:
     seed: int = 0
     stop_cm: float | None = None
     floor: float = 1.0
-    skate: float = 0.1
+    skate: float = 1.0
     jerk: float = 0.0
     prior: float = 0.1
     problems: list[str] | None = None

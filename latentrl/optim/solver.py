@@ -49,7 +49,7 @@ class OptimizeSettings:
     """Problems solved together as one tensor."""
     guidance: float = GUIDANCE_SCALE
     seed: int = 0
-    weights: dict[str, float] = field(default_factory=lambda: {"floor": 1.0, "skate": 0.1, "jerk": 0.0,
+    weights: dict[str, float] = field(default_factory=lambda: {"floor": 1.0, "skate": 1.0, "jerk": 0.0,
                                                                "prior": 0.1})
     stop_cm: float | None = None
     """End a batch early once every problem's goal error is at most this (None: run every step)."""
