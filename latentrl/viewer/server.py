@@ -6,11 +6,12 @@ import contextlib
 import io
 import signal
 import socket
+import sys
 import threading
 from typing import Any
 
 from latentrl.errors import ConfigError, LatentRLError
-from latentrl.viewer.guard import ConnectionGuard, complain, guarded_websockets
+from latentrl.viewer.guard import ConnectionGuard, complain, guarded_websockets, is_loopback
 
 EXTRA_HINT = "pip install 'latentrl[viewer]'"
 
@@ -52,10 +53,51 @@ def check_port(host: str, port: int) -> None:
         probe.close()
 
 
+WILDCARD_HOSTS = ("", "0.0.0.0", "::")
+"""Hosts that bind every network interface."""
+
+
+def reachable_host(host: str) -> str:
+    """The address another machine reaches a server bound to ``host`` at.
+
+    A wildcard host is this machine's outward address: the one the OS would send from (a UDP
+    socket "connected" to a documentation address sends nothing), else the address of its name,
+    else loopback when it has no network.
+    """
+    if host not in WILDCARD_HOSTS:
+        return host
+    family, probe = (socket.AF_INET6, "2001:db8::1") if host == "::" else (socket.AF_INET, "192.0.2.1")
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as s:
+            s.connect((probe, 9))
+            address = s.getsockname()[0]
+    except OSError:
+        address = ""
+    if address in WILDCARD_HOSTS and family == socket.AF_INET:
+        try:
+            address = socket.gethostbyname(socket.gethostname())
+        except OSError:
+            address = ""
+    return address if address not in WILDCARD_HOSTS else ("::1" if host == "::" else "127.0.0.1")
+
+
+def is_local_only(host: str) -> bool:
+    """Whether a server bound to ``host`` is reachable from this machine only (every address it names is loopback)."""
+    if host in WILDCARD_HOSTS:
+        return False
+    if is_loopback(host):
+        return True
+    try:
+        infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        return False
+    return all(is_loopback(str(info[4][0]).split("%")[0]) for info in infos)
+
+
 def url_of(host: str, port: int) -> str:
-    """The URL to open for a server bound to ``host:port`` (a wildcard host shows 127.0.0.1)."""
-    shown = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
-    return f"http://{shown}:{port}"
+    """The URL to open for a server bound to ``host:port`` (a wildcard host: this machine's outward address)."""
+    shown = reachable_host(host)
+    return f"http://[{shown}]:{port}" if ":" in shown else f"http://{shown}:{port}"
 
 
 def start_server(host: str, port: int, label: str, command: str = "view") -> Any:
@@ -81,8 +123,13 @@ def start_server(host: str, port: int, label: str, command: str = "view") -> Any
 
 
 def announce(command: str, host: str, port: int) -> None:
-    """The one line that tells the user where to look."""
-    print(f"latentrl {command}: open {url_of(host, port)} in a browser (Ctrl-C stops)", flush=True)
+    """The line that tells the user where to look, and a warning line when other machines can reach it too."""
+    url = url_of(host, port)
+    print(f"latentrl {command}: open {url} in a browser (Ctrl-C stops)", flush=True)
+    if not is_local_only(host):
+        print(f"latentrl {command}: warning: --host {host} makes the viewer reachable from the network: "
+              f"anyone who can reach {url} can watch{' and steer' if command == 'play' else ''} it",
+              file=sys.stderr, flush=True)
 
 
 def serve_until_interrupted(server: Any, command: str, host: str, stop: threading.Event | None = None,

@@ -315,3 +315,61 @@ def test_an_error_in_the_playback_loop_pauses_it_and_the_thread_lives(guarded, e
     finally:
         player.stop.set()
         player.thread.join(2)
+
+
+# --------------------------------------------------------------------------- --host
+def serve_view(motion_file, *host):
+    """``latentrl view MOTION [--host H] --port 0`` in a subprocess; returns it and its URL line."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "latentrl.app.cli", "view", str(motion_file), *host, "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    return proc, proc.stdout.readline()
+
+
+def stop(proc) -> str:
+    """Ctrl-C the server; its stderr."""
+    import signal
+
+    proc.send_signal(signal.SIGINT)
+    try:
+        _, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    return err
+
+
+def test_a_network_host_prints_its_reachable_address_and_a_warning(motion_file):
+    import urllib.request
+
+    pytest.importorskip("viser")
+    from latentrl.viewer.server import is_local_only
+
+    proc, line = serve_view(motion_file, "--host", "0.0.0.0")
+    try:
+        url = re.search(r"open (http://\S+) in a browser", line).group(1)
+        assert "0.0.0.0" not in url, line
+        warning = proc.stderr.readline()
+        assert warning.startswith("latentrl view: warning: --host 0.0.0.0 makes the viewer reachable from the "
+                                  f"network: anyone who can reach {url} can watch it"), warning
+        with urllib.request.urlopen(url, timeout=10) as page:  # the printed address serves the viewer
+            assert page.status == 200
+        host = re.match(r"http://\[?([^\]]+?)\]?:\d+$", url).group(1)
+        assert is_local_only(host) == (host == "127.0.0.1")  # loopback only where the machine has no network
+    finally:
+        stop(proc)
+
+
+def test_a_loopback_host_prints_no_warning(motion_file):
+    pytest.importorskip("viser")
+    from latentrl.viewer.server import is_local_only
+
+    proc, line = serve_view(motion_file, "--host", "localhost")
+    assert line.startswith("latentrl view: open http://localhost:"), line
+    assert "warning" not in stop(proc)
+    assert all(is_local_only(h) for h in ("127.0.0.1", "127.0.0.2", "::1", "localhost"))
+    assert not any(is_local_only(h) for h in ("0.0.0.0", "::", ""))
