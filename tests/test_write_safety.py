@@ -22,6 +22,7 @@ from latentrl.safe_io import atomic_write_bytes, atomic_write_text, open_no_foll
 from tests.helpers import make_tiny_model
 
 TINY = Path(__file__).resolve().parents[1] / "configs" / "tiny.yaml"
+MOTION_TINY = Path(__file__).resolve().parents[1] / "configs" / "motion" / "tiny.yaml"
 SECRET = "precious bytes\n"
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "symlink") or os.name == "nt", reason="POSIX links and flock")
@@ -131,6 +132,17 @@ def test_resume_refuses_a_linked_lock_in_a_finished_run(tmp_path, tiny_motion, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "train.log: the training log is a symbolic link" in err, err
     assert target.read_text() == SECRET and log_before
+
+
+@pytest.mark.parametrize("name, what", [(LOCK_FILE, "lock file"), (LOG_FILE, "training log")])
+def test_motion_train_refuses_a_linked_lock_or_log(name, what, tmp_path, capsys):
+    target = victim(tmp_path)
+    run = tmp_path / "run"
+    linked(run, name, target)
+    assert main(["motion", "train", str(MOTION_TINY), "--run-dir", str(run), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{name}: the {what} is a symbolic link" in err, err
+    assert target.read_text() == SECRET
 
 
 # --------------------------------------------------------------------------- atomic writes
