@@ -103,7 +103,7 @@ class RawClient:
 
         origin = f"http://{host}:{port}" if origin == "own" else origin
         self.ws = connect(f"ws://{host}:{port}", subprotocols=[f"viser-v{viser.__version__}"], origin=origin,
-                          open_timeout=10, max_size=None)
+                          open_timeout=10, max_size=None, max_queue=None)  # reads all it is sent, as a page does
         # Viser counts a client as connected (and runs its GUI callbacks) from its first camera message
         self.send(type="ViewerCameraMessage", wxyz=[1.0, 0.0, 0.0, 0.0], position=[0.0, -3.0, 2.0], fov=1.0,
                   near=0.01, far=100.0, image_height=480, image_width=640, look_at=[0.0, 0.0, 0.0],
@@ -373,3 +373,15 @@ def test_a_loopback_host_prints_no_warning(motion_file):
     assert "warning" not in stop(proc)
     assert all(is_local_only(h) for h in ("127.0.0.1", "127.0.0.2", "::1", "localhost"))
     assert not any(is_local_only(h) for h in ("0.0.0.0", "::", ""))
+
+
+def test_a_viser_that_starts_its_server_another_way_is_warned_about(capsys, monkeypatch):
+    import contextlib
+
+    pytest.importorskip("viser")
+    import latentrl.viewer.server as server
+
+    monkeypatch.setattr(server, "guarded_websockets", lambda guard: contextlib.nullcontext())
+    srv = server.start_server("127.0.0.1", 0, "test", "view")
+    srv.stop()
+    assert "other web pages could connect to it" in capsys.readouterr().err
