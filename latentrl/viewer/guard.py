@@ -120,6 +120,9 @@ class ConnectionGuard:
         return guarded
 
 
+_serve_lock = threading.Lock()
+
+
 @contextlib.contextmanager
 def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
     """While open, every websockets server started gets ``guard`` in front of its HTTP handler.
@@ -130,16 +133,17 @@ def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
     """
     import websockets.asyncio.server as ws_server
 
-    original = ws_server.serve
+    with _serve_lock:  # two servers built at once must not keep each other's wrapper
+        original = ws_server.serve
 
-    def serve(*args: Any, process_request: Any = None, **kwargs: Any) -> Any:
-        return original(*args, process_request=guard.wrap(process_request), **kwargs)
+        def serve(*args: Any, process_request: Any = None, **kwargs: Any) -> Any:
+            return original(*args, process_request=guard.wrap(process_request), **kwargs)
 
-    ws_server.serve = serve
-    try:
-        yield
-    finally:
-        ws_server.serve = original
+        ws_server.serve = serve
+        try:
+            yield
+        finally:
+            ws_server.serve = original
 
 
 # --------------------------------------------------------------------------- values a client sends

@@ -103,7 +103,7 @@ class RawClient:
 
         origin = f"http://{host}:{port}" if origin == "own" else origin
         self.ws = connect(f"ws://{host}:{port}", subprotocols=[f"viser-v{viser.__version__}"], origin=origin,
-                          open_timeout=10, max_size=None, max_queue=None)  # reads all it is sent, as a page does
+                          open_timeout=30, max_size=None, max_queue=None)  # reads all it is sent, as a page does
         # Viser counts a client as connected (and runs its GUI callbacks) from its first camera message
         self.send(type="ViewerCameraMessage", wxyz=[1.0, 0.0, 0.0, 0.0], position=[0.0, -3.0, 2.0], fov=1.0,
                   near=0.01, far=100.0, image_height=480, image_width=640, look_at=[0.0, 0.0, 0.0],
@@ -141,11 +141,13 @@ def wait_for(check, what: str, timeout: float = 10.0) -> None:
 
 
 @pytest.fixture
-def guarded():
+def guarded(monkeypatch):
     """A Viser server started as ``latentrl view`` starts it (origin check, connection bound)."""
     pytest.importorskip("viser")
+    from latentrl.viewer import guard
     from latentrl.viewer.server import start_server
 
+    monkeypatch.setattr(guard, "_window", {"start": -float("inf"), "lines": 0})  # this test's stderr lines all print
     srv = start_server("127.0.0.1", 0, "test", "view")
     yield srv
     srv.stop()
@@ -188,6 +190,39 @@ def test_connections_are_bounded(guarded, capsys):
     finally:
         for client in clients:
             client.close()
+
+
+def test_a_flood_of_connections_is_bounded_and_playback_goes_on(guarded, eval_folder):
+    from concurrent.futures import ThreadPoolExecutor
+
+    from websockets.exceptions import InvalidStatus
+
+    from latentrl.viewer.guard import MAX_CLIENTS
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    player = Player(guarded, open_source(eval_folder))
+    player.start()
+
+    def attempt(_):
+        try:
+            return RawClient(guarded.get_port())
+        except InvalidStatus as exc:
+            return exc.response.status_code
+
+    with ThreadPoolExecutor(20) as pool:  # 20 handshakes at a time, 200 in all
+        results = list(pool.map(attempt, range(200)))
+    clients = [r for r in results if isinstance(r, RawClient)]
+    try:
+        assert len(clients) == MAX_CLIENTS and results.count(503) == 200 - MAX_CLIENTS, results
+        before = player.frame
+        wait_for(lambda: player.frame != before, "playback still moving")
+        assert player.thread.is_alive()
+    finally:
+        for client in clients:
+            client.close()
+        player.stop.set()
+        player.thread.join(2)
 
 
 def test_bad_gui_values_are_ignored_and_playback_goes_on(guarded, eval_folder, capsys):
