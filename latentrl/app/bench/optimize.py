@@ -23,7 +23,7 @@ from latentrl.optim.solver import rollout, unconstrained_jerk
 from latentrl.optim.warm import policy_warm_start
 from latentrl.resources import task_file
 from latentrl.safe_io import atomic_write_bytes
-from latentrl.timing import hardware, synchronizer
+from latentrl.timing import hardware, median_time
 
 DART_SECONDS_PER_100_STEPS_60_FRAMES = 74.0
 """DART App. F: "60 frames and 100 optimization steps costs around 74 seconds" (RTX 4090)."""
@@ -123,22 +123,11 @@ def _cost_row(name: str, device: str, steps: int) -> dict:
         text = model.encode_text(["walk"])
     start = model.initial_state(1, seed_index=torch.tensor([0]))
     z = torch.zeros(8, 1, *model.latent_shape, device=device, requires_grad=True)
-    sync = synchronizer(device)
-
     def one_step():
         joints, _ = rollout(model, start, [text] * 8, z, 5.0)
         joints[:, -1].square().sum().backward()
 
-    one_step()  # warm-up
-    sync()
-    times = []
-    for _ in range(steps):
-        t0 = time.perf_counter()
-        one_step()
-        sync()
-        times.append(time.perf_counter() - t0)
-    times.sort()
-    per_step = times[len(times) // 2]
+    per_step = median_time(one_step, repeats=steps, warmup=1, device=device)
     per_100 = per_step * 100
     row = {"model": name, "device": device, "seconds_per_step": per_step, "seconds_per_100_steps_64_frames": per_100,
            "seconds_per_100_steps_60_frames": per_100 * 60 / 64,
