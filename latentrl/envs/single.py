@@ -1,20 +1,25 @@
 """A single ``gymnasium.Env`` view of a one-env vector env (numpy in, numpy out).
 
-Two uses: Gymnasium's own ``check_env`` (which only checks single envs) can then check our
-dynamics, and ``gymnasium.vector.SyncVectorEnv`` over many of them is the per-env-loop baseline
-the benchmark compares the batched env against.
+Three uses: ``gymnasium.make(id)`` returns one (through :class:`SingleEntryPoint`, so code written
+for single envs runs unchanged), Gymnasium's own ``check_env`` (which only checks single envs) can
+then check our dynamics, and ``gymnasium.vector.SyncVectorEnv`` over many of them is the
+per-env-loop baseline the benchmark compares the batched env against.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 from gymnasium.vector import AutoresetMode
 
-from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.errors import ConfigError
+
+if TYPE_CHECKING:  # the registration imports this module, and must not load torch
+    from latentrl.envs.base import LatentMotionVectorEnv
 
 
 class SingleEnv(gym.Env):
@@ -49,3 +54,30 @@ class SingleEnv(gym.Env):
     def close(self) -> None:
         """Close the wrapped vector env."""
         self.env.close()
+
+
+@dataclass(frozen=True)
+class SingleEntryPoint:
+    """The ``entry_point`` of a task's Gymnasium id: ``gymnasium.make(id, **kwargs)`` builds a :class:`SingleEnv`.
+
+    ``kwargs`` are the task's constructor arguments, as for ``make_vec``; the vector env is built with one env,
+    autoreset off and the id's ``max_episode_steps`` (``gymnasium.make``'s own ``max_episode_steps`` only adds
+    its ``TimeLimit``, so it can end episodes earlier, never later).
+    """
+
+    vector_entry_point: type | str
+    """The task's env class, or ``"module:Class"`` (imported on the first ``make``)."""
+    max_episode_steps: int
+    """Truncation passed to the constructor, as ``make_vec`` does."""
+
+    def __call__(self, **kwargs: Any) -> SingleEnv:
+        """Build the one-env vector env with ``kwargs`` and wrap it."""
+        for name in ("num_envs", "autoreset_mode"):
+            if name in kwargs:
+                raise ConfigError(f"gymnasium.make builds one env with autoreset off; {name}={kwargs[name]!r} "
+                                  "belongs to gymnasium.make_vec(id, num_envs=N, ...)")
+        kwargs.setdefault("max_episode_steps", self.max_episode_steps)
+        create = self.vector_entry_point
+        if isinstance(create, str):
+            create = load_env_creator(create)
+        return SingleEnv(create(1, autoreset_mode=AutoresetMode.DISABLED, **kwargs))

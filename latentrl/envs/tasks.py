@@ -81,7 +81,7 @@ class TaskSpec:
     Its values come from ``env.<name>`` when :class:`~latentrl.envs.config.EnvConfig` has that section, else
     from ``env.options``."""
     gym_id: str | None = None
-    """A ``gymnasium.make_vec`` id (registered by :func:`register_task`)."""
+    """A Gymnasium id (registered by :func:`register_task`): ``make_vec`` builds the env, ``make`` one ``SingleEnv``."""
     max_episode_steps: int = 32
     """Steps before truncation that the Gymnasium id passes to the constructor."""
     suite_kind: str = "paths"
@@ -117,7 +117,10 @@ def register_task(spec: TaskSpec, *, replace: bool = False) -> TaskSpec:
         raise ValueError(f"task '{spec.name}' is registered already; pass replace=True to replace it")
     TASKS[spec.name] = spec
     if spec.gym_id is not None and (replace or spec.gym_id not in gymnasium.registry):
-        gymnasium.register(id=spec.gym_id, vector_entry_point=spec.env, max_episode_steps=spec.max_episode_steps)
+        from latentrl.envs.single import SingleEntryPoint  # gymnasium.make's single env
+
+        gymnasium.register(id=spec.gym_id, entry_point=SingleEntryPoint(spec.env, spec.max_episode_steps),
+                           vector_entry_point=spec.env, max_episode_steps=spec.max_episode_steps)
     return spec
 
 

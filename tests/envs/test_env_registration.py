@@ -14,11 +14,11 @@ from latentrl.envs import FollowPathEnv, ReachLocationEnv, SingleEnv
 from tests.envs.test_follow_path import PATHS
 
 
-def test_ids_are_registered_with_vector_entry_points():
+def test_ids_are_registered_with_vector_and_single_entry_points():
     for env_id in ("latentrl/ReachLocation-v0", "latentrl/FollowPath-v0", "latentrl/Joystick-v0",
                    "latentrl/TimedPath-v0"):
         spec = gym.spec(env_id)
-        assert spec.vector_entry_point and spec.entry_point is None
+        assert spec.vector_entry_point and spec.entry_point is not None  # make_vec: the batched env; make: one
 
 
 def test_make_vec_reach_location(tiny_model):
