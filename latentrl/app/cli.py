@@ -279,9 +279,10 @@ def _eval_commands(sub) -> None:
     ev.add_argument("policy", metavar="POLICY",
                     help="PPO checkpoint (.pt) from latentrl train, or a shipped policy by name (reach_walk_default)")
     ev.add_argument("--paths", nargs="+", metavar="FILE",
-                    help="DART-format path files or suite names in tasks/paths (default: dart_walk_long "
-                         "dart_run_long dart_hop_long); for joystick and timed policies, command-timeline or "
-                         "timed path files, or suite names in tasks/joystick or tasks/timed")
+                    help="DART-format path files or suite names in tasks/paths (default: those of dart_walk_long "
+                         "dart_run_long dart_hop_long using only the policy's prompts); for joystick and timed "
+                         "policies, command-timeline or timed path files, or suite names in tasks/joystick or "
+                         "tasks/timed")
     ev.add_argument("--episodes", type=int, default=32, help="episodes per path, run as one batch (DART: 32)")
     ev.add_argument("--max-steps", type=int, default=256,
                     help="step budget per episode, in primitives of 8 frames (DART: 256 = 68.3 s); "
@@ -302,6 +303,7 @@ def _eval_commands(sub) -> None:
                     help="render the first N episodes of every path as GIF and BVH (default 1)")
     ev.add_argument("--no-render", dest="render", action="store_const", const=0, help="render nothing")
     ev.add_argument("--no-motions", dest="motions", action="store_false", help="skip the per-episode .npz files")
+    ev.add_argument("--no-progress", action="store_true", help="hide the progress bar (paths x episodes)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

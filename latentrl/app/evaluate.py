@@ -11,13 +11,16 @@
 
 The policy's task (its checkpoint's ``env.task``; the path task when it stores none) decides how it is
 judged: its :class:`~latentrl.envs.tasks.TaskSpec` names the evaluator, the folder of ``tasks/`` in which
-``--paths`` names resolve and the suites run without ``--paths``. A joystick or timed policy runs command
-timelines (``tasks/joystick/``) or timed paths (``tasks/timed/``), its ``report.json`` has the format
-``latentrl.eval.task/1`` and its motions are named ``<suite>_<i>_ep<e>``.
+``--paths`` names resolve and the suites run without ``--paths`` (those of the task's suites whose every
+prompt the policy was trained on: a walk policy is not judged on hops). The report files are rewritten
+after every path, so an interrupted eval leaves the report of the paths it finished. A joystick or timed
+policy runs command timelines (``tasks/joystick/``) or timed paths (``tasks/timed/``), its ``report.json``
+has the format ``latentrl.eval.task/1`` and its motions are named ``<suite>_<i>_ep<e>``.
 """
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +70,8 @@ class EvalRequest:
     out: str | None = None
     render: int = 1
     motions: bool = True
+    progress: bool = True
+    """Show a progress bar over paths x episodes."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -157,20 +162,31 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 
-def evaluate(req: EvalRequest) -> int:
-    """``latentrl eval``: run the suites of the policy's task, write the report and motions."""
-    env = stored_env(policy_file(req.policy))
-    if req.motion is None:  # the model the policy was trained with: no flag to repeat
-        req.motion = motion_of(env)
+def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
+    """The policy's task spec and the suite files to run: ``paths``, else the task's suites of its prompts."""
+    env = stored_env(policy_file(policy))
     spec = task_spec(env.task if env is not None else UNNAMED_TASK)
     evaluator = spec.evaluator
     if evaluator is None:
-        raise ConfigError(f"{req.policy}: task '{spec.name}' has no evaluator (give its TaskSpec an evaluator)")
+        raise ConfigError(f"{policy}: task '{spec.name}' has no evaluator (give its TaskSpec an evaluator)")
+    defaults = evaluator.default_suites(spec.suites, env.texts if env is not None else ())
+    return spec, resolve_path_files(paths, evaluator.suite_kind, defaults)
+
+
+def evaluate(req: EvalRequest) -> int:
+    """``latentrl eval``: run the suites of the policy's task, write the report and motions."""
+    from tqdm import tqdm
+
+    env = stored_env(policy_file(req.policy))
+    if req.motion is None:  # the model the policy was trained with: no flag to repeat
+        req.motion = motion_of(env)
+    spec, files = eval_suites(req.policy, req.paths)
+    evaluator = spec.evaluator
     settings = _settings(req)
-    files = resolve_path_files(req.paths, evaluator.suite_kind,
-                               evaluator.default_suites(spec.suites, env.texts if env is not None else ()))
-    for file in files:  # check every file before loading models
-        evaluator.load_suite(file)
+    entries = sum(len(evaluator.load_suite(file)) for file in files)  # every file checked before models load
+    if req.paths is None:
+        print(f"evaluating on {', '.join(f.stem for f in files)} (the {spec.name} suites using only the policy's "
+              "prompts; --paths chooses others)", flush=True)
     req.policy = str(policy_file(req.policy))  # a file, or a shipped policy by name (reach_walk_default)
     beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
     out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"
@@ -178,10 +194,25 @@ def evaluate(req: EvalRequest) -> int:
     model, policy, motion, policy_info, observe_next = _load(req, settings)
     observe_next = evaluator.fit(policy, model, files, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
-    with locked_output(out_dir):  # one eval per folder; a failure from here on removes the folder this command created
-        results = evaluator.run(act, model, files, settings, observe_next=observe_next, out_dir=out_dir,
-                                render=req.render, motions=req.motions)
-        lines = evaluator.report(results, settings, out_dir, policy=policy_info, motion=motion, hardware=hardware())
+    info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
+    # an evaluator written before ``after_entry`` existed still runs, without the bar and the reports in between
+    stepwise = "after_entry" in inspect.signature(evaluator.run).parameters
+    bar = tqdm(total=entries * settings.episodes, unit="episode", desc="eval", dynamic_ncols=True,
+               disable=not (req.progress and stepwise))
+    with locked_output(out_dir) as output:  # one eval per folder; a failure before the first report removes it
+        def after_entry(done: Any) -> None:
+            """After every path: the report of the paths so far (atomic), then the bar."""
+            evaluator.report(done, settings, out_dir, **info)
+            output.keep()  # an interrupted or failed eval leaves the report of the paths it finished
+            bar.update(settings.episodes)
+
+        try:
+            results = evaluator.run(act, model, files, settings, observe_next=observe_next, out_dir=out_dir,
+                                    render=req.render, motions=req.motions,
+                                    **({"after_entry": after_entry} if stepwise else {}))
+        finally:
+            bar.close()
+        lines = evaluator.report(results, settings, out_dir, **info)
     print("\n".join(lines))
     return 0
 

@@ -47,11 +47,14 @@ class Evaluator(Protocol):
         """
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
-            out_dir: Path | None = None, render: int = 0, motions: bool = False) -> Any:
+            out_dir: Path | None = None, render: int = 0, motions: bool = False,
+            after_entry: Callable[[Any], None] | None = None) -> Any:
         """Episodes of every entry of every suite file (one progress line printed per entry); their results.
 
         With ``out_dir``, each episode's motion goes to ``motions/`` (if ``motions``) and the first ``render``
-        episodes of an entry to ``renders/`` as GIF and BVH.
+        episodes of an entry to ``renders/`` as GIF and BVH. ``after_entry`` (optional: ``latentrl eval``
+        passes it only to a ``run`` that takes it) gets the results so far, as :meth:`report` takes them,
+        after each entry: the eval rewrites its report and moves its progress bar.
         """
 
     def report(self, results: Any, settings: Any, out_dir: Path, **info: Any) -> list[str]:

@@ -23,7 +23,7 @@ from latentrl.envs.tasks import attach_evaluator
 from latentrl.errors import CheckpointError
 from latentrl.evaluation import joystick, plots, report, timed
 from latentrl.evaluation.config import EvalConfig
-from latentrl.evaluation.results import EpisodeResult, PathResult, prompts_label
+from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, prompts_label
 from latentrl.evaluation.runner import fit_policy, measure_speed, run_suites
 from latentrl.evaluation.skills import match_share
 from latentrl.evaluation.task_eval import aggregate, build_task_report, results_table, write_task_report
@@ -68,16 +68,28 @@ class PathEvaluator:
         return load_paths(file)
 
     def default_suites(self, suites: tuple[str, ...], texts: Sequence[str]) -> tuple[str, ...]:
-        """DART's Table 4 suites, whatever the policy was trained on (they are the benchmark)."""
-        return suites
+        """DART's Table 4 suites whose every prompt the policy was trained on (all of them if none is).
+
+        A walk policy is not judged on the hop suite: it would fail there after minutes per path.
+        """
+        from latentrl.resources import suites_folder
+
+        known = set(texts)
+        fits = [name for name in suites
+                if all(set(p.texts) <= known for p in load_paths(suites_folder(self.suite_kind) / f"{name}.json"))]
+        return tuple(fits) or suites
 
     def fit(self, policy: Any, motion: Any, files: Sequence[Path], settings: Any, observe_next: bool | None) -> bool:
         """The policy fits FollowPath; whether it observes the next waypoint (from its size when not stored)."""
         return fit_policy(policy.obs_dim, policy.action_dim, motion, settings, observe_next)
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
-            out_dir: Path | None = None, render: int = 0, motions: bool = False) -> PathRun:
-        """Every path of every file, then the controller's speed at batch 1 and at ``settings.episodes``."""
+            out_dir: Path | None = None, render: int = 0, motions: bool = False,
+            after_entry: Callable[[PathRun], None] | None = None) -> PathRun:
+        """Every path of every file, then the controller's speed at batch 1 and at ``settings.episodes``.
+
+        ``after_entry`` gets the paths done so far (no speed yet) after each path.
+        """
         def sink(ep: EpisodeResult, data: dict) -> str | None:
             clip = MotionClip.from_dict(data)
             if motions:
@@ -87,8 +99,19 @@ class PathEvaluator:
                                  f"{ep.suite} path {ep.path_index} ep {ep.episode} ({ep.end})", motions,
                                  ep.episode < render)
 
+        done: list[SuiteResult] = []
+        file_of = {Path(f).stem: str(Path(f)) for f in files}
+
+        def progress(result: PathResult) -> None:
+            _path_progress(result)
+            if not done or done[-1].name != result.suite:
+                done.append(SuiteResult(result.suite, file_of[result.suite], []))
+            done[-1].paths.append(result)
+            if after_entry is not None:
+                after_entry(PathRun(done, {}, motions, render))
+
         suites = run_suites(act, motion, files, settings, observe_next=observe_next,
-                            sink=sink if out_dir is not None else None, progress=_path_progress)
+                            sink=sink if out_dir is not None else None, progress=progress)
         first = load_paths(files[0])[0]
         speed = measure_speed(act, motion, first, settings, [1, settings.episodes], observe_next)
         return PathRun(suites, speed, motions, render)
@@ -122,8 +145,18 @@ def _path_progress(result: PathResult) -> None:
     reach = f", reach time of successes {sum(times) / len(times):.1f} s" if times else ""
     judged = [s for ep in result.episodes for s in ep.segments if s["match"] is not None]
     skill = f", skill matched in {match_share(judged):.0%} of {len(judged)} segments" if judged else ""
-    print(f"{result.suite} path {result.index} ({prompts_label(result.path.texts)}): {wins}/{len(result.episodes)} "
-          f"reached{reach}{skill} ({result.wall_s:.0f} s)", flush=True)
+    _say(f"{result.suite} path {result.index} ({prompts_label(result.path.texts)}): {wins}/{len(result.episodes)} "
+         f"reached{reach}{skill} ({result.wall_s:.0f} s)")
+
+
+def _say(line: str) -> None:
+    """Print one progress line above the progress bar (tqdm redraws the bar below it)."""
+    import sys
+
+    from tqdm import tqdm
+
+    tqdm.write(line, file=sys.stdout)
+    sys.stdout.flush()
 
 
 @dataclass
@@ -176,8 +209,9 @@ class SuiteEvaluator:
         return bool(observe_next)
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
-            out_dir: Path | None = None, render: int = 0, motions: bool = False) -> TaskRun:
-        """Every entry of every suite file with the default criteria."""
+            out_dir: Path | None = None, render: int = 0, motions: bool = False,
+            after_entry: Callable[[TaskRun], None] | None = None) -> TaskRun:
+        """Every entry of every suite file with the default criteria; ``after_entry`` gets those done so far."""
         def sink(ep, clip: MotionClip) -> str | None:
             if motions:
                 clip.meta.update(suite=ep.suite, index=ep.index, episode=ep.episode, end=ep.end)
@@ -185,8 +219,19 @@ class SuiteEvaluator:
                                  f"{ep.suite} {ep.index} ep {ep.episode} ({ep.end})", motions, ep.episode < render)
 
         criteria = self.criteria()
+        done: list[tuple[str, str, list]] = []
+        file_of = {Path(f).stem: str(Path(f)) for f in files}
+
+        def progress(result) -> None:
+            _task_progress(result)
+            if not done or done[-1][0] != result.suite:
+                done.append((result.suite, file_of[result.suite], []))
+            done[-1][2].append(result)
+            if after_entry is not None:
+                after_entry(TaskRun(done, criteria))
+
         suites = self.module.run_suites(act, motion, files, settings, criteria=criteria,
-                                        sink=sink if out_dir is not None else None, progress=_task_progress,
+                                        sink=sink if out_dir is not None else None, progress=progress,
                                         **self._observe_next(observe_next))
         return TaskRun(suites, criteria)
 
@@ -210,7 +255,7 @@ class SuiteEvaluator:
 def _task_progress(result) -> None:
     means = {k: v["mean"] for k, v in aggregate(result.episodes).items()}
     shown = ", ".join(f"{k} {v:.2f}" for k, v in means.items() if v == v)
-    print(f"{result.suite} {result.index} ({result.label}): {shown} ({result.wall_s:.0f} s)", flush=True)
+    _say(f"{result.suite} {result.index} ({result.label}): {shown} ({result.wall_s:.0f} s)")
 
 
 PATHS = PathEvaluator()

@@ -160,3 +160,51 @@ def test_play_and_export_take_the_motion_model_the_policy_names(eval_files, tmp_
     torch.save(state, bare)
     assert trained_motion(bare) == "default"
     assert trained_motion(tmp_path / "missing.pt") == "default"  # the loaders then name the missing file
+
+
+def test_eval_without_paths_runs_the_suites_of_the_policys_prompts():
+    """A walk policy is judged on the walk suite alone, not on the run and hop suites it never learned."""
+    from latentrl.app.evaluate import eval_suites
+
+    spec, files = eval_suites("reach_walk_default", None)
+    assert spec.name == "reach" and [f.name for f in files] == ["dart_walk_long.json"]
+    _, files = eval_suites("reach_hop_left_default", None)
+    assert [f.name for f in files] == ["dart_hop_long.json"]
+    _, files = eval_suites("path_mixed_default", None)  # trained on all three prompts: all three suites
+    assert [f.stem for f in files] == ["dart_walk_long", "dart_run_long", "dart_hop_long"]
+    _, files = eval_suites("reach_walk_default", ["sharp_turns"])  # --paths still chooses
+    assert [f.name for f in files] == ["sharp_turns.json"]
+
+
+def test_an_interrupted_eval_leaves_the_report_of_the_paths_it_finished(eval_files, tmp_path, capsys, monkeypatch):
+    """The report is rewritten after every path: Ctrl-C during the second path leaves a valid report of the first."""
+    from latentrl.evaluation import runner
+    from latentrl.evaluation.report import load_report
+
+    paths = write_paths(tmp_path, [NEAR, FAR], "two.json")
+    real, calls = runner.run_path, []
+
+    def second_interrupted(*args, **kwargs):
+        calls.append(kwargs["index"])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "run_path", second_interrupted)
+    out = tmp_path / "out"
+    assert run_eval(eval_files, paths, out, "--no-render", "--no-progress") == 130
+    assert calls == [0, 1] and "interrupted" in capsys.readouterr().err
+    report = load_report(out)
+    assert [p["index"] for p in report["suites"]["two"]["paths"]] == [0]
+    assert report["overall"]["paths"] == 1 and report["suites"]["two"]["metrics"]["success_rate"]["mean"] == 1.0
+    assert "| two | 0 (" in (out / "report.md").read_text() and (out / "paths.png").is_file()
+    assert not list(out.glob(".*.tmp"))  # written atomically: no temporary left
+
+
+def test_eval_progress_bar_counts_paths_times_episodes(eval_files, tmp_path, capsys):
+    """The bar (stderr) ends at paths x episodes; --no-progress hides it."""
+    paths = write_paths(tmp_path, [NEAR, NEAR, NEAR], "three.json")
+    assert run_eval(eval_files, paths, tmp_path / "a", "--no-render", "--no-motions") == 0
+    assert "6/6" in capsys.readouterr().err
+    assert run_eval(eval_files, paths, tmp_path / "b", "--no-render", "--no-motions", "--no-progress") == 0
+    assert "6/6" not in capsys.readouterr().err
