@@ -375,6 +375,21 @@ def _export_onnx(a: argparse.Namespace) -> int:
                               allow_motion_mismatch=a.allow_motion_mismatch) or 0)
 
 
+def _list_commands(sub) -> None:
+    ls = sub.add_parser("list", help="what ships: tasks and their Gymnasium ids, policies, configs, suites, prompts")
+    ls.add_argument("section", nargs="?", metavar="SECTION",
+                    help="tasks, policies, configs, suites or prompts (default: all of them)")
+    ls.add_argument("--motion", default="default", help="whose prompts to list: 'default', a model file or a DART "
+                                                         "checkpoint (default: default)")
+    ls.set_defaults(func=_list)
+
+
+def _list(args: argparse.Namespace) -> int:
+    from latentrl.app.listing import ListRequest, list_command
+
+    return list_command(request(ListRequest, args))
+
+
 def _optimize_commands(sub) -> None:
     opt = sub.add_parser("optimize", help="keyframes and joint targets by latent noise optimization (docs/optimize.md)")
     opt.add_argument("suite", metavar="SUITE", help="a latentrl.constraints/1 JSON file or a shipped suite name "
@@ -423,6 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
     _bench_commands(sub)
     _viewer_commands(sub)
     _export_commands(sub)
+    _list_commands(sub)
     return parser
 
 
