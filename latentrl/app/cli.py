@@ -330,7 +330,8 @@ def _viewer_commands(sub) -> None:
     view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port))
 
     play = sub.add_parser("play", help="steer a reach policy live in the browser: click on the floor to set the goal")
-    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach policy")
+    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach or path policy, or a shipped "
+                                                       "policy by name (reach_walk_default)")
     play.add_argument("--motion", default=None,
                       help="the motion model the policy was trained on (default: the one its stored config names)")
     play.add_argument("--allow-motion-mismatch", action="store_true", help="run on another motion model (experts)")
@@ -356,7 +357,8 @@ def _export_commands(sub) -> None:
     esub.required = True
     onnx = esub.add_parser("onnx", help="the whole controller step (policy mean, guided sampler, decoder, world "
                                         "update) as one ONNX graph (needs latentrl[onnx])")
-    onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) written by latentrl train")
+    onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach or path policy, or a "
+                                                       "shipped policy by name (reach_walk_default)")
     onnx.add_argument("--out", required=True, metavar="FILE", help="output .onnx file")
     onnx.add_argument("--batch", type=_pos_int, default=1, help="characters per call, fixed in the graph (default 1)")
     onnx.add_argument("--text", help="bake this prompt in (default: the graph takes a text_embedding input)")

@@ -1,7 +1,7 @@
 """What a policy checkpoint says about how it was trained: its env config and its motion model.
 
 ``latentrl eval``, ``latentrl play`` and ``latentrl export onnx`` all read these, so a policy trained on
-any motion model runs without its ``--motion`` repeated.
+any motion model runs without its ``--motion`` repeated, and a command refuses a task it cannot run by name.
 """
 
 from __future__ import annotations
@@ -56,6 +56,12 @@ def stored_step_settings(config) -> StepSettings:
 def motion_of(env) -> str:
     """The motion model a stored ``EnvConfig`` names ('default' when there is none)."""
     return (env.motion if env is not None else None) or "default"
+
+
+def stored_task(policy: str | Path) -> str:
+    """The task a policy was trained on (its stored ``env.task``; 'path', DART's protocol, when it stores none)."""
+    env = stored_env(policy)
+    return env.task if env is not None else "path"
 
 
 def trained_motion(policy: str | Path, given: str | None = None) -> str:

@@ -74,6 +74,8 @@ MIN_OPSET = 17
 DEFAULT_OPSET = 17
 MAX_DIFF = 1e-3
 """``export_command`` fails when onnxruntime and torch differ by more than this after one step."""
+EXPORT_TASKS = ("reach", "path")
+"""Tasks whose observation the graph builds (a goal, and a next goal for path policies that observe it)."""
 EXTRA = "pip install 'latentrl[onnx]' (packages onnx and onnxruntime)"
 OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation",
                 "next_airborne")
@@ -409,9 +411,17 @@ def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: st
     if int(batch) < 1:
         raise ConfigError(f"--batch must be >= 1, got {batch}")
     check_output_file(out)
+    from latentrl.resources import policy_file
+
+    policy = policy_file(policy)  # a file, or a shipped policy by name (reach_walk_default)
     if not Path(policy).is_file():
         raise CheckpointError(f"policy checkpoint not found: {policy}")
-    from latentrl.evaluation.trained import trained_motion
+    from latentrl.evaluation.trained import stored_task, trained_motion
+
+    task = stored_task(policy)
+    if task not in EXPORT_TASKS:
+        raise CheckpointError(f"{policy}: export onnx builds controllers of {' and '.join(EXPORT_TASKS)} policies "
+                              f"(goal and next_goal inputs); this policy's task is '{task}', which it cannot export")
 
     step, info = load_controller(policy, trained_motion(policy, motion), batch, text, allow_motion_mismatch)
     example = step.example_inputs(next(iter(info["texts"].values()), None))

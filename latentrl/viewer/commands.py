@@ -12,6 +12,9 @@ from latentrl.errors import CheckpointError
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
+PLAY_TASKS = ("reach", "path")
+"""Tasks ``latentrl play`` steers: one goal, set by a click (a path policy that also observes the next
+waypoint is refused)."""
 
 
 def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
@@ -34,17 +37,24 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                  allow_motion_mismatch: bool = False) -> int:
     """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list.
 
-    The text list is ``text`` (if given), the policy's training texts, then every prompt the motion
-    model's text table knows; the first is where the page starts. ``motion`` None: the model named in
-    the policy's stored config.
+    ``policy`` is a file or a shipped policy's name (``reach_walk_default``). The text list is ``text``
+    (if given), the policy's training texts, then every prompt the motion model's text table knows; the
+    first is where the page starts. ``motion`` None: the model named in the policy's stored config.
     """
     import torch
 
+    from latentrl.evaluation.trained import stored_task
+    from latentrl.resources import policy_file
     from latentrl.viewer.server import check_port, require_viser, serve_until_interrupted, start_server
 
-    policy = Path(policy)
+    policy = Path(policy_file(policy))
     if not policy.is_file():
-        raise CheckpointError(f"{policy}: no such policy checkpoint (give a .pt written by latentrl train)")
+        raise CheckpointError(f"{policy}: no such policy checkpoint (give a .pt written by latentrl train, "
+                              "or a shipped policy's name)")
+    task = stored_task(policy)
+    if task not in PLAY_TASKS:
+        raise CheckpointError(f"{policy}: play steers {' and '.join(PLAY_TASKS)} policies toward a clicked goal; this "
+                              f"policy's task is '{task}' (evaluate it with latentrl eval)")
     require_viser()
     check_port(host, port)  # before the models load
     from latentrl.evaluation.trained import trained_motion
@@ -62,6 +72,10 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)
     env = play_env(loaded.checkpoint, model, text, device)
+    if loaded.policy.action_dim == env.single_action_space.shape[0] and \
+            loaded.policy.obs_dim == env.single_observation_space.shape[0] + 4:
+        raise CheckpointError(f"{policy}: this {task} policy also observes the next waypoint; play steers one "
+                              "clicked goal (reach policies, path policies trained without observe_next)")
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
     server = start_server(host, port, label=f"latentrl play {policy.name}", command="play")
     title = (f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n"

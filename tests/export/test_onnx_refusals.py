@@ -71,3 +71,20 @@ def test_an_existing_file_at_out_is_kept_when_the_export_is_refused(walk_state, 
     assert main(["export", "onnx", str(policy), "--out", str(out)]) == 2
     capsys.readouterr()
     assert out.read_bytes() == b"an earlier export"
+
+
+@pytest.mark.parametrize("name, task", [("joystick_walk_default", "joystick"), ("timed_walk_default", "timed")])
+def test_a_policy_of_a_task_without_a_controller_is_refused_by_its_task(name, task, tmp_path, capsys):
+    """A shipped joystick or timed policy (by name) is refused in one line naming its task, not a dimension."""
+    out = tmp_path / "controller.onnx"
+    assert main(["export", "onnx", name, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert f"this policy's task is '{task}'" in err and "reach and path" in err and "motion" not in err, err
+    assert not out.exists()
+
+
+def test_a_shipped_policy_exports_by_name(tmp_path, capsys):
+    out = tmp_path / "controller.onnx"
+    assert main(["export", "onnx", "reach_walk_default", "--out", str(out)]) == 0
+    assert out.stat().st_size > 0 and "wrote" in capsys.readouterr().out

@@ -47,6 +47,23 @@ def test_port_in_use(capsys, motion_file):
         one_line_error(capsys, ["play", str(POLICY), "--port", str(port)], f"--port {port}: already in use")
 
 
+@pytest.mark.parametrize("name, task", [("joystick_walk_default", "joystick"), ("timed_walk_default", "timed")])
+def test_play_refuses_a_task_it_cannot_steer_by_name(capsys, name, task):
+    """A shipped joystick or timed policy: one line naming its task, not a dimension blaming the motion model."""
+    one_line_error(capsys, ["play", name], f"this policy's task is '{task}'")
+
+
+def test_play_takes_shipped_names_and_refuses_a_next_waypoint_policy(capsys):
+    pytest.importorskip("viser")
+    with socket.socket() as busy:  # the name resolves: play gets as far as the busy port
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        one_line_error(capsys, ["play", "reach_walk_default", "--port", str(port)], f"--port {port}: already in use")
+    one_line_error(capsys, ["play", "path_mixed_default", "--port", "0", "--device", "cpu"],
+                   "also observes the next waypoint")
+
+
 def test_unresolvable_host(capsys, motion_file):
     pytest.importorskip("viser")
     one_line_error(capsys, ["view", str(motion_file), "--host", "no.such.host.invalid"], "cannot be resolved")
