@@ -16,6 +16,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import io
 import json
@@ -66,28 +67,35 @@ def save_torch_atomic(obj: Any, path: str | Path) -> Path:
     return atomic_write_bytes(path, buf.getvalue())
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (same-folder temp file + fsync + ``os.replace``)."""
-    path = Path(path)
+@contextlib.contextmanager
+def _replacing(path: Path, suffix: str):
+    """``(fd, name)`` of a fresh sibling of ``path`` that replaces it when the block ends; removed on failure.
+
+    mkstemp opens with O_CREAT | O_EXCL (and O_NOFOLLOW where it exists) under a random name: never an
+    existing file or a link someone placed in advance. The rename replaces a link at ``path``, never follows it.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
-    # mkstemp opens with O_CREAT | O_EXCL (and O_NOFOLLOW where it exists): never an existing file or link
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
     try:
         if hasattr(os, "fchmod"):  # mkstemp makes 0600; give the file normal permissions
             os.fchmod(fd, 0o666 & ~_umask())
         else:
             os.chmod(tmp, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
+        yield fd, Path(tmp)
         os.replace(tmp, path)
     except BaseException:
-        try:
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
-        except OSError:
-            pass
         raise
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (same-folder temp file + fsync + ``os.replace``)."""
+    path = Path(path)
+    with _replacing(path, ".tmp") as (fd, _tmp), os.fdopen(fd, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
     return path
 
 
@@ -98,20 +106,9 @@ def atomic_write_with(path: str | Path, write: Callable[[Path], Any]) -> Path:
     name someone could have linked in advance); it is renamed over ``path`` once ``write`` returns.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{path.suffix}", dir=path.parent)
-    try:
-        if hasattr(os, "fchmod"):
-            os.fchmod(fd, 0o666 & ~_umask())
+    with _replacing(path, f".tmp{path.suffix}") as (fd, tmp):
         os.close(fd)
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+        write(tmp)
     return path
 
 

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from tqdm import tqdm
 
 import latentrl.evaluation.tasks  # noqa: F401  (attaches the shipped tasks' evaluators)
 from latentrl.envs.config import stored_env_config
@@ -175,8 +176,6 @@ def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
 
 def evaluate(req: EvalRequest) -> int:
     """``latentrl eval``: run the suites of the policy's task, write the report and motions."""
-    from tqdm import tqdm
-
     env = stored_env(policy_file(req.policy))
     if req.motion is None:  # the model the policy was trained with: no flag to repeat
         req.motion = motion_of(env)
@@ -197,9 +196,11 @@ def evaluate(req: EvalRequest) -> int:
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
     # an evaluator written before ``after_entry`` existed still runs, without the bar and the reports in between
     stepwise = "after_entry" in inspect.signature(evaluator.run).parameters
-    bar = tqdm(total=entries * settings.episodes, unit="episode", desc="eval", dynamic_ncols=True,
-               disable=not (req.progress and stepwise))
     with locked_output(out_dir) as output:  # one eval per folder; a failure before the first report removes it
+        # the bar starts once the folder is ours: a refused eval prints its one line and nothing else
+        bar = tqdm(total=entries * settings.episodes, unit="episode", desc="eval", dynamic_ncols=True,
+                   disable=not (req.progress and stepwise))
+
         def after_entry(done: Any) -> None:
             """After every path: the report of the paths so far (atomic), then the bar."""
             evaluator.report(done, settings, out_dir, **info)
