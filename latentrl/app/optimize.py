@@ -13,7 +13,7 @@ from latentrl.errors import ConfigError
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.optim import OptimizeSettings, load_suite, optimize
 from latentrl.optim.report import write_outputs
-from latentrl.optim.solver import INITS, unconstrained_jerk
+from latentrl.optim.solver import INITS, add_unconstrained_jerk
 from latentrl.optim.warm import policy_warm_start
 from latentrl.preflight import check_device, check_writable, locked_output
 from latentrl.resources import task_file
@@ -76,8 +76,7 @@ def optimize_command(req: OptimizeRequest) -> int:
                            on_step=None if bar is None else (lambda _step, count: bar.update(count)))
         if bar is not None:
             bar.close()
-        for r in results:
-            r.metrics["jerk_unconstrained"] = unconstrained_jerk(model, r.problem, settings.guidance, seed=req.seed)
+        add_unconstrained_jerk(model, results, settings.guidance, seed=req.seed)
         header = {"suite": str(path), "motion_model": req.motion, "device": req.device, "hardware": hardware()}
         report = write_outputs(results, out_dir, settings, header)
     print((out_dir / "report.md").read_text(encoding="utf-8"))

@@ -19,7 +19,6 @@ Everything is checked on load; a bad value is one line naming the file, the prob
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from latentrl.errors import DataError, closest
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS
 from latentrl.motion.text import prompt_problem
+from latentrl.safe_io import read_json_file
 
 FORMAT = "latentrl.constraints/1"
 """The ``format`` value a suite file must carry."""
@@ -233,12 +233,7 @@ def load_suite(path: str | Path) -> list[Problem]:
     source = str(path)
     if not path.is_file():
         raise DataError(f"{source}: no such suite file (a latentrl.constraints/1 JSON, docs/optimize.md)")
-    if path.stat().st_size > MAX_SUITE_BYTES:
-        raise DataError(f"{source}: {path.stat().st_size} bytes, more than the {MAX_SUITE_BYTES} allowed")
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"), parse_constant=lambda c: float(c))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DataError(f"{source}: not valid JSON ({exc})") from None
+    raw = read_json_file(path, "constraint suite", MAX_SUITE_BYTES, DataError)  # size, JSON, UTF-8, nesting
     return parse_suite(raw, source, path.parent)
 
 

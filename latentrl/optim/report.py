@@ -34,8 +34,8 @@ def summary(results: list[Result]) -> dict:
     out = {k: _mean([r.metrics.get(k) for r in results]) for k in METRICS}
     out["problems"] = len(results)
     out["share_within_1cm"] = float(np.mean([r.metrics["goal_error_cm"] <= 1.0 for r in results]))
-    batch = results[0].metrics["batch"] if results else 1
-    out["seconds_per_problem"] = (out["seconds"] or 0.0) / max(batch, 1)
+    # each problem's share of its own batch's wall time (batches of one suite may differ in size)
+    out["seconds_per_problem"] = _mean([r.metrics["seconds"] / r.metrics["batch"] for r in results]) or 0.0
     return out
 
 

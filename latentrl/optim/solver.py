@@ -95,30 +95,38 @@ class Result:
 
 def start_states(model, problems: list[Problem]) -> RolloutState:
     """The start of every problem: a seed history placed as ``initial_state`` does, or two frames of a file."""
-    states = []
+    states, built = [], {}
     for p in problems:
-        if p.start.seed is not None:
-            k = model.seed_history.shape[0] if model.seed_history is not None else 0
-            if p.start.seed >= k:
-                raise DataError(f"problem {p.name!r}: start.seed {p.start.seed} is outside the model's "
-                                f"{k} seed histories (0-{k - 1})")
-            states.append(model.initial_state(1, seed_index=torch.tensor([p.start.seed])))
+        if id(p) in built:  # the same problem again (samples): its start once
+            states.append(built[id(p)])
             continue
-        clip = MotionClip.load(p.start.motion)
-        if clip.features is None:
-            raise DataError(f"{p.start.motion}: has no 'features' (a motion written by latentrl eval, motion "
-                            f"sample or optimize has them); problem {p.name!r} cannot start from it")
-        end = p.start.frame if p.start.frame >= 0 else clip.frames - 1
-        if not HISTORY_LENGTH - 1 <= end < clip.frames:
-            raise DataError(f"problem {p.name!r}: start.frame {p.start.frame} is outside {p.start.motion}'s "
-                            f"{clip.frames} frames (needs {HISTORY_LENGTH} frames ending there)")
-        feats = torch.as_tensor(clip.features[end - HISTORY_LENGTH + 1:end + 1], dtype=torch.float32)
-        canon, world = world_to_canonical(feats[None].to(model.device), model.pelvis_delta)
-        states.append(RolloutState(canon, world, torch.zeros(1, dtype=torch.bool, device=model.device)))
+        built[id(p)] = _start_state(model, p)
+        states.append(built[id(p)])
     return RolloutState(torch.cat([s.history for s in states]),
                         WorldTransform(torch.cat([s.world.rotation for s in states]),
                                        torch.cat([s.world.translation for s in states])),
                         torch.cat([s.airborne_flags() for s in states]))
+
+
+def _start_state(model, p: Problem) -> RolloutState:
+    """One problem's start (batch 1)."""
+    if p.start.seed is not None:
+        k = model.seed_history.shape[0] if model.seed_history is not None else 0
+        if p.start.seed >= k:
+            raise DataError(f"problem {p.name!r}: start.seed {p.start.seed} is outside the model's "
+                            f"{k} seed histories (0-{k - 1})")
+        return model.initial_state(1, seed_index=torch.tensor([p.start.seed]))
+    clip = MotionClip.load(p.start.motion)
+    if clip.features is None:
+        raise DataError(f"{p.start.motion}: has no 'features' (a motion written by latentrl eval, motion "
+                        f"sample or optimize has them); problem {p.name!r} cannot start from it")
+    end = p.start.frame if p.start.frame >= 0 else clip.frames - 1
+    if not HISTORY_LENGTH - 1 <= end < clip.frames:
+        raise DataError(f"problem {p.name!r}: start.frame {p.start.frame} is outside {p.start.motion}'s "
+                        f"{clip.frames} frames (needs {HISTORY_LENGTH} frames ending there)")
+    feats = torch.as_tensor(clip.features[end - HISTORY_LENGTH + 1:end + 1], dtype=torch.float32)
+    canon, world = world_to_canonical(feats[None].to(model.device), model.pelvis_delta)
+    return RolloutState(canon, world, torch.zeros(1, dtype=torch.bool, device=model.device))
 
 
 def rollout(model, start: RolloutState, embeddings: list[torch.Tensor], noise: torch.Tensor, guidance: float,
@@ -162,6 +170,19 @@ def _problem_seed(seed: int, name: str, sample: int) -> int:
     return (seed * 1_000_003 + zlib.crc32(name.encode()) * 31 + sample) % (2**63)
 
 
+def total_loss(joints: torch.Tensor, noise: torch.Tensor, targets, weights: dict[str, float],
+               names: tuple[str, ...]) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """(B,) constraint loss plus the weighted regularizers, and the regularizers ``names`` computed on the way.
+
+    The optimizer's loop asks only for the weighted ones; the final rollout asks for all (they are its metrics).
+    """
+    loss = constraint_loss(joints[:, HISTORY_LENGTH:], targets)
+    reg = regularizers(joints, noise, float(FPS), names) if names else {}
+    for k, w in weights.items():
+        loss = loss + w * reg[k]
+    return loss, reg
+
+
 def solve_batch(model, problems: list[Problem], settings: OptimizeSettings,
                 warm: torch.Tensor | None = None, on_step: Callable[[int, int], None] | None = None) -> list[Result]:
     """Optimize problems of one length together; one :class:`Result` per problem (its best sample)."""
@@ -184,16 +205,12 @@ def solve_batch(model, problems: list[Problem], settings: OptimizeSettings,
             group["lr"] = settings.lr * (1.0 - step / settings.steps)
         opt.zero_grad(set_to_none=True)
         joints, _ = rollout(model, start, embeddings, z, settings.guidance)
-        gen = joints[:, HISTORY_LENGTH:]
-        loss = constraint_loss(gen, targets)
-        if weights:
-            reg = regularizers(joints, z, float(FPS))
-            loss = loss + sum(w * reg[k] for k, w in weights.items())
+        loss, _ = total_loss(joints, z, targets, weights, tuple(weights))
         loss.sum().backward()  # per-problem losses: each problem's gradient is its own
         with torch.no_grad():
             norm = z.grad.flatten(2).norm(dim=(0, 2)).clamp(min=1e-12)  # (B,) over the whole sequence
             z.grad /= norm[None, :, None, None]
-            err = goal_error_cm(gen, targets)
+            err = goal_error_cm(joints[:, HISTORY_LENGTH:], targets)
         opt.step()
         elapsed = time.perf_counter() - t0
         for i, (e, lo) in enumerate(zip(err.tolist(), loss.detach().tolist())):
@@ -209,12 +226,8 @@ def _finish(model, problems, expanded, start, embeddings, z, targets, traces, se
     """Roll the final noise out once more (no gradient): the returned motion and its metrics."""
     with torch.no_grad():
         joints, feats = rollout(model, start, embeddings, z, settings.guidance, with_features=True)
-        gen = joints[:, HISTORY_LENGTH:]
-        err = goal_error_cm(gen, targets)
-        loss = constraint_loss(gen, targets)
-        reg = regularizers(joints, z, float(FPS))
-        for k, w in weights.items():
-            loss = loss + w * reg[k]
+        err = goal_error_cm(joints[:, HISTORY_LENGTH:], targets)
+        loss, reg = total_loss(joints, z, targets, weights, REGULARIZERS)  # every regularizer: the report's metrics
         start_joints = start.world.apply(joints_of(start.history))
         history_err = (joints[:, :HISTORY_LENGTH] - start_joints).norm(dim=-1).mean(dim=(1, 2)) * 100.0
     reps = settings.samples
@@ -259,14 +272,19 @@ def unconstrained_jerk(model, problem: Problem, guidance: float, samples: int = 
 
     The reference the result's jerk is compared with (DART: constrained 0.61 vs data 0.74).
     """
-    torch.manual_seed(seed)
     with torch.no_grad():
         start = start_states(model, [problem] * samples)
         emb = [model.encode_text([problem.texts[s]] * samples) for s in range(problem.primitives)]
         g = torch.Generator().manual_seed(seed)
         z = torch.randn(problem.primitives, samples, *model.latent_shape, generator=g).to(model.device)
         joints, _ = rollout(model, start, emb, z, guidance)
-        return float(regularizers(joints, z, float(FPS))["jerk"].mean())
+        return float(regularizers(joints, z, float(FPS), ("jerk",))["jerk"].mean())
+
+
+def add_unconstrained_jerk(model, results: list[Result], guidance: float, seed: int = 0) -> None:
+    """Set every result's ``jerk_unconstrained`` metric (:func:`unconstrained_jerk`), as the reports show it."""
+    for r in results:
+        r.metrics["jerk_unconstrained"] = unconstrained_jerk(model, r.problem, guidance, seed=seed)
 
 
 def optimize(model, problems: list[Problem], settings: OptimizeSettings | None = None,

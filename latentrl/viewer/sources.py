@@ -178,18 +178,14 @@ def open_source(path: str | Path) -> Source:
         raise DataError(f"{path}: no such file or folder (give a motion .npz, an evaluation folder or a run folder)")
     if path.is_file():
         if path.name == REPORT_JSON:
-            if _report_format(path) == OPTIMIZE_FORMAT:
-                return optimize_source(path.parent)
-            return evaluation_source(path.parent)
+            return _report_source(path.parent)
         if path.suffix == ".npz":
             return motion_source(path)
         if path.suffix == ".pt":
             raise DataError(f"{path}: a checkpoint, not a motion; to steer a policy live use: latentrl play {path}")
         raise DataError(f"{path}: expected a motion .npz, an evaluation folder (report.json) or a training run folder")
     if (path / REPORT_JSON).is_file():
-        if _report_format(path / REPORT_JSON) == OPTIMIZE_FORMAT:
-            return optimize_source(path)
-        return evaluation_source(path)
+        return _report_source(path)
     if any((path / marker).exists() for marker in RUN_MARKERS):
         return run_source(path)
     if sorted(path.glob("*.npz")):
@@ -264,12 +260,14 @@ OPTIMIZE_FORMAT = "latentrl.optimize-report/1"
 MAX_REPORT_BYTES = 64 * 1024 * 1024
 
 
-def _report_format(path: Path) -> Any:
-    """The ``format`` field of a report file (None if it has none or is no JSON object)."""
+def _report_source(folder: Path) -> Source:
+    """The folder's report.json, read once: an optimize output or an evaluation."""
     from latentrl.safe_io import read_json_file
 
-    report = read_json_file(path, "report", MAX_REPORT_BYTES, DataError)
-    return report.get("format") if isinstance(report, dict) else None
+    report = read_json_file(folder / REPORT_JSON, "report", MAX_REPORT_BYTES, DataError)
+    if isinstance(report, dict) and report.get("format") == OPTIMIZE_FORMAT:
+        return optimize_source(folder, report)
+    return evaluation_source(folder)
 
 
 def _target_rows(targets: Any, where: str) -> list[dict]:
@@ -288,12 +286,9 @@ def _target_rows(targets: Any, where: str) -> list[dict]:
     return rows
 
 
-def optimize_source(folder: Path) -> Source:
-    """Every problem of a ``latentrl optimize`` output, with its targets (markers and ghost keyframes)."""
-    from latentrl.safe_io import read_json_file
-
+def optimize_source(folder: Path, report: dict) -> Source:
+    """Every problem of a ``latentrl optimize`` output (its parsed ``report``), with its targets."""
     path = folder / REPORT_JSON
-    report = read_json_file(path, "report", MAX_REPORT_BYTES, DataError)
     problems = report.get("problems")
     if not isinstance(problems, list) or not problems:
         raise DataError(f"{path}: an optimize report needs a non-empty 'problems' list")

@@ -8,7 +8,6 @@ import pytest
 import torch
 
 from latentrl.app.cli import main
-from latentrl.motion import save_motion_model
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS
 from latentrl.optim import FORMAT, OptimizeSettings, load_suite, optimize, parse_suite
@@ -30,8 +29,8 @@ def rows(frame: torch.Tensor) -> list:
 
 
 @pytest.fixture(scope="module")
-def model():
-    return make_tiny_model()
+def model(tiny_model):
+    return tiny_model  # tests/conftest.py
 
 
 def target_problem(model, name="p", primitives=2, seed=5, text="walk", frame=None) -> dict:
@@ -159,10 +158,8 @@ def test_shipped_suites_load():
 
 
 @pytest.fixture(scope="module")
-def tiny_file(tmp_path_factory) -> str:
-    path = tmp_path_factory.mktemp("model") / "tiny_motion.pt"
-    save_motion_model(make_tiny_model(), path)
-    return str(path)
+def tiny_file(eval_files) -> str:
+    return str(eval_files["motion"])  # the tiny model as a file (tests/conftest.py)
 
 
 def test_optimize_command_writes_report_motions_and_plot(tiny_file, tmp_path, model):
@@ -228,7 +225,7 @@ def test_bad_suite_file_and_flags(tmp_path, capsys):
     assert "format: expected 'latentrl.constraints/1'" in capsys.readouterr().err
     path.write_text("{")
     assert main(["optimize", str(path), "--no-progress"]) == 2
-    assert "not valid JSON" in capsys.readouterr().err
+    assert "invalid JSON: " in capsys.readouterr().err
     assert main(["optimize", str(tmp_path / "missing.json"), "--no-progress"]) == 2
     assert "no such suite file" in capsys.readouterr().err
     assert main(["optimize", "joint_targets", "--floor", "-1", "--no-progress", "--out", str(tmp_path / "o")]) == 2

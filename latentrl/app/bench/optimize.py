@@ -19,7 +19,7 @@ from latentrl.app.bench.common import default_devices, official_size_model, writ
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.optim import OptimizeSettings, load_suite, optimize
 from latentrl.optim.report import summary
-from latentrl.optim.solver import rollout, unconstrained_jerk
+from latentrl.optim.solver import add_unconstrained_jerk, rollout
 from latentrl.optim.warm import policy_warm_start
 from latentrl.resources import task_file
 from latentrl.safe_io import atomic_write_bytes
@@ -61,8 +61,7 @@ def _suite_rows(req: OptimizeBenchRequest, device: str, warm_fn, curves: dict) -
             t0 = time.perf_counter()
             results = optimize(model, problems, settings, warm_start=fn)
             wall = time.perf_counter() - t0
-            for r in results:
-                r.metrics["jerk_unconstrained"] = unconstrained_jerk(model, r.problem, settings.guidance)
+            add_unconstrained_jerk(model, results, settings.guidance)
             s = summary(results)
             to_1cm = [r.metrics["seconds_to_1cm"] / r.metrics["batch"] for r in results
                       if r.metrics["seconds_to_1cm"] is not None]
