@@ -25,6 +25,22 @@ def tiny_model():
     return make_tiny_model()
 
 
+@pytest.fixture(scope="session")
+def eval_files(tmp_path_factory, tiny_model) -> dict[str, Path]:
+    """``motion``: the tiny model saved as a file; ``policy``: a PPO checkpoint trained 'on' it (iteration 0)."""
+    from latentrl.motion.checkpoint import file_sha256, save_motion_model
+    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
+    from tests.evaluation.conftest import fresh_policy
+
+    root = tmp_path_factory.mktemp("eval_files")
+    motion = save_motion_model(tiny_model, root / "tiny_motion.pt")
+    policy = fresh_policy(tiny_model)
+    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
+                            optimizer=torch.optim.Adam(policy.parameters()), config={"test": True},
+                            motion={"path": str(motion), "sha256": file_sha256(motion)})
+    return {"motion": motion, "policy": save_checkpoint(state, root / "policy.pt")}
+
+
 # Tiny networks: one intra-op thread avoids OpenMP stalls on a busy 2-core machine, and keeps results
 # identical between runs made inside module fixtures and inside tests.
 torch.set_num_threads(1)

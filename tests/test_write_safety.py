@@ -186,20 +186,11 @@ def test_plots_and_gifs_never_write_through_a_link_at_their_final_or_temporary_n
 
 # --------------------------------------------------------------------------- one eval or optimize per --out folder
 @pytest.fixture(scope="module")
-def eval_files(tmp_path_factory, tiny_model) -> dict[str, Path]:
-    """The tiny motion model as a file, a fresh policy checkpoint that fits it, and a one-path suite."""
-    from latentrl.motion.checkpoint import file_sha256
-    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
-    from tests.evaluation.conftest import NEAR, fresh_policy, write_paths
+def near_paths(tmp_path_factory) -> Path:
+    """A one-path suite for the tiny policy of ``eval_files`` (tests/conftest.py)."""
+    from tests.evaluation.conftest import NEAR, write_paths
 
-    root = tmp_path_factory.mktemp("eval_files")
-    motion = save_motion_model(tiny_model, root / "tiny_motion.pt")
-    policy = fresh_policy(tiny_model)
-    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
-                            optimizer=torch.optim.Adam(policy.parameters()), config={"test": True},
-                            motion={"path": str(motion), "sha256": file_sha256(motion)})
-    return {"motion": motion, "policy": save_checkpoint(state, root / "policy.pt"),
-            "paths": write_paths(root, [NEAR], "near.json")}
+    return write_paths(tmp_path_factory.mktemp("near"), [NEAR], "near.json")
 
 
 def refused_while_held(out: Path, argv: list[str], capsys) -> None:
@@ -215,10 +206,10 @@ def refused_while_held(out: Path, argv: list[str], capsys) -> None:
     assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE, "report.json"]
 
 
-def test_a_second_eval_into_the_same_out_folder_is_refused(eval_files, tmp_path, capsys):
+def test_a_second_eval_into_the_same_out_folder_is_refused(eval_files, near_paths, tmp_path, capsys):
     out = tmp_path / "out"
     argv = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths",
-            str(eval_files["paths"]), "--episodes", "1", "--max-steps", "2", "--device", "cpu", "--render", "0",
+            str(near_paths), "--episodes", "1", "--max-steps", "2", "--device", "cpu", "--render", "0",
             "--out", str(out)]
     refused_while_held(out, argv, capsys)
     assert main(argv) == 0  # once the holder is gone, the folder is free again

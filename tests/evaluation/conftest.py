@@ -1,11 +1,10 @@
-"""Fixtures of the evaluation tests: a tiny motion model file and a fresh policy checkpoint that fits it."""
+"""Helpers of the evaluation tests: a fresh policy for the tiny model, path files (``eval_files``: root conftest)."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-import pytest
 import torch
 
 
@@ -19,21 +18,6 @@ def fresh_policy(model, observe_next: bool = False):
     torch.manual_seed(0)
     return ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
                        PolicyConfig(latent_dim=32), env.metadata["observation_layout"])
-
-
-@pytest.fixture(scope="session")
-def eval_files(tmp_path_factory, tiny_model) -> dict[str, Path]:
-    """``motion``: the tiny model saved as a file; ``policy``: a PPO checkpoint trained 'on' it (iteration 0)."""
-    from latentrl.motion.checkpoint import file_sha256, save_motion_model
-    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
-
-    root = tmp_path_factory.mktemp("eval_files")
-    motion = save_motion_model(tiny_model, root / "tiny_motion.pt")
-    policy = fresh_policy(tiny_model)
-    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
-                            optimizer=torch.optim.Adam(policy.parameters()), config={"test": True},
-                            motion={"path": str(motion), "sha256": file_sha256(motion)})
-    return {"motion": motion, "policy": save_checkpoint(state, root / "policy.pt")}
 
 
 def write_paths(folder: Path, data, name: str = "paths.json") -> Path:

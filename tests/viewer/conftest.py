@@ -51,3 +51,18 @@ def motion_file(tmp_path) -> Path:
 @pytest.fixture
 def eval_folder(tmp_path) -> Path:
     return write_eval(tmp_path / "eval")
+
+
+def walk_controller(server):
+    """``latentrl play``'s controller for the shipped walk policy, built as the command builds it (not started).
+
+    The policy's training env settings: the shipped walk runs with the foot lock.
+    """
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.ppo import load_policy
+    from latentrl.resources import policy_file
+    from latentrl.viewer.live import LiveController, SteeredReachEnv
+
+    env = SteeredReachEnv(1, motion=load_motion_model("default"), texts=["walk", "run"], max_episode_steps=10**9,
+                          autoreset_mode="Disabled", foot_lock=True)
+    return LiveController(server, env, load_policy(policy_file("reach_walk_default")).policy, "test", "walk", seed=0)

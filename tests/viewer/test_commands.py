@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from latentrl.app.cli import main
+from tests.viewer.conftest import walk_controller
 
 ROOT = Path(__file__).resolve().parents[2]
 POLICY = ROOT / "policies" / "reach_walk_default.pt"
@@ -124,16 +125,10 @@ def test_player_without_browser(server, eval_folder):
 
 def test_live_control_walks_to_the_goal(server):
     """The shipped walk policy, driven by the controller's own loop, walks towards a goal set as a click would."""
-    from latentrl.motion.checkpoint import load_motion_model
-    from latentrl.ppo import load_policy
-    from latentrl.viewer.live import LiveController, SteeredReachEnv, floor_point
+    from latentrl.viewer.live import floor_point
 
-    model = load_motion_model("default")
-    policy = load_policy(POLICY).policy
-    # as `latentrl play` builds it: the policy's training env settings (the shipped walk runs with the foot lock)
-    env = SteeredReachEnv(1, motion=model, texts=["walk", "run"], max_episode_steps=10**9, autoreset_mode="Disabled",
-                          foot_lock=True)
-    live = LiveController(server, env, policy, "test", "walk", seed=0)
+    live = walk_controller(server)
+    env = live.env
     start = live.pelvis().copy()
     goal = floor_point((0.0, -4.0, 3.0), (0.3, 0.8, -0.5))  # a click ray in front of the start pose, to the right
     assert goal is not None and floor_point((0, 0, 1), (0, 0, 1)) is None

@@ -11,10 +11,9 @@ import pytest
 
 from latentrl.render import save_motion_npz
 from latentrl.viewer.markup import plain
-from tests.viewer.conftest import walking, write_eval
+from tests.viewer.conftest import walk_controller, walking, write_eval
 
 ROOT = Path(__file__).resolve().parents[2]
-POLICY = ROOT / "policies" / "reach_walk_default.pt"
 IMG = "<img src=x onerror=alert(1)>"
 SCRIPT = "<script>alert(2)</script>"
 HOSTILE = f"{IMG} {SCRIPT} ![p](/etc/hostname) [l](javascript:alert(3)) `c` **b** {{x}} a|b & &amp;"
@@ -261,15 +260,7 @@ def test_bad_gui_values_are_ignored_and_playback_goes_on(guarded, eval_folder, c
 @pytest.fixture
 def live(guarded):
     """``latentrl play``'s controller with the shipped walk policy, its loop running."""
-    from latentrl.motion.checkpoint import load_motion_model
-    from latentrl.ppo import load_policy
-    from latentrl.viewer.live import LiveController, SteeredReachEnv
-
-    model = load_motion_model("default")
-    policy = load_policy(POLICY).policy
-    env = SteeredReachEnv(1, motion=model, texts=["walk", "run"], max_episode_steps=10**9, autoreset_mode="Disabled",
-                          foot_lock=True)
-    controller = LiveController(guarded, env, policy, "test", "walk", seed=0)
+    controller = walk_controller(guarded)
     controller.start()
     yield controller
     controller.stop.set()
