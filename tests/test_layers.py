@@ -20,8 +20,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "latentrl"
 FLOORS = (
     ("errors", "constants", "config", "safe_io", "preflight", "timing", "resources", "monitor", "runlock"),
     ("motion",),
-    ("datasets", "render", "rewards"),
-    ("motion_training", "envs", "ppo"),
+    ("datasets", "render", "rewards", "scenes"),
+    ("motion_training", "envs", "ppo", "physics"),
     ("evaluation", "optim"),
     ("viewer", "export"),
     ("app", "cli", "__main__"),
@@ -36,6 +36,8 @@ APART = {
     "motion_training": ("envs", "ppo", "rewards", "render"),
     "optim": ("motion_training", "datasets"),
     "evaluation": ("optim",),
+    "scenes": ("datasets", "render", "rewards"),
+    "physics": ("envs", "motion_training"),
 }
 """unit -> units it must not import, whatever their floor."""
 
