@@ -27,6 +27,7 @@ from typing import Any
 from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import next_at_last_problem
+from latentrl.envs.reach_joint import ReachJointConfig
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.tasks import TASKS, task_spec
 from latentrl.errors import ConfigError, closest
@@ -229,6 +230,8 @@ class EnvConfig:
     """Arguments of the joystick task."""
     timed: TimedConfig = field(default_factory=TimedConfig)
     """Arguments of the timed-path task."""
+    reach_joint: ReachJointConfig = field(default_factory=ReachJointConfig)
+    """Arguments of the joint-goal task (docs/joint_goals.md)."""
     options: dict[str, Any] = field(default_factory=dict)
     """Arguments of a registered task that has no section of its own above (its spec's ``config`` fields)."""
 

@@ -149,5 +149,7 @@ for _spec in (
              "latentrl/Joystick-v0", 75, "joystick", ("joystick_walk", "joystick_run")),
     TaskSpec("timed", "latentrl.envs.timed:TimedPathEnv", "latentrl.envs.config:TimedConfig",
              "latentrl/TimedPath-v0", 256, "timed", ("timed_walk",)),
+    TaskSpec("reach_joint", "latentrl.envs.reach_joint:ReachJointEnv", "latentrl.envs.reach_joint:ReachJointConfig",
+             "latentrl/ReachJoint-v0", 64, "joint_goals", ("pelvis_near", "pelvis_far")),
 ):
     TASKS[_spec.name] = _spec

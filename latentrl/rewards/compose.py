@@ -8,23 +8,25 @@ the env reports as ``infos["reward/<term>"]``).
 Terms and DART's weights (README command; the kernels in :mod:`latentrl.rewards.terms` give
 the formulas):
 
-==============  =======  ====================================================================
-name            weight   term
-==============  =======  ====================================================================
-``dist``        1.0      goal-distance progress of the pelvis, metres per step
-``success``     1.0      1 when the goal is reached during the step
-``foot_floor``  100      -(lower foot's distance to the floor beyond 3 cm), x0.1 for hop/run
-``skate``       100      -(contact-weighted foot displacement), metres per frame
-``orient``      0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
-``rotation``    10.0     -(1 - cos) of the hip-axis yaw change per frame
-``jerk``        0        -(largest third difference of any joint), metres per frame^3
-``prior``       0        -max(0, mean square of the action (latent noise) - 1): noise far from N(0, I)
-``skill``       0        -(how far the step is from its text's skill rule: speed band, single support)
-``heading``     1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
-``speed``       1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
-``pace``        1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
-``timing``      1.0      on reaching a waypoint, 1 - |arrival error| / tolerance, in [0, 1] (TimedPath)
-==============  =======  ====================================================================
+=================  =======  ====================================================================
+name               weight   term
+=================  =======  ====================================================================
+``dist``           1.0      goal-distance progress of the pelvis, metres per step
+``success``        1.0      1 when the goal is reached during the step
+``foot_floor``     100      -(lower foot's distance to the floor beyond 3 cm), x0.1 for hop/run
+``skate``          100      -(contact-weighted foot displacement), metres per frame
+``orient``         0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
+``rotation``       10.0     -(1 - cos) of the hip-axis yaw change per frame
+``jerk``           0        -(largest third difference of any joint), metres per frame^3
+``prior``          0        -max(0, mean square of the action (latent noise) - 1): noise far from N(0, I)
+``skill``          0        -(how far the step is from its text's skill rule: speed band, single support)
+``heading``        1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
+``speed``          1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
+``pace``           1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
+``timing``         1.0      on reaching a waypoint, 1 - |arrival error| / tolerance, in [0, 1] (TimedPath)
+``joint_dist``     1.0      the goal joint's progress toward its target, metres per step (ReachJoint)
+``joint_arrival``  5.0      at the goal time, exp(-joint error / 0.1 m), in [0, 1] (ReachJoint)
+=================  =======  ====================================================================
 
 Each task computes and reports only its own terms (``terms=`` of :class:`RewardComposer`; the envs'
 ``reward_terms``): ReachLocation and FollowPath the seven of :data:`DART_TERMS`, Joystick and TimedPath
@@ -84,6 +86,9 @@ class RewardInputs:
     """(N, D) the step's action (latent noise) after clamping to the action bound."""
     skill: torch.Tensor | None = None
     """(N,) long: each env's text as a skill code (:func:`latentrl.rewards.skills.skill_code`)."""
+    joint_error: torch.Tensor | None = None
+    """ReachJoint: (N, 3) the goal joint's distance to its target (m) at the last frame before the step, at the
+    step's last frame (the goal-time frame when that is in the step) and at the goal-time frame (NaN elsewhere)."""
 
     def step_seconds(self) -> float:
         """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
@@ -267,6 +272,18 @@ def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2] - x.floor_height
     return terms.skill_fidelity(*x.pelvis_before_after(), height, x.skill, x.step_seconds(),
                                 scale=cfg.skill_multipliers() if cfg.skill_scale else None)
+
+
+@reward_term("joint_dist", 1.0, inputs=('joint_error',))
+def _joint_dist(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.joint_progress` of the goal joint toward its target (ReachJoint)."""
+    return terms.joint_progress(x.joint_error[:, 0], x.joint_error[:, 1])
+
+
+@reward_term("joint_arrival", 5.0, inputs=('joint_error',))
+def _joint_arrival(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.joint_arrival` at the goal time (ReachJoint)."""
+    return terms.joint_arrival(x.joint_error[:, 2])
 
 
 TERM_NAMES: tuple[str, ...] = tuple(REWARD_TERMS)

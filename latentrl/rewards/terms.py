@@ -328,3 +328,40 @@ def skill_fidelity(
         families = [value * float(k) for value, k in zip(families, scale, strict=True)]
     per_code = torch.stack((torch.zeros_like(speed), *families), 1)
     return per_code.gather(1, skill.long().clamp(0, len(S.SKILLS))[:, None])[:, 0]
+
+
+JOINT_ARRIVAL_SCALE_M = 0.1
+"""``joint_arrival`` falls to 1/e at this error (metres): sharp enough to pay for centimetres near the target."""
+
+
+def joint_progress(error_before: torch.Tensor, error_after: torch.Tensor) -> torch.Tensor:
+    """``joint_dist``: how much closer the goal joint came to its target during the step, metres.
+
+    ``r = e_before - e_after``: a potential-based shaping (the potential is ``-e``), so summed over an
+    episode it is the start error minus the end error and it does not change which policy is best; the
+    goal time is paid by :func:`joint_arrival`.
+
+    Args:
+        error_before: (N,) the joint's distance to its target at the last frame before the step.
+        error_after: (N,) the same at the step's last frame (or at the goal-time frame when that is in the step).
+
+    Returns:
+        (N,) metres, > 0 when approaching.
+    """
+    return error_before - error_after
+
+
+def joint_arrival(error_at_goal: torch.Tensor, scale: float = JOINT_ARRIVAL_SCALE_M) -> torch.Tensor:
+    """``joint_arrival``: the terminal term at a goal's time, ``exp(-e / scale)``; 0 in other steps.
+
+    Args:
+        error_at_goal: (N,) the joint's distance to its target at the goal-time frame, metres; NaN in the
+            steps that do not hold a goal time.
+        scale: metres at which the bonus falls to 1/e.
+
+    Returns:
+        (N,) in [0, 1]; 1 = exactly on the target at the goal time.
+    """
+    at_goal = torch.isfinite(error_at_goal)
+    score = torch.exp(-torch.where(at_goal, error_at_goal, 0.0).clamp(min=0.0) / scale)
+    return torch.where(at_goal, score, torch.zeros_like(score))

@@ -1,0 +1,230 @@
+"""ReachJoint: the observation layout, the error and success at the goal time, random goals in range, the
+rewards, joint-goal files and their errors, the config section, and the Gymnasium id."""
+
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+
+import latentrl  # noqa: F401  (registers the ids)
+from latentrl.envs.reach_joint import (
+    JOINTS,
+    JointGoal,
+    JointGoalEntry,
+    ReachJointConfig,
+    ReachJointEnv,
+    goal_frame,
+    load_joint_goals,
+)
+from latentrl.errors import ConfigError, DataError
+from latentrl.motion.skeleton import FPS
+from tests.envs.conftest import actions
+
+ENTRY = JointGoalEntry("walk", (JointGoal("pelvis", (0.3, 0.5, 0.8), 0.2),
+                                JointGoal("left_foot", (0.1, 0.9), 0.4),
+                                JointGoal("right_hand", (0.2, 1.0, 1.0), 1.0)))
+
+
+def make(tiny_model, n=2, **kwargs) -> ReachJointEnv:
+    return ReachJointEnv(n, motion=tiny_model, **kwargs)
+
+
+def test_observation_layout_carries_the_goal_in_the_body_frame_the_joint_and_the_time_left(tiny_model):
+    env = make(tiny_model, goals=[ENTRY], max_episode_steps=8)
+    fields = env.observation_fields
+    assert list(fields)[:5] == ["goal_vec", "goal_dist", "joint", "planar", "time_left"]
+    assert [b - a for a, b in list(fields.values())[:5]] == [3, 1, len(JOINTS), 1, 1]
+    obs, _ = env.reset(seed=0)
+    last = env.history_world()[:, -1, JOINTS["pelvis"]]
+    offset = torch.tensor(ENTRY.goals[0].target) - last
+    body = (offset[:, None, :] @ env._state.world.rotation)[:, 0]  # R^T v: the body frame of history frame 0
+    assert obs[:, slice(*fields["goal_vec"])] == pytest.approx(body, abs=1e-5)
+    assert obs[:, slice(*fields["goal_dist"])].flatten() == pytest.approx(offset.norm(dim=-1), abs=1e-5)
+    assert obs[:, slice(*fields["joint"])].tolist() == [[1.0, 0, 0, 0, 0, 0]] * 2
+    assert obs[:, slice(*fields["planar"])].flatten().tolist() == [0.0, 0.0]
+    assert obs[:, slice(*fields["time_left"])].flatten() == pytest.approx([6 / FPS] * 2)
+    # after the first step the current goal is the left foot's: 2-D, z of the offset is 0
+    obs, *_ = env.step(actions(2, 0))
+    assert obs[:, slice(*fields["joint"])].argmax(dim=1).tolist() == [list(JOINTS).index("left_foot")] * 2
+    assert obs[:, slice(*fields["planar"])].flatten().tolist() == [1.0, 1.0]
+    vec = obs[:, slice(*fields["goal_vec"])]
+    assert vec[:, 2].abs().max() < 1e-6
+    assert obs[:, slice(*fields["time_left"])].flatten() == pytest.approx([(12 - 8) / FPS] * 2)
+
+
+def test_error_and_success_are_measured_at_the_goal_frame(tiny_model):
+    env = make(tiny_model, goals=[ENTRY], max_episode_steps=8, record_history=True, autoreset_mode="Disabled")
+    env.reset(seed=0)
+    due, errors, ends = [], [], []
+    for k in range(4):
+        _, reward, terminated, _, infos = env.step(actions(2, k))
+        due.append(infos["goal_due"].tolist())
+        errors.append(infos["joint_error_m"])
+        ends.append((terminated.tolist(), infos["is_success"].tolist()))
+    # frames 6 and 12 fall in steps 0 and 1, frame 30 in step 3 (frames 25-32), which ends the entry
+    assert due == [[True] * 2, [True] * 2, [False] * 2, [True] * 2]
+    assert ends[3][0] == [True, True] and ends[2][0] == [False, False]
+    record, frames = env.goal_record()
+    assert frames[0].tolist() == [6, 12, 30]
+    joints = torch.as_tensor(env.export_clip(0, episode=0).joints)  # frame m of the episode is clip frame 1 + m
+    expect = [(joints[7, JOINTS["pelvis"]] - torch.tensor([0.3, 0.5, 0.8])).norm(),
+              (joints[13, JOINTS["left_foot"], :2] - torch.tensor([0.1, 0.9])).norm(),
+              (joints[31, JOINTS["right_hand"]] - torch.tensor([0.2, 1.0, 1.0])).norm()]
+    assert record[0].tolist() == pytest.approx([float(e) for e in expect], abs=1e-5)
+    assert errors[0][0] == pytest.approx(float(expect[0]), abs=1e-5)
+    assert math.isnan(float(errors[2][0]))
+    # success: every goal of the entry within the radius at its frame
+    assert ends[3][1] == [bool((record[i] < 0.1).all()) for i in range(2)]
+    wide = make(tiny_model, goals=[ENTRY], max_episode_steps=8, radius=100.0, autoreset_mode="Disabled")
+    wide.reset(seed=0)
+    for k in range(4):
+        _, _, terminated, _, infos = wide.step(actions(2, k))
+    assert terminated.all() and infos["is_success"].all()
+
+
+def test_goals_in_one_step_are_each_scored_and_asap_goals_get_a_time(tiny_model):
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.0, 0.1), 1 / FPS), JointGoal("pelvis", (0.0, 0.2), 3 / FPS),
+                                    JointGoal("left_foot", (0.0, 1.2), None)))
+    env = make(tiny_model, goals=[entry], max_episode_steps=12, max_speed=1.0, autoreset_mode="Disabled")
+    env.reset(seed=0)
+    _, _, terminated, _, _ = env.step(actions(2, 0))
+    record, frames = env.goal_record()
+    assert torch.isfinite(record[:, :2]).all() and torch.isnan(record[:, 2]).all() and not terminated.any()
+    foot = env.history_world()[:, -1, JOINTS["left_foot"], :2]
+    need = ((foot - torch.tensor([0.0, 1.2])).norm(dim=-1) / 1.0 * FPS).ceil().long()
+    assert frames[:, 2].tolist() == (8 + need.clamp(min=1)).tolist()
+
+
+def test_random_goals_lie_in_their_time_distance_and_angle_ranges(tiny_model):
+    env = make(tiny_model, 64, joints=("pelvis", "left_foot", "right_hand"), near_share=0.5, far_time=(1.0, 2.0),
+               distance=(0.2, 3.0), max_speed=1.2, angle_deg=45.0, height_offset=(-0.1, 0.1))
+    env.reset(seed=0)
+    goal = env.current_goal()
+    lead = goal["frame"]
+    near = lead <= 8
+    assert near.any() and (~near).any()
+    assert ((lead >= 1) & (near | ((lead >= 30) & (lead <= 60)))).all()
+    history = env.history_world()[:, -1]
+    start = history[torch.arange(64), goal["joint"]]
+    dist = (goal["target"][:, :2] - start[:, :2]).norm(dim=-1)
+    cap = (1.2 * lead.float() / FPS).clamp(max=3.0)
+    assert (dist <= cap + 1e-4).all() and (dist >= torch.minimum(cap, torch.tensor(0.2)) - 1e-4).all()
+    feet = goal["planar"]
+    assert set(goal["joint"][feet].tolist()) <= {JOINTS["left_foot"], JOINTS["right_foot"]}
+    assert (goal["target"][feet, 2] == 0).all()
+    dz = goal["target"][~feet, 2] - start[~feet, 2]
+    assert (dz.abs() <= 0.1 + 1e-5).all()
+    assert set(goal["joint"].tolist()) == {JOINTS[j] for j in ("pelvis", "left_foot", "right_hand")}
+    # within 45 degrees of the body's forward axis (+y of the canonical frame of the last frame)
+    from latentrl.envs.goal import body_forward
+
+    forward, _ = body_forward(history)
+    to = torch.nn.functional.normalize(goal["target"][:, :2] - start[:, :2], dim=-1)
+    cos = (to * forward[:, :2]).sum(-1)
+    assert (cos[dist > 1e-3] >= math.cos(math.radians(45)) - 1e-4).all()
+
+
+def test_a_new_goal_follows_each_due_one_and_the_rewards_read_the_joint_error(tiny_model):
+    env = make(tiny_model, 4, near_share=1.0, max_episode_steps=16)
+    env.reset(seed=1)
+    before = env.current_goal()
+    _, reward, _, _, infos = env.step(actions(4, 0))
+    assert infos["goal_due"].all()  # near goals fall within the first step
+    after = env.current_goal()
+    assert (after["frame"] > 8).all() and not torch.equal(after["target"], before["target"])
+    err = infos["joint_error_m"]
+    assert infos["reward/joint_arrival"] == pytest.approx(torch.exp(-err / 0.1), abs=1e-6)
+    assert torch.isfinite(infos["reward/joint_dist"]).all()
+
+
+def test_reward_terms_of_the_joint_error():
+    from latentrl.rewards import terms
+
+    assert terms.joint_progress(torch.tensor([1.0, 0.5]), torch.tensor([0.25, 0.75])).tolist() == [0.75, -0.25]
+    out = terms.joint_arrival(torch.tensor([0.0, 0.1, math.nan]))
+    assert out.tolist() == pytest.approx([1.0, math.exp(-1.0), 0.0])
+
+
+def write(tmp_path, data):
+    f = tmp_path / "goals.json"
+    f.write_text(json.dumps(data))
+    return f
+
+
+GOOD = {"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 2, 0.86], "time": 2.0}]}
+
+
+@pytest.mark.parametrize("data,match", [
+    ({"text": "walk"}, r"expected a non-empty list of entries"),
+    ([{**GOOD, "goal": []}], r"entry 0: unknown field 'goal' \(did you mean 'goals'\?\)"),
+    ([{"goals": GOOD["goals"]}], r"entry 0: missing field 'text'"),
+    ([{**GOOD, "goals": []}], r"entry 0: field 'goals' must be a list of 1 to 1000 goals"),
+    ([{**GOOD, "goals": [{"joint": "left_hnd", "target": [0, 1, 1], "time": 1}]}],
+     r"entry 0, goal 0: field 'joint' must be one of .*did you mean 'left_hand'"),
+    ([{**GOOD, "goals": [{"joint": "left_foot", "target": [0, 1, 0], "time": 1}]}],
+     r"entry 0, goal 0: field 'target' must be \[x, y\] \(a foot's target is on the floor\)"),
+    ([{**GOOD, "goals": [{"joint": "head", "target": [0, "a", 1], "time": 1}]}], r"field 'target' must be"),
+    ([{**GOOD, "goals": [{"joint": "head", "target": [0, 1, 1], "time": "soon"}]}],
+     r"entry 0, goal 0: field 'time' must be seconds in \(0, 3600\] or \"asap\", got 'soon'"),
+    ([{**GOOD, "goals": [GOOD["goals"][0], {"joint": "head", "target": [0, 1, 1], "time": 1.5}]}],
+     r"entry 0, goal 1: field 'time' must be after the previous timed goal \(2 s\), got 1.5"),
+])
+def test_joint_goal_file_errors_name_file_entry_goal_and_field(tmp_path, data, match):
+    f = write(tmp_path, data)
+    with pytest.raises(DataError, match=match) as err:
+        load_joint_goals(f)
+    assert str(err.value).startswith(str(f)) and "\n" not in str(err.value)
+
+
+def test_joint_goal_file_loads_targets_times_and_asap(tmp_path):
+    data = [{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 2, 0.86], "time": 2.0},
+                                       {"joint": "right_foot", "target": [0.1, 2.5], "time": "asap"}]}]
+    (entry,) = load_joint_goals(write(tmp_path, data))
+    assert entry.goals[0] == JointGoal("pelvis", (0.0, 2.0, 0.86), 2.0) and not entry.goals[0].planar
+    assert entry.goals[1].time is None and entry.goals[1].planar
+    assert goal_frame(2.0) == 60 and goal_frame(0.001) == 1
+
+
+@pytest.mark.parametrize("change,match", [
+    ({"joints": ["pelvis", "left_hnd"]}, r"joints: unknown joint 'left_hnd' \(did you mean 'left_hand'\?\)"),
+    ({"radius": 0}, r"radius: must be metres > 0, got 0"),
+    ({"near_share": 1.5}, r"near_share: must be a share in \[0, 1\]"),
+    ({"far_time": [4.0, 1.0]}, r"far_time: must be \[min, max\]"),
+    ({"distance": [-1.0, 2.0]}, r"distance: must be \[min, max\] with 0 <= min <= max"),
+    ({"max_speed": 0}, r"max_speed: must be m/s > 0"),
+])
+def test_config_section_errors_are_one_line_naming_the_field(change, match):
+    cfg = ReachJointConfig(**change)
+    with pytest.raises(ConfigError, match=match) as err:
+        cfg.validate()
+    assert "\n" not in str(err.value)
+
+
+def test_env_config_section_builds_the_env(tiny_model):
+    from latentrl.config import from_dict
+    from latentrl.envs.config import EnvConfig, build
+
+    cfg = from_dict(EnvConfig, {"task": "reach_joint", "num_envs": 2,
+                                "reach_joint": {"joints": ["left_hand", "head"], "radius": 0.05}}, "env")
+    cfg.validate()
+    env = build(cfg, "cpu", motion=tiny_model)
+    assert isinstance(env, ReachJointEnv) and env.joints == ("left_hand", "head") and env.radius == 0.05
+    with pytest.raises(ConfigError, match=r"^env: reach_joint.far_time: must be \[min, max\]"):
+        from_dict(EnvConfig, {"task": "reach_joint", "reach_joint": {"far_time": [2.0]}}, "env")
+
+
+@pytest.mark.filterwarnings("ignore:.*(symmetric and normalized|infinity|unwrapped|precision):UserWarning")
+def test_gymnasium_id_makes_a_single_env_and_a_vector_env(tiny_model):
+    env = gym.make("latentrl/ReachJoint-v0", motion=tiny_model, joints=("pelvis", "right_foot"))
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, _ = env.reset(seed=0)
+    assert isinstance(obs, np.ndarray) and obs.shape == env.observation_space.shape
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert np.isfinite(reward) and isinstance(info["is_success"], bool)
+    env.close()
+    vec = gym.make_vec("latentrl/ReachJoint-v0", num_envs=3, motion=tiny_model)
+    assert isinstance(vec, ReachJointEnv) and vec.num_envs == 3 and vec.max_episode_steps == 64
