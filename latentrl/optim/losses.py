@@ -8,6 +8,10 @@ the metric (:func:`goal_error_cm`) is its square root, averaged over the targets
 Regularizers use the evaluation's metric kernels (DART's definitions, :mod:`latentrl.evaluation.metrics`):
 floor distance, foot skate and jerk, and the ``prior`` reward term's noise-shell penalty, so the number a
 weight pushes down is the number the report prints.
+
+Scenes: a problem with a scene adds DART's two scene costs to its constraint loss (:func:`scene_loss`), the
+kernels the rewards use (:mod:`latentrl.scenes.contact`): joints kept their skin radius away from every object,
+the lower foot on the terrain under it.
 """
 
 from __future__ import annotations
@@ -17,10 +21,12 @@ import torch
 from latentrl.evaluation.metrics import foot_floor_distance_cm, foot_skate_cm_s, jerk
 from latentrl.optim.problems import Targets
 from latentrl.rewards.terms import noise_prior
+from latentrl.scenes.contact import collision_cost, contact_cost
 
 HUBER_M = 0.01
 """Pseudo-Huber scale of the constraint loss (1 cm): quadratic inside, linear (in metres) beyond."""
 REGULARIZERS = ("floor", "skate", "jerk", "prior")
+SCENE_COSTS = ("collision", "contact")
 
 
 def target_squared(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
@@ -32,10 +38,34 @@ def target_squared(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
 
 
 def constraint_loss(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
-    """(B,) weighted mean pseudo-Huber distance of the targets, metres; 0 exactly when every target is met."""
+    """(B,) weighted mean pseudo-Huber distance of the targets (metres) plus any scene's :func:`scene_loss`.
+
+    0 exactly when every target is met (and the scene is kept).
+    """
     d2 = target_squared(joints, targets)
     huber = torch.sqrt(d2 + HUBER_M**2) - HUBER_M
-    return (huber * targets.weights).sum(dim=1) / targets.weights.sum(dim=1)
+    loss = (huber * targets.weights).sum(dim=1) / targets.weights.sum(dim=1)
+    return loss if targets.scene is None else loss + scene_loss(joints, targets)
+
+
+def scene_costs(joints: torch.Tensor, targets: Targets) -> dict[str, torch.Tensor]:
+    """(B,) each scene cost of the (B, T, 22, 3) generated frames, metres (zeros when no problem has a scene).
+
+    DART's ``cons_coll`` and ``cons_cont``.
+    """
+    if targets.scene is None:
+        zero = joints.new_zeros(joints.shape[0])
+        return {"collision": zero, "contact": zero}
+    return {"collision": collision_cost(joints, targets.scene), "contact": contact_cost(joints, targets.scene)}
+
+
+def scene_loss(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
+    """(B,) the scene costs weighted by each problem's ``scene_weights`` (0 for problems without a scene)."""
+    costs = scene_costs(joints, targets)
+    if targets.scene_weights is None:
+        return costs["collision"] * 0.0
+    w = targets.scene_weights
+    return w[:, 0] * costs["collision"] + w[:, 1] * costs["contact"]
 
 
 def goal_error_cm(joints: torch.Tensor, targets: Targets) -> torch.Tensor:

@@ -14,6 +14,11 @@ Suite file (docs/optimize.md)::
                                    {"type": "joint", "frame": 40, "joint": "left_wrist",
                                     "position": [0.5, 1.2, 1.1]}]}]}
 
+A problem may also carry a scene (``"scene"``: a ``latentrl.scene/1`` object, or a scene file named relative
+to the suite file; docs/scenes.md) and the weights of its two costs (``"scene_weights": {"collision": 0.1,
+"contact": 0.1}``, DART's 0.1 each by default): the motion is then kept out of the objects and its feet on the
+terrain (:func:`latentrl.optim.losses.scene_loss`).
+
 Everything is checked on load; a bad value is one line naming the file, the problem and the field.
 """
 
@@ -31,6 +36,8 @@ from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import JOINT_NAMES, NUM_JOINTS
 from latentrl.motion.text import prompt_problem
 from latentrl.safe_io import read_json_file
+from latentrl.scenes.scene import Scene, SceneBatch
+from latentrl.scenes.spec import load_scene, parse_scene
 
 FORMAT = "latentrl.constraints/1"
 """The ``format`` value a suite file must carry."""
@@ -41,6 +48,8 @@ MAX_SUITE_BYTES = 16 * 1024 * 1024
 MAX_COORD_M = 1000.0
 """Targets farther than this from the origin are refused (no character walks there in 17 s)."""
 CONSTRAINT_TYPES = ("keyframe", "joint", "trajectory")
+SCENE_WEIGHTS = {"collision": 0.1, "contact": 0.1}
+"""Default weights of a problem's scene costs (DART's ``weight_collision`` and ``weight_contact``)."""
 AXES = "xyz"
 
 
@@ -68,6 +77,10 @@ class Problem:
     targets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     masks: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     weights: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    scene: Scene | None = None
+    """Objects the motion must keep out of, and the terrain its feet stand on (None: the flat floor alone)."""
+    scene_weights: tuple[float, float] = (SCENE_WEIGHTS["collision"], SCENE_WEIGHTS["contact"])
+    """Weights of the scene's collision and contact costs."""
 
     @property
     def num_frames(self) -> int:
@@ -184,9 +197,10 @@ def parse_problem(raw, source: str, index: int, base: Path | None = None) -> Pro
     where = _Where(source, index)
     if not isinstance(raw, dict):
         raise where.error("problem", f"expected an object, got {str(raw)[:40]}")
-    extra = sorted(set(raw) - {"name", "start", "text", "primitives", "constraints"})
+    extra = sorted(set(raw) - {"name", "start", "text", "primitives", "constraints", "scene", "scene_weights"})
     if extra:
-        raise where.error(extra[0], "unknown field; expected name, start, text, primitives, constraints")
+        raise where.error(extra[0], "unknown field; expected name, start, text, primitives, constraints, scene, "
+                                    "scene_weights")
     name = raw.get("name", f"problem_{index}")
     if not isinstance(name, str) or not name or len(name) > 80 or not all(ch.isalnum() or ch in "_-." for ch in name):
         raise where.error("name", f"expected 1-80 letters, digits, '_', '-' or '.', got {name!r:.40}")
@@ -222,9 +236,36 @@ def parse_problem(raw, source: str, index: int, base: Path | None = None) -> Pro
     for i, c in enumerate(constraints):
         rows += _rows_of(c, where, f"constraints[{i}]", primitives * FUTURE_LENGTH)
     frames, joints, targets, masks, weights = zip(*rows)
+    scene, scene_weights = _scene_of(raw, where, base)
     return Problem(name, start, list(texts), primitives, constraints,
                    np.asarray(frames, np.int64), np.asarray(joints, np.int64), np.asarray(targets, np.float32),
-                   np.asarray(masks, np.float32), np.asarray(weights, np.float32))
+                   np.asarray(masks, np.float32), np.asarray(weights, np.float32), scene, scene_weights)
+
+
+def _scene_of(raw: dict, where: _Where, base: Path | None) -> tuple[Scene | None, tuple[float, float]]:
+    """A problem's ``scene`` (inline or a file beside the suite) and ``scene_weights``, checked."""
+    weights = raw.get("scene_weights", {})
+    if not isinstance(weights, dict) or set(weights) - set(SCENE_WEIGHTS):
+        raise where.error("scene_weights", f"expected an object with some of {', '.join(SCENE_WEIGHTS)}, "
+                                           f"got {str(weights)[:40]}")
+    pair = []
+    for k, default in SCENE_WEIGHTS.items():
+        w = _number(weights.get(k, default), where, f"scene_weights.{k}")
+        if w < 0:
+            raise where.error(f"scene_weights.{k}", f"must be >= 0, got {w}")
+        pair.append(w)
+    value = raw.get("scene")
+    if value is None:
+        return None, (pair[0], pair[1])
+    source = f"{where.source}: problem {where.problem!r}: scene"
+    if isinstance(value, str) and value:
+        path = Path(value)
+        if base is not None and not path.is_absolute():
+            path = base / path
+        return load_scene(path), (pair[0], pair[1])
+    if isinstance(value, dict):
+        return parse_scene(value, source), (pair[0], pair[1])
+    raise where.error("scene", f"expected a scene file name or a latentrl.scene/1 object, got {str(value)[:40]}")
 
 
 def load_suite(path: str | Path) -> list[Problem]:
@@ -269,6 +310,10 @@ class Targets:
     points: torch.Tensor  # (B, K, 3) world metres
     masks: torch.Tensor  # (B, K, 3) 1 = the axis counts
     weights: torch.Tensor  # (B, K), 0 on padding
+    scene: SceneBatch | None = None
+    """The problems' scenes (an empty one for a problem without), or None when no problem has one."""
+    scene_weights: torch.Tensor | None = None
+    """(B, 2) collision and contact weights (0 for a problem without a scene)."""
 
     @property
     def valid(self) -> torch.Tensor:
@@ -292,4 +337,9 @@ def stack_targets(problems: list[Problem], device: str | torch.device = "cpu") -
         points[i, :n] = torch.from_numpy(p.targets)
         masks[i, :n] = torch.from_numpy(p.masks)
         weights[i, :n] = torch.from_numpy(p.weights)
-    return Targets(*(t.to(device) for t in (frames, joints, points, masks, weights)))
+    out = Targets(*(t.to(device) for t in (frames, joints, points, masks, weights)))
+    if any(p.scene is not None for p in problems):
+        out.scene = SceneBatch.from_scenes([p.scene or Scene() for p in problems], device)
+        out.scene_weights = torch.tensor([p.scene_weights if p.scene is not None else (0.0, 0.0) for p in problems],
+                                         dtype=torch.float32, device=device)
+    return out

@@ -5,6 +5,7 @@ from latentrl.rewards.compose import (
     DART_TERMS,
     DEFAULT_WEIGHTS,
     REWARD_TERMS,
+    SCENE_TERMS,
     TERM_NAMES,
     RewardComposer,
     RewardConfig,
@@ -13,5 +14,5 @@ from latentrl.rewards.compose import (
     reward_term,
 )
 
-__all__ = ["COMMON_TERMS", "DART_TERMS", "DEFAULT_WEIGHTS", "REWARD_TERMS", "TERM_NAMES", "RewardComposer",
-           "RewardConfig", "RewardInputs", "RewardTerm", "reward_term"]
+__all__ = ["COMMON_TERMS", "DART_TERMS", "DEFAULT_WEIGHTS", "REWARD_TERMS", "SCENE_TERMS", "TERM_NAMES",
+           "RewardComposer", "RewardConfig", "RewardInputs", "RewardTerm", "reward_term"]

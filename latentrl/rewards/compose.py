@@ -8,25 +8,27 @@ the env reports as ``infos["reward/<term>"]``).
 Terms and DART's weights (README command; the kernels in :mod:`latentrl.rewards.terms` give
 the formulas):
 
-=================  =======  ====================================================================
-name               weight   term
-=================  =======  ====================================================================
-``dist``           1.0      goal-distance progress of the pelvis, metres per step
-``success``        1.0      1 when the goal is reached during the step
-``foot_floor``     100      -(lower foot's distance to the floor beyond 3 cm), x0.1 for hop/run
-``skate``          100      -(contact-weighted foot displacement), metres per frame
-``orient``         0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
-``rotation``       10.0     -(1 - cos) of the hip-axis yaw change per frame
-``jerk``           0        -(largest third difference of any joint), metres per frame^3
-``prior``          0        -max(0, mean square of the action (latent noise) - 1): noise far from N(0, I)
-``skill``          0        -(how far the step is from its text's skill rule: speed band, single support)
-``heading``        1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
-``speed``          1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
-``pace``           1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
-``timing``         1.0      on reaching a waypoint, 1 - |arrival error| / tolerance, in [0, 1] (TimedPath)
-``joint_dist``     1.0      the goal joint's progress toward its target, metres per step (ReachJoint)
-``joint_arrival``  5.0      at the goal time, exp(-joint error / 0.1 m), in [0, 1] (ReachJoint)
-=================  =======  ====================================================================
+====================  =======  ====================================================================
+name                  weight   term
+====================  =======  ====================================================================
+``dist``              1.0      goal-distance progress of the pelvis, metres per step
+``success``           1.0      1 when the goal is reached during the step
+``foot_floor``        100      -(lower foot's distance to the floor beyond 3 cm), x0.1 for hop/run
+``skate``             100      -(contact-weighted foot displacement), metres per frame
+``orient``            0.1      moving direction vs goal direction, in [0, 1] (per env, unlike DART)
+``rotation``          10.0     -(1 - cos) of the hip-axis yaw change per frame
+``jerk``              0        -(largest third difference of any joint), metres per frame^3
+``prior``             0        -max(0, mean square of the action (latent noise) - 1): noise far from N(0, I)
+``skill``             0        -(how far the step is from its text's skill rule: speed band, single support)
+``heading``           1.0      pelvis motion along the commanded heading, in [0, 1] (Joystick)
+``speed``             1.0      -|pelvis speed - commanded speed|, m/s (Joystick)
+``pace``              1.0      -|speed toward the waypoint - the speed that arrives on time|, m/s (TimedPath)
+``timing``            1.0      on reaching a waypoint, 1 - |arrival error| / tolerance, in [0, 1] (TimedPath)
+``collision``         0        -(joints' depth inside their skin radius of an object), metres (scenes)
+``terrain_contact``   0        -(lower foot's distance to the terrain beyond 3 cm), x0.1 hop/run (scenes)
+``joint_dist``        1.0      the goal joint's progress toward its target, metres per step (ReachJoint)
+``joint_arrival``     5.0      at the goal time, exp(-joint error / 0.1 m), in [0, 1] (ReachJoint)
+====================  =======  ====================================================================
 
 Each task computes and reports only its own terms (``terms=`` of :class:`RewardComposer`; the envs'
 ``reward_terms``): ReachLocation and FollowPath the seven of :data:`DART_TERMS`, Joystick and TimedPath
@@ -53,12 +55,16 @@ from latentrl.motion.representation import HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.rewards import terms
 from latentrl.rewards.skills import SKILLS, skill_code
+from latentrl.scenes.scene import SceneBatch
 
 #: DART's terms (ReachLocation and FollowPath compute these), in reporting order.
 DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk")
 
 #: Terms every task computes besides its own (weight 0 unless a config sets one).
 COMMON_TERMS: tuple[str, ...] = ("prior", "skill")
+
+#: Terms an env computes when it has a scene (docs/scenes.md; weight 0 unless a config sets one).
+SCENE_TERMS: tuple[str, ...] = ("collision", "terrain_contact")
 
 @dataclass
 class RewardInputs:
@@ -86,6 +92,8 @@ class RewardInputs:
     """(N, D) the step's action (latent noise) after clamping to the action bound."""
     skill: torch.Tensor | None = None
     """(N,) long: each env's text as a skill code (:func:`latentrl.rewards.skills.skill_code`)."""
+    scene: SceneBatch | None = None
+    """The env's scenes (N rows or one), for the scene terms."""
     joint_error: torch.Tensor | None = None
     """ReachJoint: (N, 3) the goal joint's distance to its target (m) at the last frame before the step, at the
     step's last frame (the goal-time frame when that is in the step) and at the goal-time frame (NaN elsewhere)."""
@@ -286,8 +294,21 @@ def _joint_arrival(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     return terms.joint_arrival(x.joint_error[:, 2])
 
 
+@reward_term("collision", 0.0, inputs=('scene',))
+def _collision(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.collision` over the new frames."""
+    return terms.collision(x.joints_world[:, x.history_length :], x.scene)
+
+
+@reward_term("terrain_contact", 0.0, inputs=('scene',))
+def _terrain_contact(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.terrain_contact` over the new frames, scaled per text."""
+    return terms.terrain_contact(x.joints_world[:, x.history_length :], x.scene, cfg.contact_threshold,
+                                 x.floor_scale)
+
+
 TERM_NAMES: tuple[str, ...] = tuple(REWARD_TERMS)
-"""The shipped terms' names, in reporting order: DART's, then the Joystick and TimedPath tasks', then the common."""
+"""The shipped terms' names, in reporting order: DART's, the Joystick and TimedPath tasks', the common, the scenes'."""
 
 DEFAULT_WEIGHTS: dict[str, float] = {name: term.weight for name, term in REWARD_TERMS.items()}
 """DART's README weights (``fixtext_repeat_floor100_hop10_skate100``), the task terms' (1 each), 0 for the common."""

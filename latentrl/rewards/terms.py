@@ -30,9 +30,12 @@ from latentrl.motion.contacts import contact_shares, weighted_foot_slide
 from latentrl.motion.contacts import foot_positions as _foot_positions
 from latentrl.motion.skeleton import LEFT_HIP, RIGHT_HIP
 from latentrl.rewards import skills as S
+from latentrl.scenes.contact import collision_cost, contact_cost
+from latentrl.scenes.scene import SceneBatch
 
 __all__ = [
     "arrival_timing",
+    "collision",
     "foot_floor",
     "foot_joints",
     "foot_skate",
@@ -44,6 +47,7 @@ __all__ = [
     "skill_fidelity",
     "speed_tracking",
     "success",
+    "terrain_contact",
     "yaw_rate",
 ]
 
@@ -365,3 +369,38 @@ def joint_arrival(error_at_goal: torch.Tensor, scale: float = JOINT_ARRIVAL_SCAL
     at_goal = torch.isfinite(error_at_goal)
     score = torch.exp(-torch.where(at_goal, error_at_goal, 0.0).clamp(min=0.0) / scale)
     return torch.where(at_goal, score, torch.zeros_like(score))
+
+
+def collision(joints: torch.Tensor, scene: SceneBatch) -> torch.Tensor:
+    """``collision``: minus DART's ``cons_coll`` (:func:`latentrl.scenes.contact.collision_cost`).
+
+    ``r = -mean_t sum_j max(0, skin_j - sdf(p_{t,j}))``  (metres)
+
+    Args:
+        joints: (N, F, 22, 3) world joints of the new frames.
+        scene: the env's scenes (N rows or one).
+
+    Returns:
+        (N,) <= 0; 0 while every joint keeps its skin radius from every object.
+    """
+    return -collision_cost(joints, scene)
+
+
+def terrain_contact(joints: torch.Tensor, scene: SceneBatch, threshold: float = CONTACT_HEIGHT_M,
+                    scale: torch.Tensor | None = None) -> torch.Tensor:
+    """``terrain_contact``: minus DART's ``cons_cont``, the lower foot's distance to the terrain beyond ``threshold``.
+
+    ``r = -s * mean_t max(|min_f (z_{t,f} - height(xy_{t,f}))| - threshold, 0)``  (metres): :func:`foot_floor`
+    with the terrain under each foot (a tread, a seat top) in place of the flat floor.
+
+    Args:
+        joints: (N, F, 22, 3) world joints of the new frames.
+        scene: the env's scenes.
+        threshold: tolerated distance, metres (DART 0.03).
+        scale: (N,) multiplier (the hop/run text scale of ``foot_floor``), or ``None`` for 1.
+
+    Returns:
+        (N,) <= 0.
+    """
+    out = -contact_cost(joints, scene, threshold)
+    return out if scale is None else out * scale

@@ -59,8 +59,10 @@ class Cylinder:
 
 @dataclass(frozen=True)
 class Seat:
-    """A box to sit on: footprint ``size`` (x, y before turning), its top ``seat_height`` above the base;
-    the sitter faces ``yaw_deg`` (0 = +x, 90 = +y) with the back to the seat."""
+    """A box to sit on: footprint ``size`` (x, y before turning), its top ``seat_height`` above the base.
+
+    A sitter faces ``yaw_deg`` (0 = +x, 90 = +y), back to the seat.
+    """
 
     center: tuple[float, float]
     size: tuple[float, float]

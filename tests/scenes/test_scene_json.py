@@ -5,8 +5,18 @@ import json
 import pytest
 
 from latentrl.errors import DataError
-from latentrl.scenes import Box, Cylinder, Scene, Seat, Stairs, load_scene, parse_scene, scene_from_json, \
-    scene_to_dict, scene_to_json
+from latentrl.scenes import (
+    Box,
+    Cylinder,
+    Scene,
+    Seat,
+    Stairs,
+    load_scene,
+    parse_scene,
+    scene_from_json,
+    scene_to_dict,
+    scene_to_json,
+)
 
 SCENE = Scene((Box((1.0, 2.0), (0.6, 0.4, 1.0), 30.0), Cylinder((-1.0, 3.0), 0.25, 1.2, base=0.1),
                Seat((0.0, 4.0), (0.5, 0.5), 0.45, -90.0), Stairs((2.0, 0.0), 90.0, 1.2, 0.15, 0.3, 6)), 0.05)
