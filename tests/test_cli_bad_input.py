@@ -241,7 +241,7 @@ ROWS = [
     ("sample-out-suffix", [*SAMPLE, "--out", "motion.txt"], r"--out must name a \.npz file, got 'motion\.txt'"),
     ("sample-out-under-file", [*SAMPLE, "--out", "{fx}/afile/m.npz"],
      r"--out folder .*afile exists and is not a direc"),
-    ("sample-render-suffix", [*SAMPLE, "--render", "m.mp4"], r"--render must name a \.gif file"),
+    ("sample-render-suffix", [*SAMPLE, "--render", "m.avi"], r"--render must name a \.gif or \.mp4 file, got .m\.avi."),
     # ---------------------------------------------------------------- motion train / export-bvh
     ("motion-train-no-config", ["motion", "train"], r"give a CONFIG file \(e\.g\. configs/motion/default\.yaml\)"),
     ("motion-train-missing-config", ["motion", "train", "nowhere.yaml"], r"config file not found: nowhere\.yaml"),

@@ -1,4 +1,4 @@
-"""latentrl.render: the shared motion .npz and the BVH export (round trip, axes, rotations, parser)."""
+"""latentrl.render: the shared motion .npz, the BVH export and the GIF/MP4 renderer (frames, pixels, decoding)."""
 
 import numpy as np
 import pytest
@@ -124,14 +124,81 @@ def test_motion_npz_round_trip(tmp_path):
     assert back["actions"].shape == (1, 16) and bool(back["success"])
 
 
-def test_gif_plays_in_real_time_with_goals_outside_the_box_left_out(tmp_path):
+def test_gif_plays_in_real_time_at_its_size(tmp_path):
     from PIL import Image
 
-    from latentrl.render import render_gif
+    from latentrl.render import RENDER_SIZE, render_gif
 
-    joints = np.zeros((30, 22, 3), np.float32)
-    joints[..., 2] = 1.0
+    joints = t_pose(30, yaw=0.0).astype(np.float32)
     path = render_gif(tmp_path / "m.gif", joints, texts=["walk"] * 30, title="suite path 0 (walk)",
                       goals=np.array([[0.0, 1.0, 0.0], [0.0, 50.0, 0.0]]))
     with Image.open(path) as im:
         assert im.n_frames == 10 and im.info["duration"] == 100  # 30 frames at 30 fps, every 3rd: 1 s exactly
+        assert im.size == (RENDER_SIZE, RENDER_SIZE)
+
+
+def test_mp4_decodes_with_its_frame_count_and_size(tmp_path):
+    imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+    from latentrl.render import render_video
+
+    path = render_video(tmp_path / "m.mp4", t_pose(31, yaw=0.3), texts=["walk"] * 31, size=320)
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = next(reader)
+    frames = [np.frombuffer(f, np.uint8).reshape(320, 320, 3) for f in reader]
+    assert meta["size"] == (320, 320) and meta["fps"] == pytest.approx(30.0)
+    assert len(frames) == 31  # every frame (MP4's default stride is 1)
+    assert len(list(tmp_path.iterdir())) == 1  # the temporary file was renamed, nothing left beside it
+    halved = render_video(tmp_path / "h.mp4", t_pose(31), stride=2, size=320)
+    reader = imageio_ffmpeg.read_frames(str(halved))
+    assert next(reader)["fps"] == pytest.approx(15.0) and sum(1 for _ in reader) == 16
+
+
+def test_camera_puts_its_target_at_the_centre_and_a_metre_at_focal_over_distance():
+    from latentrl.render import CAMERA_DISTANCE, FOCAL, RENDER_SIZE, Camera
+
+    target = np.array([3.0, -2.0, 0.85])
+    cam = Camera(target)
+    pix, depth = cam.project(np.stack((target, target + [1.0, 0.0, 0.0], target + cam.up)))
+    centre = RENDER_SIZE / 2
+    metre = FOCAL * RENDER_SIZE / 2 / CAMERA_DISTANCE
+    assert np.allclose(pix[0], [centre, centre]) and np.allclose(depth, CAMERA_DISTANCE)
+    assert np.allclose(pix[1], [centre + metre, centre])  # +x (the body's right) is image right
+    assert np.allclose(pix[2], [centre, centre - metre])  # up is image up
+
+
+def test_a_known_joint_lands_on_its_pixel_in_its_side_colour():
+    from latentrl.render import LEFT, RIGHT, Camera, follow_targets, render_frames
+
+    joints = t_pose(1, yaw=0.0)  # arms stretched sideways, facing +y: seen from behind
+    frame = np.asarray(next(render_frames(joints)))
+    cam = Camera(follow_targets(joints)[0])
+    for wrist, elbow, side in ((20, 18, LEFT), (21, 19, RIGHT)):
+        x, y = np.round(cam.project((joints[0, wrist] + joints[0, elbow]) / 2)[0]).astype(int)
+        pixel = frame[y, x].astype(int)
+        shades = [np.clip(np.round(np.array(side) * k), 0, 255) for k in (0.62, 1.0, 1.3)]
+        assert min(np.abs(pixel - s).max() for s in shades) <= 1, (x, y, pixel)
+    left_x = cam.project(joints[0, 20])[0][0]
+    assert left_x < frame.shape[1] / 2 < cam.project(joints[0, 21])[0][0]  # left hand on the image's left
+
+
+def test_skeleton_style_and_bad_requests(tmp_path):
+    from latentrl.render import render_frames, render_video
+
+    body = np.asarray(next(render_frames(t_pose(1))))
+    bones = np.asarray(next(render_frames(t_pose(1), style="skeleton")))
+    assert body.shape == bones.shape and (body != bones).any()
+    with pytest.raises(DataError, match=r"m\.avi: expected a \.gif or \.mp4 file"):
+        render_video(tmp_path / "m.avi", t_pose(2))
+    with pytest.raises(DataError, match="render style must be one of body, skeleton, got 'mesh'"):
+        render_video(tmp_path / "m.gif", t_pose(2), style="mesh")
+    with pytest.raises(DataError, match="render size must be a multiple of 16"):
+        render_video(tmp_path / "m.gif", t_pose(2), size=100)
+    assert not list(tmp_path.iterdir())
+
+
+def test_viewer_and_renders_share_their_colours():
+    from latentrl import render
+    from latentrl.viewer import scene
+
+    assert scene.side_colour(1) == render.LEFT and scene.side_colour(2) == render.RIGHT  # left_hip, right_hip
+    assert tuple(scene.BONE_COLOURS[0, 0]) == render.LEFT  # pelvis -> left_hip

@@ -88,6 +88,7 @@ def _check_sample(req: SampleRequest, texts: list[str]) -> None:
     from latentrl.constants import MAX_GUIDANCE
     from latentrl.motion.text import prompt_problem
     from latentrl.preflight import check_device, check_output_file
+    from latentrl.render import video_problem
 
     if not 0 < req.seconds <= 3600:  # also refuses nan
         raise ConfigError(f"--seconds must be in (0, 3600], got {req.seconds}")
@@ -103,8 +104,8 @@ def _check_sample(req: SampleRequest, texts: list[str]) -> None:
             raise ConfigError(f"--text: {prompt_problem(text)}")
     if not req.out.endswith(".npz"):
         raise ConfigError(f"--out must name a .npz file, got '{req.out}'")
-    if req.render and not req.render.endswith(".gif"):
-        raise ConfigError(f"--render must name a .gif file, got '{req.render}'")
+    if req.render and video_problem(req.render):
+        raise ConfigError(f"--render {video_problem(req.render)}")
     check_device(req.device, "--device")
     for out_file in (req.out, req.render):
         if out_file:
@@ -117,7 +118,7 @@ def sample(req: SampleRequest) -> int:
 
     from latentrl.motion.checkpoint import load_motion_model
     from latentrl.motion.clip import MotionClip, primitive_layout
-    from latentrl.render import render_gif
+    from latentrl.render import render_video
 
     texts = req.text or ["walk"]
     _check_sample(req, texts)
@@ -148,7 +149,7 @@ def sample(req: SampleRequest) -> int:
         clip.save(path)
         print(f"wrote {path} ({roll.joints_world.shape[1]} frames, {roll.joints_world.shape[1] / 30:.1f} s)")
     if req.render:
-        render_gif(req.render, roll.joints_world[0].cpu().numpy(), texts=frame_texts)
+        render_video(req.render, roll.joints_world[0].cpu().numpy(), texts=frame_texts)
         print(f"wrote {req.render}")
     return 0
 

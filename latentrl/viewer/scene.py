@@ -12,22 +12,24 @@ from typing import Any
 import numpy as np
 
 from latentrl.motion.skeleton import ANKLE_JOINTS, FOOT_JOINTS, JOINT_NAMES, PARENTS, PELVIS
+from latentrl.render import (  # the colours of the rendered GIFs and MP4s, so both agree  # noqa: F401
+    AIRBORNE,
+    CENTRE,
+    CONTACT,
+    GOAL,
+    LEFT,
+    RIGHT,
+    TRAIL,
+    WAYPOINT,
+    side_colour,
+)
 
 CONTACT_HEIGHT_M = 0.03
 """DART's skate threshold: a foot joint counts fully in contact at the floor, not at all 3 cm above it."""
-LEFT, RIGHT, CENTRE = (60, 120, 220), (225, 105, 60), (90, 90, 100)
-CONTACT, AIRBORNE = (40, 190, 80), (150, 150, 150)
-GOAL, WAYPOINT, TRAIL = (220, 40, 60), (250, 180, 40), (70, 70, 200)
 TARGET_DIM, TARGET_ON = (150, 150, 160), (40, 200, 90)
 """Optimization targets and ghost keyframes: grey, green on their own frame."""
 BONES = np.array([(PARENTS[j], j) for j in range(len(PARENTS)) if PARENTS[j] >= 0], dtype=np.int64)
 """(21, 2) parent, child joint index of every bone."""
-
-
-def side_colour(joint: int) -> tuple[int, int, int]:
-    """The colour of a joint's side of the body: left, right or centre."""
-    name = JOINT_NAMES[joint]
-    return LEFT if name.startswith("left") else RIGHT if name.startswith("right") else CENTRE
 
 
 BONE_COLOURS = np.array([[side_colour(c)] * 2 for _, c in BONES], dtype=np.uint8)
