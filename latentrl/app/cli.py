@@ -20,9 +20,74 @@ from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
 
 
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Help that shows every option's default (unless its text already names one) and keeps examples' lines."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if "(default" in text or any(default is v for v in (None, False, True, argparse.SUPPRESS)) \
+                or not action.option_strings:
+            return action.help
+        shown = " ".join(map(str, default)) if isinstance(default, (list, tuple)) else default
+        return f"{text} (default: {str(shown).replace('%', '%%')})".strip()
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str):  # one line, exit 2 (argparse's own convention)
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+EXAMPLES = {
+    "motion": "latentrl motion sample --text walk --seconds 5 --render walk.mp4",
+    "motion info": "latentrl motion info --motion default",
+    "motion sample": "latentrl motion sample --text walk:3 --text 'turn left:1.5' --foot-lock --render walk.mp4",
+    "motion train": "latentrl motion train configs/motion/tiny.yaml --run-dir runs/motion-tiny",
+    "motion export-bvh": "latentrl motion export-bvh motion.npz --out motion.bvh",
+    "data": "latentrl data convert-amass ~/amass/ACCAD --labels labels.json --out data/accad",
+    "data convert-amass": "latentrl data convert-amass ~/amass/ACCAD --labels labels.json --out data/accad",
+    "quickstart": "latentrl quickstart --run-dir runs/quick",
+    "train": "latentrl train configs/quick.yaml --set ppo.total_steps=65536 --run-dir runs/my-reach",
+    "eval": "latentrl eval reach_walk_default --episodes 4 --out eval-walk",
+    "compare": "latentrl compare eval-a eval-b --out compare.md",
+    "optimize": "latentrl optimize inbetween_walk --steps 100 --out optimize-inbetween",
+    "bench": "latentrl bench rollout --batches 1 16 --json rollout.json",
+    "bench rollout": "latentrl bench rollout --batches 1 16 --json rollout.json",
+    "bench env": "latentrl bench env --num-envs 1 64 --models default --json env.json",
+    "bench train": "latentrl bench train --skip-success --iterations 3",
+    "bench motion": "latentrl bench motion --seconds 20 --batch 4 --foot-lock",
+    "bench optimize": "latentrl bench optimize --skip-suites --cost-steps 3",
+    "view": "latentrl view runs/quick/eval",
+    "play": "latentrl play reach_walk_default --port 8080",
+    "export": "latentrl export onnx reach_walk_default --out reach.onnx",
+    "export onnx": "latentrl export onnx reach_walk_default --out reach.onnx --text walk",
+    "list": "latentrl list policies",
+}
+"""One example line per command, shown at the end of its ``--help`` (keyed by the words after ``latentrl``)."""
+
+
+def subcommands(parser: argparse.ArgumentParser, words: tuple[str, ...] = ()):
+    """Yield ``(words, parser)`` of every (nested) subcommand below ``parser``, depth first."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {a.dest: a.help for a in action._choices_actions}
+            for name, sub in action.choices.items():
+                if sub.description is None:
+                    sub.description = helps.get(name)
+                yield (*words, name), sub
+                yield from subcommands(sub, (*words, name))
+
+
+def _add_examples(parser: argparse.ArgumentParser) -> None:
+    """Set every subcommand's epilog to its line of :data:`EXAMPLES` (a missing one fails the CLI tests)."""
+    for words, sub in subcommands(parser):
+        example = EXAMPLES.get(" ".join(words))
+        if example:
+            sub.epilog = f"example:\n  {example}"
 
 
 def _device(text: str) -> str:
@@ -107,9 +172,10 @@ def _motion_commands(sub) -> None:
     sample.add_argument("--seed", type=_seed, default=0, help="random seed (noise and seed-history choice)")
     sample.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
     sample.add_argument("--batch", type=int, default=1, help="number of motions (files get _<i> suffixes)")
-    sample.add_argument("--device", default="cpu", type=_device)
+    sample.add_argument("--device", default="cpu", type=_device, help="torch device")
     sample.add_argument("--out", default="motion.npz", help="output .npz (shared motion format)")
-    sample.add_argument("--render", help="also write a skeleton animation (.gif)")
+    sample.add_argument("--render", metavar="FILE", help="also draw the first motion as a .gif or .mp4 (MP4 needs "
+                                                         "latentrl[video])")
     sample.set_defaults(func=_motion_sample)
 
     train = msub.add_parser("train", help="train a motion model (VAE, then denoiser) from a YAML config")
@@ -239,8 +305,8 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--motion", default="default", help="'default' or a model file")
     motion.add_argument("--seconds", type=_pos_float, default=60.0, help="rollout length per prompt")
     motion.add_argument("--batch", type=_pos_int, default=8, help="rollouts per prompt")
-    motion.add_argument("--guidance", type=float, default=GUIDANCE_SCALE)
-    motion.add_argument("--seed", type=_seed, default=0)
+    motion.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
+    motion.add_argument("--seed", type=_seed, default=0, help="random seed")
     motion.add_argument("--json", help="write all figures to this JSON file")
     motion.add_argument("--no-floor-snap", action="store_true",
                         help="measure the model alone, without the rollout's floor snap")
@@ -253,10 +319,11 @@ def _bench_commands(sub) -> None:
 def _bench_optimize_command(bsub) -> None:
     opt = bsub.add_parser("optimize", help="noise optimization on the shipped constraint suites: error, skate, jerk, "
                                            "time to 1 cm, cost per 100 steps vs DART")
-    opt.add_argument("--suites", nargs="+", default=["inbetween", "inbetween_mid", "joint_targets"])
-    opt.add_argument("--steps", type=_pos_int, default=100)
-    opt.add_argument("--batch", type=_pos_int, default=16)
-    opt.add_argument("--lr", type=_pos_float, default=0.05)
+    opt.add_argument("--suites", nargs="+", default=["inbetween", "inbetween_mid", "joint_targets"],
+                     help="shipped constraint suites")
+    opt.add_argument("--steps", type=_pos_int, default=100, help="Adam steps")
+    opt.add_argument("--batch", type=_pos_int, default=16, help="problems solved together")
+    opt.add_argument("--lr", type=_pos_float, default=0.05, help="Adam learning rate")
     opt.add_argument("--warm", metavar="POLICY", help="also run every suite warm-started from this policy's noises")
     opt.add_argument("--cost-steps", type=_pos_int, default=5, help="timed steps of the cost rows")
     opt.add_argument("--models", nargs="+", default=["default", "official"], help="models of the cost rows")
@@ -392,6 +459,25 @@ def _list(args: argparse.Namespace) -> int:
     return list_command(request(ListRequest, args))
 
 
+def _physics_commands(sub) -> None:
+    phys = sub.add_parser("physics", help="execute motions on a MuJoCo humanoid (pip install 'latentrl[physics]')")
+    psub = phys.add_subparsers(dest="physics_command", metavar="SUBCOMMAND", parser_class=_Parser)
+    psub.required = True
+    tr = psub.add_parser("track", help="PD-track a motion .npz with a reported root assist; write motion.npz and "
+                                       "report.json (docs/physics.md)")
+    tr.add_argument("motion", metavar="MOTION.npz", help="motion file with features (from motion sample or eval)")
+    tr.add_argument("--out", required=True, help="output folder for motion.npz and report.json")
+    tr.add_argument("--height", type=float, help="humanoid height in m (default: fitted to the motion's bones)")
+    tr.add_argument("--assist-hz", type=float, default=2.0, help="root assist frequency, 0 = off (default: 2)")
+    tr.set_defaults(func=_physics_track)
+
+
+def _physics_track(args: argparse.Namespace) -> int:
+    from latentrl.app.physics import TrackRequest, track_command
+
+    return track_command(request(TrackRequest, args))
+
+
 def _optimize_commands(sub) -> None:
     opt = sub.add_parser("optimize", help="keyframes and joint targets by latent noise optimization (docs/optimize.md)")
     opt.add_argument("suite", metavar="SUITE", help="a latentrl.constraints/1 JSON file or a shipped suite name "
@@ -411,7 +497,7 @@ def _optimize_commands(sub) -> None:
                                 ("jerk", 0.0, "jerk (m/s^3)"), ("prior", 0.1, "noise above the Gaussian shell")):
         opt.add_argument(f"--{name}", type=float, default=default, help=f"weight of the {what} regularizer")
     opt.add_argument("--problem", dest="problems", action="append", metavar="NAME", help="solve only this problem")
-    opt.add_argument("--device", default="cpu", type=_device)
+    opt.add_argument("--device", default="cpu", type=_device, help="torch device")
     opt.add_argument("--seed", type=_seed, default=0, help="random seed of the starts")
     opt.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     opt.set_defaults(func=_optimize)
@@ -441,6 +527,8 @@ def build_parser() -> argparse.ArgumentParser:
     _viewer_commands(sub)
     _export_commands(sub)
     _list_commands(sub)
+    _physics_commands(sub)
+    _add_examples(parser)
     return parser
 
 
