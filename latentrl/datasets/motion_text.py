@@ -14,7 +14,11 @@ field                     dtype, shape       meaning
 ``seg_start``             int32 (S,)         first frame of each text segment
 ``seg_end``               int32 (S,)         one past the last frame of each text segment
 ``seg_text``              unicode (S,)       segment texts; segments may overlap and cover every frame
+``seats`` (optional)      float32 (K, 4)     seats sat on: x, y of the seat point under the seated pelvis,
+                                             seat height (m), facing yaw (rad, counter-clockwise from +y)
 ========================  =================  =========================================================
+
+Optional fields (``OPTIONAL_FIELDS``) are scene data: a file without them has none of that kind.
 
 Files load with ``allow_pickle=False``. Every problem is reported as one ``DataError`` line that names the
 file, the field and what was expected.
@@ -48,6 +52,11 @@ FIELDS: dict[str, tuple[str, tuple]] = {
     "seg_text": ("unicode", ("S",)),
 }
 
+#: Scene fields a sequence may carry (same notation); "K" is the number of seats.
+OPTIONAL_FIELDS: dict[str, tuple[str, tuple]] = {
+    "seats": ("float32", ("K", 4)),
+}
+
 #: Largest allowed distance (m) between stored ``joints`` and the forward kinematics of the stored pose.
 FK_TOLERANCE_M = 1e-4
 
@@ -60,7 +69,7 @@ def _shape_text(template: tuple) -> str:
 
 def _check_field(name: str, field: str, value: np.ndarray, sizes: dict[str, int]) -> None:
     """Dtype, shape (binding T/S on first sight) and finiteness of one field."""
-    kind, template = FIELDS[field]
+    kind, template = FIELDS[field] if field in FIELDS else OPTIONAL_FIELDS[field]
     if kind == "unicode":
         if value.dtype.kind != "U":
             raise DataError(f"{name}: field '{field}' has dtype {value.dtype}, expected unicode strings")
@@ -178,6 +187,11 @@ def validate_sequence(seq: Mapping, name: str, check_fk: bool = True) -> None:
         if not isinstance(value, np.ndarray):
             raise DataError(f"{name}: field '{field}' is a {type(value).__name__}, expected a numpy array")
         _check_field(name, field, value, sizes)
+    for field in OPTIONAL_FIELDS:
+        if field in seq:
+            if not isinstance(seq[field], np.ndarray):
+                raise DataError(f"{name}: field '{field}' is a {type(seq[field]).__name__}, expected a numpy array")
+            _check_field(name, field, seq[field], sizes)
     fps = float(seq["fps"])
     if fps != FPS:
         raise DataError(f"{name}: field 'fps' is {fps:g}, expected {FPS}")
@@ -191,7 +205,7 @@ def validate_sequence(seq: Mapping, name: str, check_fk: bool = True) -> None:
 def _canonical(seq: Mapping) -> dict[str, np.ndarray]:
     """Cast each field to its format dtype (texts to fixed-width unicode); values are left unchanged."""
     out = {}
-    for field, (kind, _) in FIELDS.items():
+    for field, (kind, _) in (FIELDS | OPTIONAL_FIELDS).items():
         value = np.asarray(seq[field]) if field in seq else None
         if value is None:
             continue
@@ -203,7 +217,7 @@ def write_sequence(path: str | os.PathLike, seq: Mapping, check_fk: bool = True)
     """Validate ``seq`` (after casting to the format dtypes) and write it atomically to ``path`` (.npz)."""
     path = Path(path)
     data = _canonical(seq)
-    validate_sequence(data if len(data) == len(FIELDS) else seq, path.name, check_fk=check_fk)
+    validate_sequence(data if all(f in data for f in FIELDS) else seq, path.name, check_fk=check_fk)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=path.parent)
     try:
@@ -217,7 +231,10 @@ def write_sequence(path: str | os.PathLike, seq: Mapping, check_fk: bool = True)
 
 
 def read_sequence(path: str | os.PathLike, check_fk: bool = True) -> dict[str, np.ndarray]:
-    """Load and validate one sequence file; returns field name -> array (fields not in ``FIELDS`` dropped)."""
+    """Load and validate one sequence file; returns field name -> array (unknown fields dropped).
+
+    Known fields are those of ``FIELDS`` and ``OPTIONAL_FIELDS``.
+    """
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: file not found, expected a motion-text .npz file")
@@ -226,7 +243,7 @@ def read_sequence(path: str | os.PathLike, check_fk: bool = True) -> dict[str, n
     try:
         with np.load(path, allow_pickle=False) as npz:
             seq = {}
-            for field in FIELDS:
+            for field in (*FIELDS, *OPTIONAL_FIELDS):
                 if field in npz.files:
                     seq[field] = npz[field]
     except ValueError as exc:  # object arrays need pickle, which we refuse

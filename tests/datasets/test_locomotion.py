@@ -12,6 +12,7 @@ from latentrl.datasets.body import (
     matrix_to_axis_angle_np,
 )
 from latentrl.datasets.locomotion import (
+    LOCOMOTION_SKILLS,
     NEIGHBOURS,
     SKILLS,
     SYNONYMS,
@@ -241,7 +242,7 @@ def test_default_dataset_is_balanced_and_clean():
     assert 40_000 <= stats["frames"] <= 60_000
     assert 0.12 <= stats["transition_fraction"] <= 0.3
     skills = stats["skills"]
-    assert set(skills) == set(SKILLS)
+    assert set(skills) == set(LOCOMOTION_SKILLS)  # the default: locomotion alone (scene skills are opt-in)
     single_frames = np.array([s["single_label_frames"] for s in skills.values()])
     assert single_frames.min() > 0.5 * single_frames.mean()
     for name, s in skills.items():

@@ -33,7 +33,10 @@ the public API, statistics).
 """
 
 from latentrl.datasets.locomotion.config import (
+    FOLLOWERS,
+    LOCOMOTION_SKILLS,
     NEIGHBOURS,
+    SCENE_SKILLS,
     SKILLS,
     SYNONYMS,
     TEXT_SPEED_RANGE,
@@ -44,7 +47,10 @@ from latentrl.datasets.locomotion.config import (
 from latentrl.datasets.locomotion.generator import dataset_statistics, foot_skate, generate_dataset, generate_sequences
 
 __all__ = [
+    "FOLLOWERS",
+    "LOCOMOTION_SKILLS",
     "NEIGHBOURS",
+    "SCENE_SKILLS",
     "SKILLS",
     "SYNONYMS",
     "TEXT_SPEED_RANGE",

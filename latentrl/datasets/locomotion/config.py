@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from latentrl.errors import ConfigError, closest
 
@@ -14,8 +14,8 @@ _SWING_TO_HELD_S = 0.35  # time for a foot to travel between the floor and a hel
 _HELD_MIN_HEIGHT = 0.1  # m, lowest toe height of a held foot
 _HELD_AFTER_S = 0.9  # an air spell longer than this holds the foot up in between (no gait swings this long)
 
-#: Canonical skills. Each has a synonym list in ``SYNONYMS``; the first synonym is the canonical text.
-SKILLS: tuple[str, ...] = (
+#: The locomotion skills: the default skill set (the data of every default model up to v5).
+LOCOMOTION_SKILLS: tuple[str, ...] = (
     "walk",
     "run",
     "hop_left",
@@ -28,6 +28,19 @@ SKILLS: tuple[str, ...] = (
     "sidestep_right",
     "stand",
 )
+
+#: Skills that change posture or use the scene: crouching, sitting on a seat and getting up. A config
+#: selects them through ``LocomotionConfig.skills``; the default leaves them out, so older configs
+#: reproduce their data bit for bit.
+SCENE_SKILLS: tuple[str, ...] = (
+    "crouch",
+    "crouch_walk",
+    "sit_down",
+    "stand_up",
+)
+
+#: Every skill. Each has a synonym list in ``SYNONYMS``; the first synonym is the canonical text.
+SKILLS: tuple[str, ...] = LOCOMOTION_SKILLS + SCENE_SKILLS
 
 #: Skill -> texts a segment of that skill may carry (no text belongs to two skills).
 SYNONYMS: dict[str, tuple[str, ...]] = {
@@ -42,6 +55,10 @@ SYNONYMS: dict[str, tuple[str, ...]] = {
     "sidestep_left": ("sidestep left", "side step to the left", "step sideways to the left"),
     "sidestep_right": ("sidestep right", "side step to the right", "step sideways to the right"),
     "stand": ("stand still", "stand", "stand idle"),
+    "crouch": ("crouch", "crouch down"),
+    "crouch_walk": ("crouch walk", "walk crouched"),
+    "sit_down": ("sit down", "sit down on the seat"),
+    "stand_up": ("stand up", "get up"),
 }
 
 #: Texts that only describe some speeds: text -> (min, max) speed in m/s; other texts fit any speed.
@@ -80,12 +97,31 @@ _TRANSITIONS: tuple[tuple[str, str], ...] = (
     ("sidestep_left", "sidestep_right"),
     ("walk_backward", "sidestep_left"),
     ("walk_backward", "sidestep_right"),
+    ("crouch", "crouch_walk"),
 )
-#: Skill -> skills it may cross-fade into (the transition graph, symmetric).
+# One-way transitions: a posture is left only the way it was entered (a crouch or a seat by standing up).
+_ONE_WAY: tuple[tuple[str, str], ...] = (
+    ("stand", "crouch"),
+    ("walk", "crouch"),
+    ("stand", "sit_down"),
+    ("crouch", "stand_up"),
+    ("sit_down", "stand_up"),
+    ("stand_up", "stand"),
+    ("stand_up", "walk"),
+)
+#: Skill -> skills it is joined to by a transition in either direction (the undirected graph).
 NEIGHBOURS: dict[str, tuple[str, ...]] = {
-    s: tuple(sorted({b for a, b in _TRANSITIONS if a == s} | {a for a, b in _TRANSITIONS if b == s}))
+    s: tuple(sorted({b for a, b in _TRANSITIONS + _ONE_WAY if a == s}
+                    | {a for a, b in _TRANSITIONS + _ONE_WAY if b == s}))
     for s in SKILLS
 }
+#: Skill -> skills it may cross-fade into (``NEIGHBOURS`` less the reverse of the one-way transitions).
+FOLLOWERS: dict[str, tuple[str, ...]] = {
+    s: tuple(sorted({b for a, b in _TRANSITIONS + _ONE_WAY if a == s} | {a for a, b in _TRANSITIONS if b == s}))
+    for s in SKILLS
+}
+#: Skills a sequence does not start with: a jump starts from standing, a getting-up from a posture.
+_NO_START = ("jump_forward", "stand_up")
 # Stand and walk connect most skills, so their blocks are shorter to keep the frame counts balanced.
 _HUB_SHARE = {"stand": 0.45, "walk": 0.6}
 _CANONICAL_WEIGHT = 3.0  # the canonical text is drawn this many times as often as each other synonym
@@ -111,8 +147,12 @@ class LocomotionConfig:
     """Length of each sequence in seconds, at 30 fps."""
     seed: int = 0
     """Seed; the dataset is a pure function of the config."""
-    skills: tuple[str, ...] = SKILLS
-    """Skills to generate (a subset of ``SKILLS``); transitions to skills outside it are skipped."""
+    skills: tuple[str, ...] = LOCOMOTION_SKILLS
+    """Skills to generate (a subset of ``SKILLS``); transitions to skills outside it are skipped. The default
+    is the locomotion alone; ``SCENE_SKILLS`` add crouching and sitting."""
+    skill_weights: dict[str, float] = field(default_factory=dict)
+    """Skill -> relative share of the frames (default 1): the planner balances ``frames / weight`` across
+    skills, so a weight of 0.5 gives a skill about half the frames of the others."""
     block_seconds: tuple[float, float] = (2.2, 3.8)
     """Range of the time a skill runs at full weight, in seconds (stand and walk blocks are shorter)."""
     transition_seconds: tuple[float, float] = (0.3, 0.6)
@@ -138,6 +178,11 @@ class LocomotionConfig:
             if skill not in SKILLS:
                 raise ConfigError(f"LocomotionConfig.skills: unknown skill '{skill}'{closest(skill, SKILLS)}; "
                                   f"expected some of {', '.join(SKILLS)}")
+        for skill, weight in self.skill_weights.items():
+            if skill not in SKILLS:
+                raise ConfigError(f"LocomotionConfig.skill_weights: unknown skill '{skill}'{closest(skill, SKILLS)}")
+            if not (math.isfinite(weight) and weight > 0):
+                raise ConfigError(f"LocomotionConfig.skill_weights.{skill}: {weight}, expected a number > 0")
         if not self.skills:
             raise ConfigError("LocomotionConfig.skills: empty, expected at least one skill")
         if self.steering not in ("wander", "random_hold"):

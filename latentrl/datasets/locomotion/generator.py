@@ -29,6 +29,7 @@ from latentrl.datasets.locomotion.plan import (
     _plan_blocks,
     _weights,
 )
+from latentrl.datasets.locomotion.skills import _POSTURE_SKILLS, _block_speed
 from latentrl.datasets.motion_text import make_sequence, write_meta, write_sequence
 from latentrl.motion.contacts import foot_positions, weighted_foot_slide
 from latentrl.motion.heading import hip_yaw_rad
@@ -45,12 +46,16 @@ def _schedule(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, count
     weights = _weights([(b.start, a.end) for a, b in zip(blocks[:-1], blocks[1:])], total)
     phase = rng.uniform() + np.cumsum(_cycle_rate(blocks, weights)) / FPS
     for b in blocks:
+        if b.skill in _POSTURE_SKILLS:  # the posture changes once the cross-fade into its block is over
+            b.params["t0"] = (b.start + b.blend_in) / FPS
         if b.skill == "jump_forward":  # jump phase 0 (start of the standing lead-in) at the blend centre
             b.phase_offset = -phase[b.start + b.blend_in // 2] if b.blend_in else 0.9 - phase[pad]
     evaluated = _evaluate_blocks(blocks, phase, t, body)
     contact, switches = _compose_contacts(blocks, [c for _, c in evaluated])
     motion_ramps = _motion_ramps(blocks, switches, total)
     for a, b, (start, end) in zip(blocks[:-1], blocks[1:], motion_ramps):  # label the whole speed change
+        if b.skill in _POSTURE_SKILLS and _block_speed(a.skill, a.params) == 0.0:
+            continue  # no speed change: the labels switch where the posture starts to change (at ``t0``)
         a.end, b.start = max(a.end, end), min(b.start, start)
     ch = _blend_channels(evaluated, weights, _weights(motion_ramps, total))
     lean = -0.6 * np.arctan(ch["v_fwd"] * ch["yaw_rate"] / G)  # lean into turns
@@ -60,8 +65,8 @@ def _schedule(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, count
 
 
 def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, ch: dict,
-                  contact: np.ndarray) -> tuple[np.ndarray, np.ndarray, _Feet]:
-    """Steps 3-4: (T, 3) pelvis position and (T, 3, 3) orientation, world, and the foot targets."""
+                  contact: np.ndarray) -> tuple[np.ndarray, np.ndarray, _Feet, np.ndarray]:
+    """Steps 3-4: (T, 3) pelvis position and (T, 3, 3) orientation, world, the foot targets and (T,) heading."""
     heading = rng.uniform(0, 2 * math.pi) + np.cumsum(ch["yaw_rate"]) / FPS
     c, s = np.cos(heading), np.sin(heading)
     vel = np.stack((c * ch["v_side"] - s * ch["v_fwd"], s * ch["v_side"] + c * ch["v_fwd"]), axis=-1)
@@ -73,7 +78,21 @@ def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, c
     pelvis[:, 2] -= _reach_drop(pelvis, pelvis_rot, feet, body)
     held, held_pitch = _held_feet(pelvis, pelvis_rot, heading, ch, body)
     _swing_feet(feet, held, held_pitch, heading, pelvis[:, 2], ch)
-    return pelvis, pelvis_rot, feet
+    return pelvis, pelvis_rot, feet, heading
+
+
+def _seats(blocks: list[_Block], pelvis: np.ndarray, heading: np.ndarray, visible: tuple[int, int]) -> np.ndarray:
+    """(K, 4) seats of the ``sit_down`` blocks seen in the ``visible`` frames: x, y, height, facing yaw.
+
+    The seat point is the pelvis' ground position once seated; x and y are in the visible frames' world.
+    """
+    seats = []
+    for b in blocks:
+        if b.skill != "sit_down" or not (b.start < visible[1] and b.end > visible[0]):
+            continue
+        at = min(round((b.params["t0"] + b.params["duration"]) * FPS), len(pelvis) - 1)
+        seats.append((pelvis[at, 0], pelvis[at, 1], b.params["seat"], heading[at]))
+    return np.array(seats, dtype=np.float32).reshape(-1, 4)
 
 
 def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> dict[str, np.ndarray]:
@@ -82,14 +101,18 @@ def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> di
     body = make_body(rng.uniform(*cfg.height_range))
     pad, frames = round(_PAD_S * FPS), round(cfg.seconds_per_sequence * FPS)
     blocks, ch, contact = _schedule(cfg, rng, body, counts, frames + 2 * pad, pad)
-    pelvis, pelvis_rot, feet = _trajectories(cfg, rng, body, ch, contact)
+    pelvis, pelvis_rot, feet, heading = _trajectories(cfg, rng, body, ch, contact)
     keep = slice(pad, pad + frames)  # step 5 on the visible frames only
     local = _local_rotations(body, pelvis[keep], pelvis_rot[keep], {k: v[keep] for k, v in ch.items()},
                              _Feet(feet.toe[keep], feet.yaw[keep], feet.pitch[keep], feet.grounded[keep]))
     segments = [(max(b.start, pad) - pad, min(b.end, pad + frames) - pad, b.text) for b in blocks
                 if min(b.end, pad + frames) > max(b.start, pad)]
-    return make_sequence(body.rest_joints, matrix_to_axis_angle_np(local), pelvis[keep] - body.rest_joints[0],
-                         segments)
+    seq = make_sequence(body.rest_joints, matrix_to_axis_angle_np(local), pelvis[keep] - body.rest_joints[0],
+                        segments)
+    seats = _seats(blocks, pelvis, heading, (pad, pad + frames))
+    if len(seats):
+        seq["seats"] = seats
+    return seq
 
 
 # --- public API -------------------------------------------------------------------------------------------

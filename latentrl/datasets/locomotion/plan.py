@@ -13,14 +13,16 @@ from latentrl.datasets.body import (
 from latentrl.datasets.locomotion.config import (
     _CANONICAL_WEIGHT,
     _HUB_SHARE,
+    _NO_START,
     _SWING_TO_HELD_S,
-    NEIGHBOURS,
+    FOLLOWERS,
     SYNONYMS,
     LocomotionConfig,
     texts_for,
 )
 from latentrl.datasets.locomotion.skills import (
     _CHANNEL_DEFAULTS,
+    _POSTURE_SKILLS,
     _SKILL_FNS,
     _block_speed,
     _runs,
@@ -47,11 +49,13 @@ class _Block:
     phase_offset: float = 0.0  # added to the shared phase (jumps align their cycle with the blend)
 
 
-def _choose(rng: np.random.Generator, options: Sequence[str], counts: dict[str, float]) -> str | None:
-    """Draw a skill, strongly preferring those with the fewest frames so far (balanced dataset)."""
+def _choose(rng: np.random.Generator, options: Sequence[str], counts: dict[str, float],
+            weights: dict[str, float] | None = None) -> str | None:
+    """Draw a skill, strongly preferring those with the fewest frames (over their ``weights``) so far."""
     if not options:
         return None
-    c = np.array([counts[s] for s in options], dtype=float)
+    weights = weights or {}
+    c = np.array([counts[s] / weights.get(s, 1.0) if s in weights else counts[s] for s in options], dtype=float)
     w = np.exp(-(c - c.min()) / (5.0 * FPS))
     return options[int(rng.choice(len(options), p=w / w.sum()))]
 
@@ -68,23 +72,26 @@ def _plan_blocks(
 ) -> list[_Block]:
     """Chain skill blocks along the transition graph until ``total`` frames are filled."""
     skills = tuple(cfg.skills)
-    skill = _choose(rng, [s for s in skills if s != "jump_forward"] or list(skills), counts)
+    skill = _choose(rng, [s for s in skills if s not in _NO_START] or list(skills), counts, cfg.skill_weights)
     blocks: list[_Block] = []
     used = 0  # frames laid out up to the end of the latest block's core
     while True:
-        p = _sample_params(skill, rng, body, cfg.steering, cfg.flights)
+        prev = (blocks[-1].skill, blocks[-1].params) if blocks else None
+        p = _sample_params(skill, rng, body, cfg.steering, cfg.flights, prev)
         blend_in = blocks[-1].blend_out if blocks else 0
         blend_out = round(rng.uniform(*cfg.transition_seconds) * FPS)
         if skill == "jump_forward":  # whole jumps between the blend centres, starting and ending in stance
             core = round((p["jumps"] - 0.04) / p["f"] * FPS) - (blend_in + blend_out) // 2
         else:
             core = round(rng.uniform(*cfg.block_seconds) * _HUB_SHARE.get(skill, 1.0) * FPS)
+        if skill in _POSTURE_SKILLS:  # the posture change and its shortest hold fit after the cross-fade
+            core = max(core, round((p["duration"] + p["hold"]) * FPS))
         text = _pick_text(rng, skill, _block_speed(skill, p))
         block = _Block(skill, p, text, core, blend_in, blend_out)
         blocks.append(block)
         used += blend_in + core
         counts[skill] += blend_in + core
-        nxt = _choose(rng, [s for s in NEIGHBOURS[skill] if s in skills], counts)
+        nxt = _choose(rng, [s for s in FOLLOWERS[skill] if s in skills], counts, cfg.skill_weights)
         if nxt is None or total - used < blend_out + FPS:  # nothing to go to, or too little time left
             block.core += max(total - used, 0)
             block.blend_out = 0
@@ -104,7 +111,7 @@ def _cycle_rate(blocks: Sequence[_Block], weights: np.ndarray) -> np.ndarray:
     stand keeps its cadence); across a pure stand the rate moves linearly to the next skill's, and a jump
     after a stand starts on its own rate, which the jump's cycle alignment relies on.
     """
-    stepping = np.array([b.skill != "stand" for b in blocks])
+    stepping = np.array([b.skill != "stand" and b.skill not in _POSTURE_SKILLS for b in blocks])
     if not stepping.any():
         return np.ones(weights.shape[1])
     rates = np.array([b.params["f"] for b in blocks])

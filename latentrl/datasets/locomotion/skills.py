@@ -186,12 +186,15 @@ def _heading_change(rng: np.random.Generator, steering: str, max_deg_s: float, w
 
 
 def _sample_params(skill: str, rng: np.random.Generator, body: Body, steering: str = "wander",
-                   flights: str = "high") -> dict:
+                   flights: str = "high", prev: tuple[str, dict] | None = None) -> dict:
     """Per-block skill parameters (SI units); ``f`` is the gait-cycle frequency in cycles/s.
 
     ``steering`` and ``flights`` are ``LocomotionConfig``'s (see there); the defaults reproduce the
-    data of the first shipped default model.
+    data of the first shipped default model. ``prev`` is the previous block's skill and parameters
+    (a getting-up starts from the posture before it).
     """
+    if skill in _POSTURE_SKILLS or skill == "crouch_walk":
+        return _posture_params(skill, rng, body, prev)
     low = flights == "low"
     scale = _cadence_scale(body)
     if skill in ("walk", "turn_left", "turn_right"):
@@ -414,6 +417,135 @@ def _stand(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple[dict,
     return ch, np.stack((on, on), axis=-1)
 
 
+# --- postures: crouching, sitting on a seat, getting up -------------------------------------------------
+
+#: Pelvis joint height above the seat surface while seated (m): the seat height is this much below it.
+SEATED_PELVIS_ABOVE_SEAT_M = 0.09
+#: Range of the seat heights (m) of ``sit_down``.
+SEAT_HEIGHT_RANGE = (0.2, 0.6)
+#: Range of the crouch depth (m): how far ``crouch`` lowers the pelvis below its standing height.
+CROUCH_DROP_RANGE = (0.28, 0.40)
+#: Skills whose channels are keyframed from the block's own start (``params["t0"]``): both feet stay down.
+_POSTURE_SKILLS = ("crouch", "sit_down", "stand_up")
+#: Channels a posture sets; the rest keep their standing values.
+_POSE_KEYS = ("dz", "surge", "pelvis_pitch", "trunk_pitch", "shoulder_l", "shoulder_r", "elbow_l", "elbow_r",
+              "arm_abd")
+_ARM_KEYS = ("shoulder_l", "shoulder_r", "elbow_l", "elbow_r", "arm_abd")
+
+
+def _standing_pose() -> dict[str, float]:
+    return {k: _CHANNEL_DEFAULTS[k] for k in _POSE_KEYS}
+
+
+def _crouch_pose(rng: np.random.Generator, drop_range: tuple[float, float] = CROUCH_DROP_RANGE) -> dict[str, float]:
+    """A held crouch: pelvis ``drop_range`` lower and back, pelvis tipped and trunk leaning forward, arms in front."""
+    deg = math.radians
+    shoulder, elbow = deg(rng.uniform(15, 35)), deg(rng.uniform(30, 60))
+    return dict(dz=-rng.uniform(*drop_range), surge=-rng.uniform(0.04, 0.10), pelvis_pitch=-deg(rng.uniform(20, 35)),
+                trunk_pitch=-deg(rng.uniform(5, 15)), shoulder_l=shoulder, shoulder_r=shoulder, elbow_l=elbow,
+                elbow_r=elbow, arm_abd=deg(rng.uniform(6, 12)))
+
+
+def _seated_pose(rng: np.random.Generator, body: Body, seat: float) -> dict[str, float]:
+    """Seated on a seat ``seat`` m high: pelvis joint ``SEATED_PELVIS_ABOVE_SEAT_M`` above it, back over the seat.
+
+    The pelvis moves back from the planted feet by most of a thigh length, less where a high seat would
+    otherwise stretch the leg beyond 93 % of its length (the feet must stay planted).
+    """
+    deg = math.radians
+    pelvis_z = seat + SEATED_PELVIS_ABOVE_SEAT_M
+    hip_z = pelvis_z + body.hip_offsets[0, 2]
+    ankle_z = body.rest_joints[7, 2]
+    lateral = abs(body.hip_offsets[0, 0])
+    vertical = hip_z - ankle_z
+    room = (0.93 * (body.thigh + body.shank)) ** 2 - vertical**2 - lateral**2
+    back = min(rng.uniform(0.75, 0.95) * body.thigh, math.sqrt(max(room, 0.0)))
+    shoulder, elbow = deg(rng.uniform(15, 30)), deg(rng.uniform(50, 80))
+    return dict(dz=pelvis_z - body.pelvis_height, surge=-back, pelvis_pitch=deg(rng.uniform(-5, 5)),
+                trunk_pitch=-deg(rng.uniform(0, 10)), shoulder_l=shoulder, shoulder_r=shoulder, elbow_l=elbow,
+                elbow_r=elbow, arm_abd=deg(rng.uniform(6, 10)))
+
+
+def _sway_params(rng: np.random.Generator, amplitude: tuple[float, float]) -> dict:
+    return dict(sway=rng.uniform(*amplitude), sway_f=rng.uniform(0.2, 0.3), sway_ph=rng.uniform(0, 2 * math.pi, 2),
+                breath_f=rng.uniform(0.2, 0.3))
+
+
+def _posture_params(skill: str, rng: np.random.Generator, body: Body, prev: tuple[str, dict] | None) -> dict:
+    """Parameters of crouch, crouch walk, sit down and stand up.
+
+    A posture goes from ``from`` to ``to`` (channel values, ``_POSE_KEYS``) over ``duration`` seconds from
+    ``t0`` (set by the planner: the end of the cross-fade into the block, so the movement carries this
+    block's text alone), with a forward ``lean`` that peaks midway; ``lag`` delays the pelvis against the
+    lean (getting up leans first, then rises). ``hold`` is the shortest time the block keeps its end pose.
+    """
+    deg = math.radians
+    prev_skill, prev_params = prev if prev is not None else ("", {})
+    if skill == "crouch_walk":
+        v = rng.uniform(0.4, 0.8)
+        steps = rng.uniform(1.4, 1.8) * _cadence_scale(body)
+        return dict(v_fwd=v, v_side=0.0, k=0.0, f=steps / 2, yaw_rate=0.0, rocker=0.05, toe_off=0.64,
+                    drift=_drift_params(rng, deg(10)), width=0.05 * body.height, shift=-0.04 * body.height,
+                    drop=rng.uniform(0.27, 0.36), back=rng.uniform(0.03, 0.08), lean=deg(rng.uniform(10, 20)))
+    p = dict(f=0.0, width=rng.uniform(0.05, 0.065) * body.height, **_sway_params(rng, (0.002, 0.006)))
+    if skill == "crouch":
+        low = prev_skill == "crouch_walk"  # already low: the cross-fade alone changes the depth
+        p.update(to=_crouch_pose(rng), duration=rng.uniform(0.6, 1.0), lag=0.0, lean=-deg(rng.uniform(5, 15)),
+                 hold=0.8, width=rng.uniform(0.06, 0.08) * body.height)
+        p["from"] = dict(p["to"]) if low else _standing_pose()
+    elif skill == "sit_down":
+        seat = rng.uniform(*SEAT_HEIGHT_RANGE)
+        p.update(seat=seat, to=_seated_pose(rng, body, seat), duration=rng.uniform(0.9, 1.4), lag=0.0,
+                 lean=-deg(rng.uniform(25, 40)), hold=0.8)
+        p["from"] = _standing_pose()
+    elif skill == "stand_up":
+        seated = prev_skill == "sit_down"
+        start = dict(prev_params["to"]) if prev_skill in ("crouch", "sit_down") else _crouch_pose(rng)
+        p.update(duration=rng.uniform(0.9, 1.4) if seated else rng.uniform(0.6, 1.0), lag=0.25,
+                 lean=-deg(rng.uniform(25, 40) if seated else rng.uniform(10, 20)), hold=0.3, to=_standing_pose())
+        p["from"] = start
+    else:
+        raise ValueError(skill)
+    return p
+
+
+def _posture(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple[dict, np.ndarray]:
+    """A posture change on planted feet (crouch, sit down, stand up), then its end pose with a little sway."""
+    ch = _neutral(len(t), body)
+    tau = (t - p["t0"]) / p["duration"]
+    body_s = _smootherstep((tau - p["lag"]) / (1.0 - p["lag"]))
+    arms_s = _smootherstep(tau)
+    for k in _POSE_KEYS:
+        s = arms_s if k in _ARM_KEYS else body_s
+        ch[k] = p["from"][k] + (p["to"][k] - p["from"][k]) * s
+    bump = np.sin(math.pi * np.clip(tau, 0.0, 1.0)) ** 2  # zero slope at both ends
+    ch["pelvis_pitch"] = ch["pelvis_pitch"] + 0.5 * p["lean"] * bump
+    ch["trunk_pitch"] = ch["trunk_pitch"] + 0.5 * p["lean"] * bump
+    w = 2 * math.pi * p["sway_f"]
+    ch["sway"] = p["sway"] * np.sin(w * t + p["sway_ph"][0])
+    ch["trunk_pitch"] = ch["trunk_pitch"] + math.radians(1.0) * np.sin(2 * math.pi * p["breath_f"] * t)
+    ch["stance_width"][:] = p["width"]
+    on = np.ones(len(t), dtype=bool)
+    return ch, np.stack((on, on), axis=-1)
+
+
+def _crouch_walk(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple[dict, np.ndarray]:
+    """Walking with the pelvis ``drop`` lower: shorter, flatter steps, trunk forward, arms held in front."""
+    ch, contact = _walk_like(phase, t, p, body)
+    ch["dz"] = ch["dz"] - p["drop"]
+    ch["surge"][:] = -p["back"]
+    ch["pelvis_pitch"] = ch["pelvis_pitch"] - 0.6 * p["lean"]
+    ch["trunk_pitch"] = ch["trunk_pitch"] - 0.4 * p["lean"]
+    ch["shoulder_l"] = ch["shoulder_l"] + math.radians(15)
+    ch["shoulder_r"] = ch["shoulder_r"] + math.radians(15)
+    ch["elbow_l"] = ch["elbow_l"] + math.radians(25)
+    ch["elbow_r"] = ch["elbow_r"] + math.radians(25)
+    ch["clearance"][:] = 0.04
+    ch["heel_rise"] = 0.5 * ch["heel_rise"]
+    ch["heel_strike"] = 0.5 * ch["heel_strike"]
+    return ch, contact
+
+
 _SKILL_FNS: dict[str, _ChannelFn] = {
     "walk": _walk_like,
     "turn_left": _walk_like,
@@ -426,6 +558,10 @@ _SKILL_FNS: dict[str, _ChannelFn] = {
     "hop_right": lambda ph, t, p, b: _hop(ph, t, p, b, 1.0),
     "jump_forward": _jump,
     "stand": _stand,
+    "crouch": _posture,
+    "crouch_walk": _crouch_walk,
+    "sit_down": _posture,
+    "stand_up": _posture,
 }
 
 
