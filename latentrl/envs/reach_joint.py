@@ -179,6 +179,8 @@ class ReachJointConfig:
     """Targets lie within +/- this angle of the body's forward axis."""
     height_offset: list[float] = field(default_factory=lambda: [0.0, 0.0])
     """3-D targets sit this much (uniform in [min, max] metres) above the joint's height when drawn."""
+    planar: list[str] = field(default_factory=list)
+    """Joints besides the feet whose random targets are 2-D (xy only): ``[pelvis]`` is "be at that spot"."""
     goals: str | None = None
     """A joint-goal file (or suite name in tasks/joint_goals) to train on instead of random goals."""
 
@@ -188,6 +190,9 @@ class ReachJointConfig:
                 f"must list goal joints from {list(JOINTS)}, got {self.joints!r}")
         for name in self.joints:
             require(name in JOINTS, "joints", f"unknown joint {name!r}{closest(str(name), tuple(JOINTS))}; "
+                    f"expected some of {list(JOINTS)}")
+        for name in self.planar:
+            require(name in JOINTS, "planar", f"unknown joint {name!r}{closest(str(name), tuple(JOINTS))}; "
                     f"expected some of {list(JOINTS)}")
         require(is_finite_number(self.radius) and self.radius > 0, "radius", f"must be metres > 0, got {self.radius!r}")
         require(is_finite_number(self.near_share) and 0 <= self.near_share <= 1, "near_share",
@@ -214,7 +219,8 @@ class ReachJointConfig:
             goals = str(found)
         return {"joints": tuple(self.joints), "radius": self.radius, "near_share": self.near_share,
                 "far_time": tuple(self.far_time), "distance": tuple(self.distance), "max_speed": self.max_speed,
-                "angle_deg": self.angle_deg, "height_offset": tuple(self.height_offset), "goals": goals}
+                "angle_deg": self.angle_deg, "height_offset": tuple(self.height_offset), "planar": tuple(self.planar),
+                "goals": goals}
 
 
 class ReachJointEnv(LatentMotionVectorEnv):
@@ -252,7 +258,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
     ## Arguments
 
     ``joints``, ``radius``, ``near_share``, ``far_time``, ``distance``, ``max_speed``, ``angle_deg``,
-    ``height_offset`` (:class:`ReachJointConfig`), ``goals`` (a joint-goal file or a list of
+    ``height_offset``, ``planar`` (:class:`ReachJointConfig`), ``goals`` (a joint-goal file or a list of
     :class:`JointGoalEntry`; env ``i`` runs entry ``i % E``), ``time_left_clip`` (10 s); every other argument
     is :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
     """
@@ -272,13 +278,14 @@ class ReachJointEnv(LatentMotionVectorEnv):
         max_speed: float = 1.2,
         angle_deg: float = 90.0,
         height_offset: Sequence[float] = (0.0, 0.0),
+        planar: Sequence[str] = (),
         goals: str | Path | Sequence[JointGoalEntry] | None = None,
         time_left_clip: float = 10.0,
         **kwargs,
     ):
         section = ReachJointConfig(list(joints), radius, near_share, [float(v) for v in far_time],
                                    [float(v) for v in distance], max_speed, angle_deg,
-                                   [float(v) for v in height_offset])
+                                   [float(v) for v in height_offset], list(planar))
         section.validate()
         require(time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {time_left_clip}")
         if isinstance(goals, (str, Path)):
@@ -304,6 +311,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self._rows = torch.arange(n, device=dev)
         self._joint_ids = torch.tensor(list(JOINTS.values()), device=dev)
         self._draw = torch.tensor([list(JOINTS).index(j) for j in self.joints], device=dev)
+        flat = set(FEET) | set(section.planar)
+        self._flat = torch.tensor([j in flat for j in JOINTS], device=dev)  # per one-hot slot: 2-D targets
         self._step_error = torch.full((n,), math.nan, device=dev)  # the goal error at its frame, this step
         self._due = torch.zeros(n, dtype=torch.bool, device=dev)
         self._record = torch.full((n, width), math.nan, device=dev)  # each goal's error at its frame
@@ -366,7 +375,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         angle = self._uniform(m, -a, a)
         start = self._joint_now(idx, joint)
         xy = start[:, :2] + rotate_xy(forward, angle) * dist[:, None]
-        planar = (joint == JOINTS["left_foot"]) | (joint == JOINTS["right_foot"])
+        planar = self._flat[pick]
         z = torch.where(planar, self.floor_height, start[:, 2] + self._uniform(m, *self.height_offset))
         self._target[idx, 0] = torch.cat((xy, z[:, None]), dim=-1)
         self._joint[idx, 0] = pick

@@ -1,8 +1,8 @@
 """The evaluators of the shipped tasks (:class:`~latentrl.envs.tasks.Evaluator`), attached to their specs on import.
 
-Reach and path policies are judged by DART's path protocol (:mod:`~latentrl.evaluation.runner`), joystick
-and timed policies by their own evaluators (:mod:`~latentrl.evaluation.joystick`,
-:mod:`~latentrl.evaluation.timed`). ``latentrl eval`` and the trainer's periodic evaluation only call the
+Reach and path policies are judged by DART's path protocol (:mod:`~latentrl.evaluation.runner`), joystick,
+timed and joint-goal policies by their own evaluators (:mod:`~latentrl.evaluation.joystick`,
+:mod:`~latentrl.evaluation.timed`, :mod:`~latentrl.evaluation.joint_goals`). ``latentrl eval`` and the trainer's periodic evaluation only call the
 protocol's methods, so a task registered from outside the package brings its own evaluator instead.
 
 Every episode's motion goes to ``motions/<suite>_<entry>_ep<e>.npz``; the first ``render`` episodes of an
@@ -21,7 +21,7 @@ from latentrl.envs.config import resolve_task_file
 from latentrl.envs.path import load_paths
 from latentrl.envs.tasks import attach_evaluator
 from latentrl.errors import CheckpointError
-from latentrl.evaluation import joystick, plots, report, timed
+from latentrl.evaluation import joint_goals, joystick, plots, report, timed
 from latentrl.evaluation.config import EvalConfig
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, prompts_label
 from latentrl.evaluation.runner import fit_policy, measure_speed, run_suites
@@ -258,11 +258,30 @@ def _task_progress(result) -> None:
     _say(f"{result.suite} {result.index} ({result.label}): {shown} ({result.wall_s:.0f} s)")
 
 
+class JointGoalEvaluator(SuiteEvaluator):
+    """The ReachJoint evaluation (:mod:`~latentrl.evaluation.joint_goals`): the suite report and paths.png with
+    each goal's target drawn as a marker of its joint."""
+
+    def __init__(self):
+        super().__init__("reach_joint", joint_goals, joint_goals.load_joint_goals, joint_goals.JointGoalCriteria,
+                         lambda entry: {entry.text}, takes_observe_next=False)
+        self.suite_kind = "joint_goals"
+
+    def report(self, results: TaskRun, settings: Any, out_dir: Path, **info: Any) -> list[str]:
+        """report.json, report.md and paths.png; the results table."""
+        lines = super().report(results, settings, out_dir, **info)
+        png = joint_goals.save_png(out_dir / report.PATHS_PNG, results.suites)
+        return [*lines[:-1], f"{lines[-1]}, {png}"]
+
+
 PATHS = PathEvaluator()
 JOYSTICK = SuiteEvaluator("joystick", joystick, joystick.load_timelines, joystick.TrackingCriteria,
                           lambda entry: {entry.text}, takes_observe_next=False)
 TIMED = SuiteEvaluator("timed", timed, timed.load_timed_paths, timed.TimingCriteria,
                        lambda entry: set(entry.texts), takes_observe_next=True)
 
-for _task, _evaluator in (("reach", PATHS), ("path", PATHS), ("joystick", JOYSTICK), ("timed", TIMED)):
+JOINT_GOALS = JointGoalEvaluator()
+
+for _task, _evaluator in (("reach", PATHS), ("path", PATHS), ("joystick", JOYSTICK), ("timed", TIMED),
+                          ("reach_joint", JOINT_GOALS)):
     attach_evaluator(_task, _evaluator)

@@ -228,3 +228,14 @@ def test_gymnasium_id_makes_a_single_env_and_a_vector_env(tiny_model):
     env.close()
     vec = gym.make_vec("latentrl/ReachJoint-v0", num_envs=3, motion=tiny_model)
     assert isinstance(vec, ReachJointEnv) and vec.num_envs == 3 and vec.max_episode_steps == 64
+
+
+def test_planar_joints_get_floor_targets_and_a_planar_observation(tiny_model):
+    env = make(tiny_model, 4, joints=("pelvis",), planar=("pelvis",))
+    obs, _ = env.reset(seed=0)
+    goal = env.current_goal()
+    assert goal["planar"].all() and (goal["target"][:, 2] == 0).all()
+    assert obs[:, slice(*env.observation_fields["planar"])].flatten().tolist() == [1.0] * 4
+    assert obs[:, slice(*env.observation_fields["goal_vec"])][:, 2].abs().max() < 1e-6
+    with pytest.raises(ConfigError, match=r"planar: unknown joint 'pelvs'"):
+        ReachJointConfig(planar=["pelvs"]).validate()

@@ -1,0 +1,167 @@
+"""ReachJoint evaluation: the error at the goal time and the footstep at touchdown on hand-made joints, the shipped
+suites, the runner's report and paths.png, ``latentrl eval`` of a ReachJoint policy and the training hook."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from latentrl.envs.reach_joint import JOINTS, JointGoal, JointGoalEntry, load_joint_goals
+from latentrl.envs.tasks import task_spec
+from latentrl.evaluation import joint_goals as J
+from latentrl.evaluation.config import EvalSettings
+from latentrl.resources import suites_folder
+
+
+def still_body(frames: int) -> np.ndarray:
+    """(T, 22, 3): every joint at the origin 1 m up, feet on the floor."""
+    j = np.zeros((frames, 22, 3), np.float32)
+    j[:, :, 2] = 1.0
+    j[:, [JOINTS["left_foot"], JOINTS["right_foot"]], 2] = 0.0
+    return j
+
+
+def test_errors_at_the_goal_time_split_near_and_far():
+    j = still_body(2 + 60)
+    j[:, JOINTS["pelvis"], 1] = np.arange(len(j)) * 0.01  # the pelvis walks +y at 0.3 m/s: 1 cm a frame
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.0, 0.31), 1.0),  # frame 30 (clip 31): y = 0.31
+                                    JointGoal("pelvis", (0.0, 0.40, 1.0), 1.2),  # frame 36, 6 after: near
+                                    JointGoal("pelvis", (0.0, 0.10), 2.0)))  # frame 60: 0.5 m off, far
+    metrics, detail = J.goal_metrics(j, entry, [30, 36, 60], J.JointGoalCriteria(radius_m=0.1))
+    assert detail["error_cm"] == pytest.approx([0.0, 3.0, 51.0], abs=1e-4)
+    assert metrics["err_near_cm"] == pytest.approx(3.0, abs=1e-4)
+    assert metrics["err_far_cm"] == pytest.approx(25.5, abs=1e-4)  # (0 + 51) / 2
+    assert metrics["reached"] == pytest.approx(2 / 3) and metrics["success"] == 0.0
+    assert metrics["footstep_err_cm"] is None and metrics["steps_reached"] is None
+    # a goal that never became due counts as missed
+    missed, _ = J.goal_metrics(j, entry, [30, 36, -1], J.JointGoalCriteria(radius_m=1.0))
+    assert missed["success"] == 0.0 and missed["reached"] == pytest.approx(2 / 3)
+
+
+def test_footstep_error_is_measured_at_the_touchdown_nearest_the_goal_time():
+    j = still_body(2 + 40)
+    right = JOINTS["right_foot"]
+    j[:, right, 2] = 0.1  # swinging ...
+    j[2 + 20:, right, 2] = 0.0  # ... until it lands at frame 20 (clip 22), 5 frames before its goal time
+    j[2 + 20:, right, :2] = [0.05, 0.5]
+    j[:2 + 20, right, :2] = [0.0, 0.0]
+    left = JOINTS["left_foot"]
+    j[:, left, 2] = 0.0  # planted all along: no touchdown
+    entry = JointGoalEntry("walk", (JointGoal("right_foot", (0.0, 0.5), 25 / 30),
+                                    JointGoal("left_foot", (0.0, 0.0), 35 / 30)))
+    metrics, detail = J.goal_metrics(j, entry, [25, 35], J.JointGoalCriteria(radius_m=0.1))
+    assert detail["touchdown_err_cm"][0] == pytest.approx(5.0, abs=1e-4) and detail["touchdown_err_cm"][1] is None
+    assert metrics["steps_reached"] == 0.5 and metrics["success"] == 0.0
+    # the missed step counts its goal-time error: the left foot sits on its target
+    assert metrics["footstep_err_cm"] == pytest.approx((5.0 + 0.0) / 2, abs=1e-4)
+    assert J.touchdown(j[:, right, 2], 27, 0, 41, 0.03) == 22
+    assert J.touchdown(j[:, right, 2], 27, 22, 41, 0.03) is None  # the window starts after the landing
+
+
+def test_shipped_suites_load_and_the_spec_has_the_evaluator():
+    import latentrl.evaluation.tasks  # noqa: F401  (attaches the evaluators)
+
+    spec = task_spec("reach_joint")
+    assert spec.suite_kind == "joint_goals" and spec.evaluator.suite_kind == "joint_goals"
+    for name in ("pelvis_near", "pelvis_far", "stepping_stones"):
+        entries = load_joint_goals(suites_folder("joint_goals") / f"{name}.json")
+        assert entries and all(e.text == "walk" for e in entries)
+    near = load_joint_goals(suites_folder("joint_goals") / "pelvis_near.json")
+    for entry in near:  # every goal within one step of the previous
+        times = [0.0, *(g.time for g in entry.goals)]
+        assert max(np.diff(times)) <= 8 / 30 + 1e-9
+    stones = load_joint_goals(suites_folder("joint_goals") / "stepping_stones.json")
+    for entry in stones:
+        feet = [g.joint for g in entry.goals]
+        assert all(a != b for a, b in zip(feet, feet[1:])) and all(g.planar for g in entry.goals)
+    assert any(g.time is None for g in stones[1].goals)
+
+
+def zero_policy(obs: torch.Tensor) -> torch.Tensor:
+    return torch.zeros(obs.shape[0], 16)
+
+
+def test_runner_scores_each_goal_and_writes_the_report_and_png(tiny_model, tmp_path):
+    import latentrl.evaluation.tasks as T
+
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.0, 0.2), 0.3), JointGoal("left_foot", (0.0, 0.5), None)))
+    suite = tmp_path / "mini_goals.json"
+    suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0.0, 0.2], "time": 0.3},
+                                                            {"joint": "left_foot", "target": [0.0, 0.5],
+                                                             "time": "asap"}]}]))
+    settings = EvalSettings(episodes=2, max_steps=20)
+    run = T.JOINT_GOALS.run(zero_policy, tiny_model, [suite], settings, observe_next=False)
+    (name, _, (result,)), = run.suites
+    assert name == "mini_goals" and result.entry == entry and len(result.episodes) == 2
+    ep = result.episodes[0]
+    assert set(ep.metrics) == set(J.UNITS) and ep.end in ("complete", "lost")
+    assert ep.detail["frame"][0] == 9 and ep.detail["frame"][1] > 9  # the asap goal got its time when current
+    f0, f1 = ep.detail["frame"]
+    far = [ep.detail["error_cm"][0]] + ([ep.detail["error_cm"][1]] if f1 - f0 > 8 else [])  # 9 frames: far
+    assert ep.metrics["err_far_cm"] == pytest.approx(np.mean(far))
+    lines = T.JOINT_GOALS.report(run, settings, tmp_path / "out", policy="p", motion="m", hardware="h")
+    data = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert data["task"] == "reach_joint" and data["overall"]["reached"]["n"] == 2
+    assert (tmp_path / "out" / "paths.png").stat().st_size > 1000 and "paths.png" in lines[-1]
+    assert any(line.startswith("| mini_goals | 0: walk, 2 goals (pelvis, left_foot), asap goals |") for line in lines)
+
+
+def test_env_errors_match_the_offline_metric(tiny_model):
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.1, 0.3, 0.9), 0.5), JointGoal("right_hand", (0.2, 0.6, 1.0), 1.0)))
+    settings = EvalSettings(episodes=2, max_steps=12)
+    result = J.run_entry(zero_policy, tiny_model, entry, settings)
+    env = J.make_env(tiny_model, entry, 2, settings)
+    from latentrl.evaluation.episodes import rollout
+
+    rollout(env, zero_policy, 6, 0)
+    record, _ = env.goal_record()
+    assert result.episodes[0].detail["error_cm"] == pytest.approx((record[0] * 100).tolist(), abs=1e-3)
+
+
+def test_latentrl_eval_runs_a_reach_joint_policy(eval_files, tiny_model, tmp_path, capsys):
+    from latentrl.app.cli import main
+    from latentrl.envs.reach_joint import ReachJointEnv
+    from latentrl.motion.checkpoint import file_sha256
+    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
+    from latentrl.ppo.config import PolicyConfig
+    from latentrl.ppo.policy import ActorCritic
+
+    env = ReachJointEnv(1, motion=tiny_model)
+    torch.manual_seed(0)
+    policy = ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
+                         PolicyConfig(latent_dim=32), env.metadata["observation_layout"])
+    motion = eval_files["motion"]
+    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
+                            optimizer=torch.optim.Adam(policy.parameters()),
+                            config={"env": {"task": "reach_joint", "texts": ["walk"]}},
+                            motion={"path": str(motion), "sha256": file_sha256(motion)})
+    ckpt = save_checkpoint(state, tmp_path / "reach_joint.pt")
+    suite = tmp_path / "goals_mini.json"
+    suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.5}]}]))
+    out = tmp_path / "out"
+    code = main(["eval", str(ckpt), "--motion", str(motion), "--paths", str(suite), "--episodes", "2",
+                 "--device", "cpu", "--out", str(out), "--render", "0"])
+    assert code == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["task"] == "reach_joint" and report["suites"][0]["name"] == "goals_mini"
+    assert report["overall"]["err_far_cm"]["n"] == 2 and (out / "paths.png").is_file()
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_training_runs_the_joint_goal_evaluator_periodically(tiny_model, tmp_path):
+    from latentrl.app.train import TrainConfig, make_eval_hook
+    from latentrl.envs.config import build
+    from latentrl.ppo.config import PolicyConfig
+    from latentrl.ppo.policy import ActorCritic
+
+    suite = tmp_path / "hook.json"
+    suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.5}]}]))
+    cfg = TrainConfig()
+    cfg.env.task, cfg.env.num_envs = "reach_joint", 1
+    cfg.ppo.eval_every, cfg.eval.paths, cfg.eval.episodes = 1, [str(suite)], 1
+    env = build(cfg.env, "cpu", motion=tiny_model)
+    policy = ActorCritic(env.single_observation_space.shape[0], 16, PolicyConfig(latent_dim=32),
+                         env.metadata["observation_layout"])
+    report = make_eval_hook(cfg, tiny_model, "cpu")(policy)
+    assert {"err_far_cm", "reached", "skate_cm_s"} <= set(report.metrics)
