@@ -1,0 +1,150 @@
+"""``latentrl physics track``: execute a motion .npz on the MuJoCo humanoid; write the simulated motion and a report."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from latentrl.errors import ConfigError, DataError
+
+CLOSD_METRICS = ("penetration_mm", "floating_mm", "skating_mm")
+
+
+@dataclass
+class TrackRequest:
+    """``latentrl physics track``: a motion file, the output folder and the humanoid's settings."""
+
+    motion: str
+    out: str
+    height: float | None = None
+    assist_hz: float = 2.0
+
+
+def _check(req: TrackRequest) -> None:
+    if req.height is not None and not 1.0 <= req.height <= 2.5:  # also refuses nan
+        raise ConfigError(f"--height must be in [1.0, 2.5] m, got {req.height}")
+    if not 0.0 <= req.assist_hz <= 50.0:
+        raise ConfigError(f"--assist-hz must be in [0, 50] (0 switches the root assist off), got {req.assist_hz}")
+
+
+def load_tracked_motion(path: str):
+    """The :class:`MotionClip` at ``path``, refused in one line unless it carries finite 276-D features."""
+    from latentrl.motion.clip import MotionClip
+
+    clip = MotionClip.load(path)
+    if clip.features is None:
+        raise DataError(f"{path}: no field 'features' (physics track needs the (T, 276) motion features that "
+                        f"'latentrl motion sample' and 'latentrl eval' write)")
+    features = np.asarray(clip.features)
+    if features.dtype.kind != "f" or features.shape != (clip.frames, 276):
+        raise DataError(f"{path}: field 'features' must be ({clip.frames}, 276) floating point, got "
+                        f"{features.dtype} {features.shape}")
+    if not np.isfinite(features).all():
+        bad = int((~np.isfinite(features)).any(axis=1).sum())
+        raise DataError(f"{path}: field 'features' holds NaN or inf in {bad} of {clip.frames} frames")
+    if clip.frames < 2:
+        raise DataError(f"{path}: a motion of {clip.frames} frame cannot be tracked (need at least 2)")
+    return clip
+
+
+def quality(joints: np.ndarray, floor: float = 0.0) -> dict[str, float]:
+    """CLoSD's penetration, floating and skating (mm, docs/physics.md) of (T, 22, 3) joints."""
+    from latentrl.evaluation.metrics import closd_floating_mm, closd_penetration_mm, closd_skating_mm
+
+    return {"penetration_mm": float(closd_penetration_mm(joints, floor)),
+            "floating_mm": float(closd_floating_mm(joints, floor)),
+            "skating_mm": float(closd_skating_mm(joints, floor))}
+
+
+def track_report(clip, result, kinematic: np.ndarray, humanoid, assist_hz: float, source: str) -> dict:
+    """The report.json of one tracked motion (fields in docs/physics.md)."""
+    from latentrl.timing import hardware
+
+    ref = np.asarray(clip.joints, dtype=np.float64)
+    sim = result.joints
+    err = np.linalg.norm(sim - ref, axis=-1)
+    local = np.linalg.norm((sim - sim[:, :1]) - (ref - ref[:, :1]), axis=-1)
+    return {
+        "motion": source,
+        "frames": int(clip.frames),
+        "fps": float(clip.fps),
+        "seconds": float(result.seconds),
+        "humanoid": {"height_m": round(humanoid.height, 4), "mass_kg": round(humanoid.mass, 3)},
+        "falls": len(result.falls),
+        "fall_frames": [int(f) for f in result.falls],
+        "assist": {"hz": float(assist_hz), **result.assist_summary()},
+        "tracking": {
+            "mpjpe_mm": float(err.mean() * 1000),
+            "mpjpe_local_mm": float(local.mean() * 1000),
+            "max_joint_error_mm": float(err.max() * 1000),
+            "retarget_mpjpe_mm": float(np.linalg.norm(kinematic - ref, axis=-1).mean() * 1000),
+        },
+        "reference": quality(ref, clip.floor),
+        "simulation": quality(sim, clip.floor),
+        "speed": {"sim_seconds": float(result.sim_seconds),
+                  "real_time_factor": float(result.seconds / max(result.sim_seconds, 1e-9))},
+        "hardware": hardware(),
+    }
+
+
+def simulated_clip(clip, result, pelvis_delta: np.ndarray, source: str):
+    """The simulated motion as a :class:`MotionClip` with world features (the reference's ``transl`` convention)."""
+    import torch
+
+    from latentrl.motion.clip import MotionClip
+    from latentrl.motion.representation import compute_features
+
+    joints = np.concatenate((result.joints, result.joints[-1:]))
+    rotations = np.concatenate((result.rotations, result.rotations[-1:]))
+    transl = joints[:, 0] - pelvis_delta
+    features = compute_features(torch.as_tensor(transl), torch.as_tensor(rotations), torch.as_tensor(joints))
+    return MotionClip(result.joints, clip.fps, clip.texts, features=features.numpy().astype(np.float32),
+                      primitive=clip.primitive, floor=clip.floor,
+                      meta={"source_motion": source, "physics": "latentrl physics track"})
+
+
+def track_command(req: TrackRequest) -> int:
+    """Load, simulate, write ``motion.npz`` and ``report.json`` into ``--out``; print a one-line summary."""
+    from latentrl.physics import require_mujoco
+    from latentrl.physics.humanoid import build_humanoid
+    from latentrl.physics.reference import build_reference, fit_height, kinematic_joints
+    from latentrl.physics.tracker import track
+    from latentrl.preflight import check_writable, locked_output
+    from latentrl.safe_io import atomic_write_text
+
+    _check(req)
+    clip = load_tracked_motion(req.motion)
+    require_mujoco()
+    out = Path(req.out)
+    check_writable(out, "--out")
+    height = req.height if req.height is not None else fit_height(clip.joints)
+    if not 1.0 <= height <= 2.5:
+        raise DataError(f"{req.motion}: its bone lengths give a body height of {height:.2f} m, outside the "
+                        f"humanoid's [1.0, 2.5] m (set --height)")
+    with locked_output(out):
+        humanoid = build_humanoid(height)
+        ref = build_reference(clip.joints, clip.features, clip.fps, humanoid.rest_joints)
+        start = time.perf_counter()
+        result = track(humanoid, ref, req.assist_hz or None)
+        if not np.isfinite(result.joints).all():
+            raise DataError(f"{req.motion}: the simulation diverged (non-finite state)")
+        report = track_report(clip, result, kinematic_joints(humanoid.rest_joints, ref), humanoid, req.assist_hz,
+                              req.motion)
+        report["command"] = f"latentrl physics track {req.motion} --out {req.out}"
+        report["date"] = time.strftime("%Y-%m-%d", time.gmtime())
+        report["wall_seconds"] = round(time.perf_counter() - start, 3)
+        pelvis_delta = (np.asarray(clip.joints[:, 0], dtype=np.float64)
+                        - np.asarray(clip.features[:, :3], dtype=np.float64)).mean(axis=0)
+        simulated_clip(clip, result, pelvis_delta, req.motion).save(out / "motion.npz")
+        atomic_write_text(out / "report.json", json.dumps(report, indent=2, allow_nan=False) + "\n")
+    a, t = report["assist"], report["tracking"]
+    rtf = report["speed"]["real_time_factor"]
+    print(f"tracked {clip.frames} frames ({report['seconds']:.1f} s): MPJPE {t['mpjpe_mm']:.0f} mm, "
+          f"falls {report['falls']}, assist {a['force_Ns_per_s']:.0f} N s/s ({a['force_percent_body_weight']:.0f} % "
+          f"of body weight), {rtf:.1f}x real time; wrote {out / 'motion.npz'} and {out / 'report.json'}")
+    return 0 if math.isfinite(rtf) else 1
