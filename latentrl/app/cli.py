@@ -66,6 +66,8 @@ EXAMPLES = {
     "export": "latentrl export onnx reach_walk_default --out reach.onnx",
     "export onnx": "latentrl export onnx reach_walk_default --out reach.onnx --text walk",
     "list": "latentrl list policies",
+    "physics": "latentrl physics track walk.npz --out tracked-walk",
+    "physics track": "latentrl physics track walk.npz --out tracked-walk --assist-hz 2",
 }
 """One example line per command, shown at the end of its ``--help`` (keyed by the words after ``latentrl``)."""
 
