@@ -51,6 +51,7 @@ from latentrl.envs.episode_state import (
 from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder, RecordedEpisodes
 from latentrl.envs.observation import ObservationLayout, observe
+from latentrl.envs.scene import env_scene
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.task_hooks import TaskHooks
 from latentrl.envs.texts import TextTable
@@ -59,7 +60,7 @@ from latentrl.motion.prior import MotionPrior, load_prior
 from latentrl.motion.representation import joints_of
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT, RolloutState
 from latentrl.motion.skeleton import PELVIS
-from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, RewardComposer, RewardConfig, RewardInputs
+from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, SCENE_TERMS, RewardComposer, RewardConfig, RewardInputs
 
 
 class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
@@ -95,6 +96,10 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         render_mode: only ``None``; render exported histories with :mod:`latentrl.render`.
         compile: run each step's tensor maths (:meth:`_motion_core`) as one ``torch.compile(fullgraph=True)``
             graph, on CUDA captured as a CUDA graph (:mod:`latentrl.envs.compiled`); the first step compiles.
+        scene, terminate_on_collision: objects in the world (:mod:`latentrl.envs.scene`: a scene file, a
+            :class:`~latentrl.scenes.Scene` or random obstacles; None: the flat floor alone) and whether a joint
+            inside its skin radius of one ends the episode. A scene adds the ``scene_rays`` observation group
+            and the ``collision`` and ``terrain_contact`` reward terms (docs/scenes.md).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -132,6 +137,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         foot_lock: bool = False,
         foot_lock_min_weight: float = LOCK_MIN_WEIGHT,
         amp: str | None = None,
+        scene: Any = None,
+        terminate_on_collision: bool = False,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -170,7 +177,12 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         if self.compiled:
             self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
         self._core = compile_step_core(self._motion_core, self.device) if self.compiled else self._motion_core
-        self.rewards = RewardComposer(reward_config, reward_weights, terms=self.reward_terms)
+        self.scene = env_scene(scene, self.num_envs, self.device, self.floor_height)
+        self.terminate_on_collision = bool(terminate_on_collision)
+        require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
+                "needs a scene")
+        self.rewards = RewardComposer(reward_config, reward_weights,
+                                      terms=self.reward_terms + (SCENE_TERMS if self.scene is not None else ()))
         if isinstance(texts, str):
             texts = (texts,)
         self.text_table = TextTable(self.motion, self.rewards, tuple(texts), text_weights,
@@ -192,7 +204,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
 
     # ------------------------------------------------------------------ construction
     def _setup_spaces(self) -> None:
-        self._obs = ObservationLayout(self.goal_fields, self.text_table.dim)
+        self._obs = ObservationLayout(self.goal_fields, self.text_table.dim,
+                                      self.scene.num_rays if self.scene is not None else 0)
         bound, latent = self.step_settings.action_bound, self.motion.latent_dim
         self.single_action_space = gym.spaces.Box(-bound, bound, (latent,), np.float32)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (self._obs.size,), np.float32)
@@ -270,6 +283,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         self._ep_return[idx] = 0.0
         self._ep_goals[idx] = 0
         self._reset_task(idx)
+        if self.scene is not None:
+            self.scene.reset(idx, self.history_world(idx), self.goal_world[idx], self._generator)
         if self._history is not None:
             self._history.on_reset(idx, self.history_world(idx), self._text_idx[idx], self._history_features(idx))
 
@@ -321,6 +336,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         reward, terms = self.rewards(RewardInputs(
             torch.cat((before, future), 1), goal, reached, self.text_table.floor_scale[text_idx], self.floor_height,
             actions=noise, skill=self.text_table.skill_code[text_idx],
+            scene=self.scene.batch if self.scene is not None else None,
             **self._reward_inputs(before, future, goal, reached)))
         reward = torch.where(diverged, 0.0, reward)
         terms = {k: torch.where(diverged, 0.0, v) for k, v in terms.items()}
@@ -337,6 +353,10 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         far = torch.linalg.vector_norm(future[:, -1, PELVIS, :2] - goal[:, :2], dim=-1) > self.terminate_distance
         task_done, success = self._advance_task(reached)
         terminated = task_done | far | diverged
+        if self.scene is not None:
+            self.scene.clear_goals(self.goal_world)
+            if self.terminate_on_collision:
+                terminated = terminated | (terms["collision"] < 0)
         truncated = self._steps >= self.max_episode_steps
         done = terminated | truncated
         obs = self._observe()
@@ -372,7 +392,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         state = self._require_state()
         history_world = state.world.apply(joints_of(state.history))
         return observe(state.history, history_world, self._goal_observation(history_world),
-                       self.text_table.embeddings[self._text_idx], self.floor_height)
+                       self.text_table.embeddings[self._text_idx], self.floor_height,
+                       self.scene.rays(history_world) if self.scene is not None else None)
 
     def _goal_features(self, history_world: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """(N, 4) :func:`goal_features` of ``goal`` with this env's clips."""

@@ -28,9 +28,10 @@ from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import next_at_last_problem
 from latentrl.envs.reach_joint import ReachJointConfig
+from latentrl.envs.scene import scene_spec
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.tasks import TASKS, task_spec
-from latentrl.errors import ConfigError, closest
+from latentrl.errors import ConfigError, LatentRLError, closest
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
@@ -234,6 +235,11 @@ class EnvConfig:
     """Arguments of the joint-goal task (docs/joint_goals.md)."""
     options: dict[str, Any] = field(default_factory=dict)
     """Arguments of a registered task that has no section of its own above (its spec's ``config`` fields)."""
+    scene: Any = None
+    """Objects in the world (docs/scenes.md): a ``latentrl.scene/1`` file (a path, or a name in tasks/scenes), or
+    ``{random_obstacles: {count: [3, 8], ...}}`` drawn per episode; None: the flat floor alone."""
+    terminate_on_collision: bool = False
+    """With a scene: end an episode when a joint comes inside its skin radius of an object."""
 
     def validate(self) -> None:
         """Every field in range: a registered task (and its ``options``), sizes, step settings, texts, weights."""
@@ -261,6 +267,24 @@ class EnvConfig:
         for name in self.reward_weights:
             require(name in REWARD_TERMS, "reward_weights", f"unknown reward term '{name}'"
                     f"{closest(name, tuple(REWARD_TERMS))}; known: {', '.join(REWARD_TERMS)}")
+        require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
+                "needs a scene (env.scene)")
+        if self.scene is not None:
+            try:
+                self.scene_spec()
+            except LatentRLError as exc:
+                raise ConfigError(f"scene: {exc}" if not str(exc).startswith("scene") else str(exc)) from None
+
+    def scene_spec(self) -> Any:
+        """The env's scene (:func:`latentrl.envs.scene.scene_spec`), a file name resolved; None without one."""
+        value = self.scene
+        if isinstance(value, str):
+            found = task_file(value, "scenes")
+            if found is None:
+                raise ConfigError(f"scene: scene file not found: {value} (looked in {Path.cwd()} and "
+                                  f"{packaged() / 'tasks' / 'scenes'})")
+            value = found
+        return scene_spec(value)
 
     def step_settings(self) -> StepSettings:
         """How the env steps the motion (guidance, action bound, foot lock, autocast): the fields above."""
@@ -306,6 +330,8 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
                   nonfinite_actions=cfg.nonfinite_actions, compile=cfg.compile, **cfg.step_settings().step_kwargs())
     if cfg.max_episode_steps is not None:
         common["max_episode_steps"] = cfg.max_episode_steps
+    if cfg.scene is not None:  # flat-floor envs get exactly the arguments they always had
+        common.update(scene=cfg.scene_spec(), terminate_on_collision=cfg.terminate_on_collision)
     common.update(extra)
     return task_spec(cfg.task).env_class()(cfg.num_envs, **cfg.section.kwargs(), **common)
 
