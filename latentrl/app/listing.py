@@ -16,8 +16,9 @@ from latentrl.errors import ConfigError
 SECTIONS = ("tasks", "policies", "configs", "suites", "prompts")
 """What ``latentrl list SECTION`` accepts; no section prints them all, in this order."""
 
-SUITE_KINDS = ("paths", "joystick", "timed", "constraints")
-"""Folders of ``latentrl/tasks``: waypoint paths, command timelines, timed paths, noise-optimization constraints."""
+SUITE_KINDS = ("paths", "joystick", "timed", "joint_goals", "constraints")
+"""Folders of ``latentrl/tasks``: waypoint paths, command timelines, timed paths, joint goals, noise-optimization
+constraints."""
 
 
 @dataclass

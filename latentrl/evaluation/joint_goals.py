@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.envs.reach_joint import FEET, JOINTS, JointGoalEntry, ReachJointConfig, ReachJointEnv, load_joint_goals

@@ -2,8 +2,9 @@
 
 Reach and path policies are judged by DART's path protocol (:mod:`~latentrl.evaluation.runner`), joystick,
 timed and joint-goal policies by their own evaluators (:mod:`~latentrl.evaluation.joystick`,
-:mod:`~latentrl.evaluation.timed`, :mod:`~latentrl.evaluation.joint_goals`). ``latentrl eval`` and the trainer's periodic evaluation only call the
-protocol's methods, so a task registered from outside the package brings its own evaluator instead.
+:mod:`~latentrl.evaluation.timed`, :mod:`~latentrl.evaluation.joint_goals`). ``latentrl eval`` and the
+trainer's periodic evaluation only call the protocol's methods, so a task registered from outside the package
+brings its own evaluator instead.
 
 Every episode's motion goes to ``motions/<suite>_<entry>_ep<e>.npz``; the first ``render`` episodes of an
 entry are also drawn as ``renders/*.gif`` (every :data:`GIF_STRIDE` th frame) and written as BVH.
@@ -259,8 +260,10 @@ def _task_progress(result) -> None:
 
 
 class JointGoalEvaluator(SuiteEvaluator):
-    """The ReachJoint evaluation (:mod:`~latentrl.evaluation.joint_goals`): the suite report and paths.png with
-    each goal's target drawn as a marker of its joint."""
+    """The ReachJoint evaluation (:mod:`~latentrl.evaluation.joint_goals`).
+
+    Its report adds paths.png, with each goal's target drawn as a marker of its joint.
+    """
 
     def __init__(self):
         super().__init__("reach_joint", joint_goals, joint_goals.load_joint_goals, joint_goals.JointGoalCriteria,

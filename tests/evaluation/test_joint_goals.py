@@ -108,7 +108,8 @@ def test_runner_scores_each_goal_and_writes_the_report_and_png(tiny_model, tmp_p
 
 
 def test_env_errors_match_the_offline_metric(tiny_model):
-    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.1, 0.3, 0.9), 0.5), JointGoal("right_hand", (0.2, 0.6, 1.0), 1.0)))
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.1, 0.3, 0.9), 0.5),
+                                    JointGoal("right_hand", (0.2, 0.6, 1.0), 1.0)))
     settings = EvalSettings(episodes=2, max_steps=12)
     result = J.run_entry(zero_policy, tiny_model, entry, settings)
     env = J.make_env(tiny_model, entry, 2, settings)
@@ -165,3 +166,12 @@ def test_training_runs_the_joint_goal_evaluator_periodically(tiny_model, tmp_pat
                          env.metadata["observation_layout"])
     report = make_eval_hook(cfg, tiny_model, "cpu")(policy)
     assert {"err_far_cm", "reached", "skate_cm_s"} <= set(report.metrics)
+
+
+def test_latentrl_list_shows_the_task_and_its_suites(capsys):
+    from latentrl.app.cli import main
+
+    assert main(["list", "suites"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.split()[:1] == ["joint_goals"])
+    assert "reach_joint" in line
+    assert "pelvis_far, pelvis_near, stepping_stones" in line
