@@ -282,6 +282,9 @@ def _bench_commands(sub) -> None:
                      help="also time the env with amp=bf16/fp16 (the motion model under autocast; docs/envs.md); "
                           "with --compile also both together")
     env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
+    env.add_argument("--scene", action="store_true",
+                     help="also time the env with 8 random obstacles per env (docs/scenes.md) and print its step-time "
+                          "ratio to the flat env")
     env.add_argument("--json", help="write all figures to this JSON file")
     env.set_defaults(func=_bench_env)
 

@@ -6,6 +6,8 @@ of N envs, and ``gymnasium.vector.SyncVectorEnv`` over N :class:`SingleEnv` wrap
 Figures: env steps/s (N x vector steps/s), frames/s (8 per env step) and the speed ratio, all
 measured in the same run, beside the bare sampler's primitives/s at the same batch
 (``MotionModel.rollout_step`` alone, no env): their ratio is what the env adds per step.
+``--scene`` also times the env with :data:`BENCH_SCENE` (8 random obstacles per env, docs/scenes.md) and
+prints its step-time ratio to the flat env of the same run (``scene_cost``).
 Combinations whose estimated time exceeds ``max_seconds`` are skipped with a note (estimated from
 the previous N of the same model, device and kind, which scales about linearly once the machine is
 saturated).
@@ -25,6 +27,7 @@ from latentrl.app.bench.common import default_devices, official_size_model, writ
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.envs.single import SingleEnv
 from latentrl.motion.rollout import MotionModel
+from latentrl.scenes.random import RandomObstacles
 from latentrl.timing import hardware, mean_time
 
 
@@ -42,7 +45,11 @@ class EnvBenchRequest:
     amp: str | None = None
     threads: int | None = None
     json: str | None = None
+    scene: bool = False
 
+
+BENCH_SCENE = RandomObstacles(count=[8, 8])
+"""``--scene``: 8 obstacle slots per env, each a box or a cylinder, drawn per episode."""
 
 def standing_seed() -> tuple[torch.Tensor, torch.Tensor]:
     """(1, 2, 276) canonical seed of a motionless 1.75 m rest body and its (3,) ``pelvis_delta``.
@@ -106,16 +113,18 @@ def tiny_model() -> MotionModel:
 
 
 def time_vector_env(model: MotionModel, num_envs: int, device: str, steps: int, compile: bool = False,
-                    amp: str | None = None) -> float:
+                    amp: str | None = None, scene: RandomObstacles | None = None) -> float:
     """Seconds per step of one batched ReachLocation env of ``num_envs`` envs.
 
-    ``compile``: its step compiled; ``amp``: the env's ``amp`` (undone on the model afterwards). A compiled
+    ``compile``: its step compiled; ``amp``: the env's ``amp`` (undone on the model afterwards); ``scene``: the
+    env's scene (None: the flat floor). A compiled
     env takes two untimed steps first: the first compiles, and on CUDA the second records the CUDA graph
     that later steps replay.
     """
     before = model.amp_dtype
     try:
-        env = ReachLocationEnv(num_envs, motion=model, device=device, compile=compile, amp=amp)
+        env = ReachLocationEnv(num_envs, motion=model, device=device, compile=compile, amp=amp,
+                               **({"scene": scene} if scene is not None else {}))
         env.reset(seed=0)
         actions = torch.randn(num_envs, model.latent_dim, generator=torch.Generator().manual_seed(0)).to(device)
         if compile:
@@ -194,7 +203,8 @@ def bench_env(args: EnvBenchRequest) -> int:
     (skip figures estimated longer), ``baseline`` (time the SyncVectorEnv loop too), ``compile``
     (time the env with ``compile=True`` too; the warm-up steps compile and are not timed), ``amp`` (time the env
     with that ``amp`` too, e.g. 'bf16'; with ``compile`` also both together),
-    ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``).
+    ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``), ``scene`` (time the env with
+    :data:`BENCH_SCENE` too).
     """
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -229,6 +239,11 @@ def bench_env(args: EnvBenchRequest) -> int:
                         row[ratio_key] = ratio
                 if (ratio := _rate_ratio(row["vector"], row["sampler"])) is not None:
                     row["env_share"] = 1.0 - ratio
+                if getattr(args, "scene", False):
+                    timer = partial(time_vector_env, scene=BENCH_SCENE)
+                    row["scene"] = _run_kind("scene", timer, model, name, device, n, args, last)
+                    if (ratio := _rate_ratio(row["vector"], row["scene"])) is not None:
+                        row["scene_cost"] = ratio
                 if args.baseline:
                     row["loop"] = _run_kind("loop", time_loop_env, model, name, device, n, args, last)
                     if (ratio := _rate_ratio(row["vector"], row["loop"])) is not None:
@@ -256,6 +271,8 @@ def _line(name: str, row: dict) -> str:
     text += f" | bare sampler {fmt(row['sampler'])}"
     if "env_share" in row:
         text += f" (env adds {100 * row['env_share']:.0f}%)"
+    if "scene_cost" in row:
+        text += f" | 8-object scene: x{row['scene_cost']:.3f} the flat step time"
     for key, label, ratio_key, versus, _, _ in VARIANTS:
         if key in row:
             text += f" | {label} {fmt(row[key])}"
