@@ -34,4 +34,13 @@ def test_help_shows_the_example_and_every_default(words, capsys):
 def test_a_default_written_by_the_formatter_matches_the_parsed_value(capsys):
     assert main(["motion", "sample", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
-    assert "length of the motion (default: 10.0)" in text and "(default: motion.npz)" in text
+    assert "classifier-free guidance scale (default: 5.0)" in text and "(default: motion.npz)" in text
+
+
+@pytest.mark.parametrize("name", sorted(EXAMPLES))
+def test_every_example_parses(name):
+    import shlex
+
+    words = shlex.split(EXAMPLES[name])
+    args = build_parser().parse_args(words[1:])  # argparse exits on a flag the command does not have
+    assert callable(args.func)

@@ -48,8 +48,9 @@ EXAMPLES = {
     "motion sample": "latentrl motion sample --text walk:3 --text 'turn left:1.5' --foot-lock --render walk.mp4",
     "motion train": "latentrl motion train configs/motion/tiny.yaml --run-dir runs/motion-tiny",
     "motion export-bvh": "latentrl motion export-bvh motion.npz --out motion.bvh",
-    "data": "latentrl data convert-amass ~/amass/ACCAD --labels labels.json --out data/accad",
-    "data convert-amass": "latentrl data convert-amass ~/amass/ACCAD --labels labels.json --out data/accad",
+    "data": "latentrl data convert-amass ~/amass/ACCAD --labels babel.json --smplx-model ~/smplx --out data/accad",
+    "data convert-amass": "latentrl data convert-amass ~/amass/ACCAD --labels babel.json --smplx-model ~/smplx "
+                          "--out data/accad",
     "quickstart": "latentrl quickstart --run-dir runs/quick",
     "train": "latentrl train configs/quick.yaml --set ppo.total_steps=65536 --run-dir runs/my-reach",
     "eval": "latentrl eval reach_walk_default --episodes 4 --out eval-walk",
@@ -166,16 +167,24 @@ def _motion_commands(sub) -> None:
     info.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
     info.set_defaults(func=_motion_info)
 
-    sample = msub.add_parser("sample", help="roll a motion model out over a text timeline; write .npz (and .gif)")
+    sample = msub.add_parser("sample", help="roll a motion model out over a text timeline; write .npz (and .gif/.mp4)")
     sample.add_argument("--motion", default="default", help="'default', a latentrl model file, or a DART checkpoint")
     sample.add_argument("--seed-history", help="(K, 2, 276) seed histories (.npz/.pt) for DART layouts")
-    sample.add_argument("--text", action="append", help="prompt; repeat to chain prompts, each gets an equal share")
-    sample.add_argument("--seconds", type=float, default=10.0, help="length of the motion")
+    sample.add_argument("--text", action="append", metavar="PROMPT[:SECONDS]",
+                        help="prompt; repeat to chain prompts: 'walk:3' lasts 3 s, DART's 'walk*20,turn left*6' counts "
+                             "primitives of 8 frames, a prompt without either shares what --seconds leaves "
+                             "(default: walk)")
+    sample.add_argument("--seconds", type=float, default=None,
+                        help="length of the motion (default: 10, or the sum of the --text durations)")
     sample.add_argument("--seed", type=_seed, default=0, help="random seed (noise and seed-history choice)")
     sample.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
     sample.add_argument("--batch", type=int, default=1, help="number of motions (files get _<i> suffixes)")
     sample.add_argument("--device", default="cpu", type=_device, help="torch device")
     sample.add_argument("--out", default="motion.npz", help="output .npz (shared motion format)")
+    sample.add_argument("--foot-lock", action="store_true",
+                        help="keep planted feet from sliding (the envs' foot lock; docs/motion.md)")
+    sample.add_argument("--no-floor-snap", action="store_true",
+                        help="the model alone: no snap of each primitive's lowest foot onto the floor")
     sample.add_argument("--render", metavar="FILE", help="also draw the first motion as a .gif or .mp4 (MP4 needs "
                                                          "latentrl[video])")
     sample.set_defaults(func=_motion_sample)

@@ -29,13 +29,75 @@ class SampleRequest:
     motion: str = "default"
     seed_history: str | None = None
     text: list[str] | None = None
-    seconds: float = 10.0
+    seconds: float | None = None
     seed: int = 0
     guidance: float = GUIDANCE_SCALE
     batch: int = 1
     device: str = "cpu"
     out: str = "motion.npz"
     render: str | None = None
+    foot_lock: bool = False
+    no_floor_snap: bool = False
+
+
+DEFAULT_SECONDS = 10.0
+"""Length of a sampled motion when no ``--seconds`` and no durations are given."""
+PRIMITIVE_SECONDS = 8 / 30
+"""One primitive: 8 frames at 30 fps; timelines are rounded to whole primitives."""
+
+
+def _segment(text: str) -> list[tuple[str, float | None, int | None]]:
+    """One ``--text`` value -> ``(prompt, seconds or None, primitives or None)`` segments.
+
+    ``walk`` (a share of what is left), ``walk:3`` (3 seconds) or DART's ``walk*20,turn left*6``
+    (20 and 6 primitives of 8 frames).
+    """
+    if "*" in text:
+        segments = []
+        for part in text.split(","):
+            prompt, _, count = part.rpartition("*")
+            if not prompt.strip() or not count.strip().isdigit() or int(count) < 1:
+                raise ConfigError(f"--text '{text}': expected DART's PROMPT*N[,PROMPT*N...] with N a whole number "
+                                  f"of primitives >= 1, got '{part}'")
+            segments.append((prompt.strip(), None, int(count)))
+        return segments
+    prompt, colon, tail = text.rpartition(":")
+    if not colon:
+        return [(text, None, None)]
+    try:
+        seconds = float(tail)
+    except ValueError:
+        seconds = float("nan")
+    if not 0 < seconds <= 3600 or not prompt.strip():
+        raise ConfigError(f"--text '{text}': expected PROMPT or PROMPT:SECONDS with SECONDS a number in (0, 3600]")
+    return [(prompt.strip(), seconds, None)]
+
+
+def timeline(texts: list[str], seconds: float | None) -> list[str]:
+    """The prompt of every primitive of a ``motion sample`` timeline.
+
+    Segments with a duration (``walk:3``) get ``round(seconds / (8/30))`` primitives (at least 1),
+    DART segments (``walk*20``) their count; texts without either share what is left of
+    ``seconds`` (default 10 s, rounded up to whole primitives) equally, in order. ``seconds``
+    together with a duration on every text is refused: the durations already fix the length.
+    """
+    segments = [s for text in texts for s in _segment(text)]
+    counts = [n if n is not None else None if sec is None else max(1, round(sec / PRIMITIVE_SECONDS))
+              for _, sec, n in segments]
+    shared = [i for i, c in enumerate(counts) if c is None]
+    fixed = sum(c for c in counts if c is not None)
+    if not shared and seconds is not None:
+        raise ConfigError(f"--seconds {seconds:g}: every --text already has a duration ({fixed * PRIMITIVE_SECONDS:.1f}"
+                          " s in all); drop --seconds or a duration")
+    if shared:
+        total = DEFAULT_SECONDS if seconds is None else seconds
+        free = max(1, math.ceil(total / PRIMITIVE_SECONDS - 1e-9)) - fixed
+        if free < len(shared):
+            raise ConfigError(f"--seconds {total:g}: leaves {max(free, 0)} primitives of 8 frames for "
+                              f"{len(shared)} texts without a duration after the {fixed} the durations take")
+        for k, i in enumerate(shared):  # the first texts get the extra primitives, as before durations existed
+            counts[i] = -(-(k + 1) * free // len(shared)) + (-k * free // len(shared))
+    return [prompt for (prompt, _, _), n in zip(segments, counts) for _ in range(n)]
 
 
 @dataclass
@@ -83,15 +145,16 @@ def info(req: InfoRequest) -> int:
     return 0
 
 
-def _check_sample(req: SampleRequest, texts: list[str]) -> None:
+def _check_sample(req: SampleRequest, texts: list[str]) -> list[str]:
     from latentrl.config import seed_problem
     from latentrl.constants import MAX_GUIDANCE
     from latentrl.motion.text import prompt_problem
     from latentrl.preflight import check_device, check_output_file
     from latentrl.render import video_problem
 
-    if not 0 < req.seconds <= 3600:  # also refuses nan
+    if req.seconds is not None and not 0 < req.seconds <= 3600:  # also refuses nan
         raise ConfigError(f"--seconds must be in (0, 3600], got {req.seconds}")
+    per_step = timeline(texts, req.seconds)
     if not 1 <= req.batch <= MAX_BATCH:
         raise ConfigError(f"--batch must be in [1, {MAX_BATCH}], got {req.batch}")
     if not math.isfinite(req.guidance) or abs(req.guidance) > MAX_GUIDANCE:
@@ -99,7 +162,7 @@ def _check_sample(req: SampleRequest, texts: list[str]) -> None:
                           f"got {req.guidance}")
     if seed_problem(req.seed) is not None:
         raise ConfigError(f"--seed: {seed_problem(req.seed)}")
-    for text in texts:
+    for text in dict.fromkeys(per_step):
         if prompt_problem(text) is not None:
             raise ConfigError(f"--text: {prompt_problem(text)}")
     if not req.out.endswith(".npz"):
@@ -110,6 +173,7 @@ def _check_sample(req: SampleRequest, texts: list[str]) -> None:
     for out_file in (req.out, req.render):
         if out_file:
             check_output_file(out_file, "--render" if out_file == req.render else "--out")
+    return per_step
 
 
 def sample(req: SampleRequest) -> int:
@@ -120,13 +184,13 @@ def sample(req: SampleRequest) -> int:
     from latentrl.motion.clip import MotionClip, primitive_layout
     from latentrl.render import render_video
 
-    texts = req.text or ["walk"]
-    _check_sample(req, texts)
+    per_step = _check_sample(req, req.text or ["walk"])
     model = load_motion_model(req.motion, seed_history=req.seed_history, device=req.device)
-    model.encode_text(texts)  # fail early on unknown prompts
-    steps = max(1, math.ceil(req.seconds * 30 / 8))
-    # each text gets an equal share of the steps, in the order given
-    per_step = [texts[min(len(texts) - 1, i * len(texts) // steps)] for i in range(steps)]
+    model.encode_text(list(dict.fromkeys(per_step)))  # fail early on unknown prompts
+    steps = len(per_step)
+    model.foot_lock = req.foot_lock
+    if req.no_floor_snap:
+        model.floor_snap = None
     g = torch.Generator().manual_seed(req.seed)
     roll = model.rollout(per_step, steps, batch=req.batch, generator=g, guidance_scale=req.guidance)
     if not torch.isfinite(roll.joints_world).all():  # never write a NaN motion
@@ -144,14 +208,29 @@ def sample(req: SampleRequest) -> int:
             actions=roll.noise[:, b, 0].cpu().numpy(),
             features=roll.features_world[b].cpu().numpy(),
             primitive=primitive_layout(steps),
-            meta={"seed": req.seed, "guidance_scale": req.guidance, "motion_model": model.info.get("sha256", "")},
+            meta={"seed": req.seed, "guidance_scale": req.guidance, "motion_model": model.info.get("sha256", ""),
+                  "foot_lock": req.foot_lock, "floor_snap": not req.no_floor_snap},
         )
         clip.save(path)
-        print(f"wrote {path} ({roll.joints_world.shape[1]} frames, {roll.joints_world.shape[1] / 30:.1f} s)")
+        frames = roll.joints_world.shape[1]
+        print(f"wrote {Path(path).resolve()} ({frames} frames, {frames / 30:.1f} s; {_describe(per_step)})")
     if req.render:
         render_video(req.render, roll.joints_world[0].cpu().numpy(), texts=frame_texts)
-        print(f"wrote {req.render}")
+        print(f"wrote {Path(req.render).resolve()}")
+    first = req.out if req.batch == 1 else req.out.replace(".npz", "_0.npz")
+    print(f"watch it: latentrl view {first}")
     return 0
+
+
+def _describe(per_step: list[str]) -> str:
+    """``walk 3.0 s, turn left 1.6 s``: the timeline's segments as sampled."""
+    runs: list[list] = []
+    for text in per_step:
+        if runs and runs[-1][0] == text:
+            runs[-1][1] += 1
+        else:
+            runs.append([text, 1])
+    return ", ".join(f"{text} {n * PRIMITIVE_SECONDS:.2f} s" for text, n in runs)
 
 
 def train(req: MotionTrainRequest) -> int:
