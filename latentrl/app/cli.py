@@ -479,7 +479,7 @@ def _physics_commands(sub) -> None:
     psub.required = True
     tr = psub.add_parser("track", help="PD-track a motion .npz with a reported root assist; write motion.npz and "
                                        "report.json (docs/physics.md)")
-    tr.add_argument("motion", metavar="MOTION.npz", help="motion file with features (from motion sample or eval)")
+    tr.add_argument("motion", metavar="MOTION.npz", help="motion .npz (from motion sample or eval)")
     tr.add_argument("--out", required=True, help="output folder for motion.npz and report.json")
     tr.add_argument("--height", type=float, help="humanoid height in m (default: fitted to the motion's bones)")
     tr.add_argument("--assist-hz", type=float, default=2.0, help="root assist frequency, 0 = off (default: 2)")

@@ -33,13 +33,12 @@ def _check(req: TrackRequest) -> None:
 
 
 def load_tracked_motion(path: str):
-    """The :class:`MotionClip` at ``path``, refused in one line unless it carries finite 276-D features."""
+    """The :class:`MotionClip` at ``path``; its optional 276-D features, when present, must be finite (T, 276)."""
     from latentrl.motion.clip import MotionClip
 
     clip = MotionClip.load(path)
     if clip.features is None:
-        raise DataError(f"{path}: no field 'features' (physics track needs the (T, 276) motion features that "
-                        f"'latentrl motion sample' and 'latentrl eval' write)")
+        return clip
     features = np.asarray(clip.features)
     if features.dtype.kind != "f" or features.shape != (clip.frames, 276):
         raise DataError(f"{path}: field 'features' must be ({clip.frames}, 276) floating point, got "
@@ -135,11 +134,13 @@ def track_command(req: TrackRequest) -> int:
             raise DataError(f"{req.motion}: the simulation diverged (non-finite state)")
         report = track_report(clip, result, kinematic_joints(humanoid.rest_joints, ref), humanoid, req.assist_hz,
                               req.motion)
+        report["rotations"] = "joints only" if clip.features is None else "features, swung onto the joints"
         report["command"] = f"latentrl physics track {req.motion} --out {req.out}"
         report["date"] = time.strftime("%Y-%m-%d", time.gmtime())
         report["wall_seconds"] = round(time.perf_counter() - start, 3)
-        pelvis_delta = (np.asarray(clip.joints[:, 0], dtype=np.float64)
-                        - np.asarray(clip.features[:, :3], dtype=np.float64)).mean(axis=0)
+        pelvis_delta = humanoid.rest_joints[0] if clip.features is None else (
+            np.asarray(clip.joints[:, 0], dtype=np.float64) - np.asarray(clip.features[:, :3], dtype=np.float64)
+        ).mean(axis=0)
         simulated_clip(clip, result, pelvis_delta, req.motion).save(out / "motion.npz")
         atomic_write_text(out / "report.json", json.dumps(report, indent=2, allow_nan=False) + "\n")
     a, t = report["assist"], report["tracking"]

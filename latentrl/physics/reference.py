@@ -7,6 +7,8 @@ feet 7-9 cm from its own foot joints). The joint positions are what the user see
 reads, so :func:`reference_rotations` keeps each rotation's twist from the features and turns its bone
 onto the joint positions (the smallest swing); the pelvis and spine3, which have several children, take
 the best rigid fit of their children (Kabsch). Leaves (head, wrists, toes) keep the features' rotation.
+A motion without features (an evaluation's episode files) gets its rotations from the joints alone: the
+same swings, starting from the parent's orientation (bones keep no twist of their own).
 
 Bone lengths differ too: the humanoid is rigid, a generated motion is not (the default model's run
 stretches a shank between 0.31 and 0.69 m). So that contacts happen when the motion's do, the pelvis height
@@ -119,20 +121,24 @@ def features_rotations(features: np.ndarray) -> np.ndarray:
     return np.stack((r0, r1, np.cross(r0, r1)), axis=-2)
 
 
-def reference_rotations(local: np.ndarray, joints: np.ndarray, rest: np.ndarray) -> np.ndarray:
+def reference_rotations(local: np.ndarray | None, joints: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """Local rotations whose forward kinematics on ``rest`` follows ``joints`` (see the module docstring).
 
     Args:
-        local: (T, 22, 3, 3) the features' local rotations.
+        local: (T, 22, 3, 3) the features' local rotations, or None for a motion without features: then each
+            bone swings from its parent's orientation (no twist of its own) and leaves follow their parent.
         joints: (T, 22, 3) the motion's joint positions.
         rest: (22, 3) the humanoid's rest joints.
 
     Returns:
         (T, 22, 3, 3) corrected local rotations.
     """
-    feat = global_rotations(local)
-    world = feat.copy()
+    world = np.tile(np.eye(3), (len(joints), NUM_JOINTS, 1, 1)) if local is None else global_rotations(local)
+    feat = world.copy()
     for j in range(NUM_JOINTS):
+        if local is None and j > 0:
+            feat[:, j] = world[:, PARENTS[j]]
+            world[:, j] = feat[:, j]
         kids = children(j)
         if len(kids) > 1:
             world[:, j] = _kabsch(rest[kids] - rest[j], joints[:, kids] - joints[:, j : j + 1])
@@ -204,15 +210,16 @@ def _angular_velocity(rot: np.ndarray, fps: float) -> np.ndarray:
     return np.stack((d[:, 2, 1] - d[:, 1, 2], d[:, 0, 2] - d[:, 2, 0], d[:, 1, 0] - d[:, 0, 1]), axis=-1) / 2
 
 
-def build_reference(joints: np.ndarray, features: np.ndarray, fps: float, rest: np.ndarray) -> Reference:
-    """The :class:`Reference` of a motion: (T, 22, 3) joints, (T, 276) world features, its fps, the humanoid's rest."""
+def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float, rest: np.ndarray) -> Reference:
+    """The :class:`Reference` of a motion: (T, 22, 3) joints, (T, 276) world features or None, fps, humanoid rest."""
     joints = np.asarray(joints, dtype=np.float64)
-    features = np.asarray(features, dtype=np.float64)
-    if features.ndim != 2 or features.shape != (len(joints), 276):
-        raise DataError(f"field 'features' must be (T, 276) with T = {len(joints)} frames, got {features.shape}")
-    if not np.isfinite(features).all():
-        raise DataError("field 'features' holds NaN or inf")
-    local = reference_rotations(features_rotations(features), joints, rest)
+    if features is not None:
+        features = np.asarray(features, dtype=np.float64)
+        if features.ndim != 2 or features.shape != (len(joints), 276):
+            raise DataError(f"field 'features' must be (T, 276) with T = {len(joints)} frames, got {features.shape}")
+        if not np.isfinite(features).all():
+            raise DataError("field 'features' holds NaN or inf")
+    local = reference_rotations(None if features is None else features_rotations(features), joints, rest)
     angles = hinge_angles(local)
     root_rot = local[:, 0]
     root_pos = joints[:, 0].copy()

@@ -41,7 +41,18 @@ def bad_motion(tmp_path, name, **arrays):
     return path
 
 
-@pytest.mark.parametrize("case", ["missing", "not_npz", "no_features", "nan_features", "nan_joints", "height"])
+def test_a_motion_without_features_is_tracked_from_its_joints(sampled_walk, tmp_path):
+    clip = dict(np.load(sampled_walk))
+    path = bad_motion(tmp_path, "joints_only.npz", joints=clip["joints"], fps=clip["fps"])
+    out = tmp_path / "tracked"
+    assert main(["physics", "track", str(path), "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["rotations"] == "joints only" and report["falls"] == 0
+    assert report["tracking"]["retarget_mpjpe_mm"] < 60
+    assert MotionClip.load(out / "motion.npz").features.shape == (len(clip["joints"]), 276)
+
+
+@pytest.mark.parametrize("case", ["missing", "not_npz", "bad_features", "nan_features", "nan_joints", "height"])
 def test_bad_input_is_one_line_and_exit_2(case, sampled_walk, tmp_path, capsys):
     clip = dict(np.load(sampled_walk))
     args = []
@@ -50,8 +61,9 @@ def test_bad_input_is_one_line_and_exit_2(case, sampled_walk, tmp_path, capsys):
     elif case == "not_npz":
         path = tmp_path / "text.npz"
         path.write_text("not a motion")
-    elif case == "no_features":
-        path = bad_motion(tmp_path, "nofeat.npz", joints=clip["joints"], fps=clip["fps"])
+    elif case == "bad_features":
+        feats = clip["features"][:, :9]
+        path = bad_motion(tmp_path, "badfeat.npz", joints=clip["joints"], fps=clip["fps"], features=feats)
     elif case == "nan_features":
         feats = clip["features"].copy()
         feats[3, 7] = np.nan
