@@ -30,7 +30,7 @@ from latentrl.motion.skeleton import FPS, HEAD, JOINT_NAMES, NUM_JOINTS, PARENTS
 from latentrl.safe_io import atomic_write_bytes, atomic_write_with
 
 # --------------------------------------------------------------------------- pictures
-# Colours shared with the browser viewer (latentrl.viewer.scene imports them from here), RGB 0-255.
+# Colours shared with the browser viewer (its scene module imports them from here), RGB 0-255.
 LEFT, RIGHT, CENTRE = (60, 120, 220), (225, 105, 60), (90, 90, 100)
 """The body's sides: left blue, right orange, spine and head grey (the side of a bone's child joint)."""
 CONTACT, AIRBORNE = (40, 190, 80), (150, 150, 150)
@@ -323,9 +323,14 @@ def _write_mp4(tmp: Path, frames, fps: float, size: int) -> None:
 
 
 def video_problem(path: str | Path) -> str | None:
-    """Why ``path`` cannot name a rendered video (it must end in .gif or .mp4), or None."""
-    if Path(path).suffix.lower() not in VIDEO_FORMATS:
+    """Why ``path`` cannot name a rendered video here (a .gif, or a .mp4 with imageio-ffmpeg installed), or None."""
+    import importlib.util
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in VIDEO_FORMATS:
         return f"must name a .gif or .mp4 file, got '{path}'"
+    if suffix == ".mp4" and importlib.util.find_spec("imageio_ffmpeg") is None:
+        return f"{path}: MP4 needs imageio-ffmpeg: pip install 'latentrl[video]' (or name a .gif)"
     return None
 
 
@@ -337,7 +342,7 @@ def render_video(path: str | Path, joints: np.ndarray, fps: float = FPS, texts: 
     ``stride`` keeps every n-th frame (default: :data:`GIF_STRIDE` for GIF, 1 for MP4); the file
     plays in real time at ``fps / stride``. MP4 (H.264) needs ``latentrl[video]`` (imageio-ffmpeg).
     """
-    if video_problem(path):
+    if Path(path).suffix.lower() not in VIDEO_FORMATS:
         raise DataError(f"{path}: expected a .gif or .mp4 file")
     if style not in STYLES:
         raise DataError(f"render style must be one of {', '.join(STYLES)}, got '{style}'")

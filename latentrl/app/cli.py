@@ -62,8 +62,8 @@ EXAMPLES = {
     "bench train": "latentrl bench train --skip-success --iterations 3",
     "bench motion": "latentrl bench motion --seconds 20 --batch 4 --foot-lock",
     "bench optimize": "latentrl bench optimize --skip-suites --cost-steps 3",
-    "view": "latentrl view runs/quick/eval",
-    "play": "latentrl play reach_walk_default --port 8080",
+    "view": "latentrl view runs/quick/eval --record eval.mp4",
+    "play": "latentrl play reach_walk_default --port 8080 --record play.mp4",
     "export": "latentrl export onnx reach_walk_default --out reach.onnx",
     "export onnx": "latentrl export onnx reach_walk_default --out reach.onnx --text walk",
     "list": "latentrl list policies",
@@ -408,7 +408,9 @@ def _viewer_commands(sub) -> None:
     view = sub.add_parser("view", help="browser viewer for a motion .npz, an evaluation folder or a training run")
     view.add_argument("path", metavar="PATH", help="motion .npz, eval folder (report.json), run folder or .npz folder")
     server_flags(view)
-    view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port))
+    view.add_argument("--record", metavar="FILE", help="also draw every frame played into this .gif or .mp4 when the "
+                                                       "viewer stops (MP4 needs latentrl[video])")
+    view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port, record=a.record))
 
     play = sub.add_parser("play", help="steer a reach policy live in the browser: click on the floor to set the goal")
     play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach or path policy, or a shipped "
@@ -421,9 +423,11 @@ def _viewer_commands(sub) -> None:
     play.add_argument("--deterministic", action="store_true", help="start with the policy's mean action")
     play.add_argument("--seed", type=_seed, default=0, help="seed of the start pose and the action noise")
     server_flags(play)
+    play.add_argument("--record", metavar="FILE", help="also draw every frame shown into this .gif or .mp4 when the "
+                                                       "viewer stops (MP4 needs latentrl[video])")
     play.set_defaults(func=lambda a: _viewer(
         "play_command", a.policy, host=a.host, port=a.port, motion=a.motion, device=a.device, text=a.text,
-        deterministic=a.deterministic, seed=a.seed, allow_motion_mismatch=a.allow_motion_mismatch))
+        deterministic=a.deterministic, seed=a.seed, allow_motion_mismatch=a.allow_motion_mismatch, record=a.record))
 
 
 def _viewer(name: str, *args, **kwargs) -> int:

@@ -17,29 +17,41 @@ PLAY_TASKS = ("reach", "path")
 waypoint is refused)."""
 
 
-def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT) -> int:
-    """Show a motion ``.npz``, an evaluation folder, a run's latest evaluation or a folder of motions."""
+def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
+                 record: str | Path | None = None) -> int:
+    """Show a motion ``.npz``, an evaluation folder, a run's latest evaluation or a folder of motions.
+
+    ``record``: a .gif or .mp4 that gets every frame played, drawn when the server stops.
+    """
+    from latentrl.viewer.record import Recorder, check_record
     from latentrl.viewer.server import require_viser, serve_until_interrupted, start_server
     from latentrl.viewer.sources import open_source
 
     source = open_source(path)
+    check_record(record)
     require_viser()
     server = start_server(host, port, label=f"latentrl view {Path(path).name}")
     from latentrl.viewer.playback import Player
 
-    player = Player(server, source)
+    recorder = Recorder(record, "view") if record else None
+    player = Player(server, source, recorder)
     player.start()
-    return serve_until_interrupted(server, "view", host, player.stop)
+    code = serve_until_interrupted(server, "view", host, player.stop)
+    player.thread.join(2)
+    if recorder is not None:
+        recorder.write()
+    return code
 
 
 def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str | None = None,
                  device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
-                 allow_motion_mismatch: bool = False) -> int:
+                 allow_motion_mismatch: bool = False, record: str | Path | None = None) -> int:
     """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list.
 
     ``policy`` is a file or a shipped policy's name (``reach_walk_default``). The text list is ``text``
     (if given), the policy's training texts, then every prompt the motion model's text table knows; the
     first is where the page starts. ``motion`` None: the model named in the policy's stored config.
+    ``record``: a .gif or .mp4 that gets every frame shown, drawn when the server stops.
     """
     import torch
 
@@ -55,6 +67,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     if task not in PLAY_TASKS:
         raise CheckpointError(f"{policy}: play steers {' and '.join(PLAY_TASKS)} policies toward a clicked goal; this "
                               f"policy's task is '{task}' (evaluate it with latentrl eval)")
+    from latentrl.viewer.record import Recorder, check_record
+
+    check_record(record)
     require_viser()
     check_port(host, port)  # before the models load
     from latentrl.evaluation.trained import trained_motion
@@ -80,7 +95,12 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     server = start_server(host, port, label=f"latentrl play {policy.name}", command="play")
     title = (f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n"
              "Click on the floor to set the goal; pick the text below.")
+    recorder = Recorder(record, "play") if record else None
     controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
-                                seed=seed)
+                                seed=seed, recorder=recorder)
     controller.start()
-    return serve_until_interrupted(server, "play", host, controller.stop)
+    code = serve_until_interrupted(server, "play", host, controller.stop)
+    controller.thread.join(2)
+    if recorder is not None:
+        recorder.write()
+    return code

@@ -121,11 +121,14 @@ class LiveController:
         text: the prompt to start with (one of ``env.texts``).
         deterministic: start with the policy's mean action instead of sampling it.
         seed: seed of the env (seed pose) and of action sampling.
+        recorder: keeps the frames shown for ``--record`` (None: nothing kept).
     """
 
     def __init__(self, server: Any, env: SteeredReachEnv, policy: Any, title: str, text: str,
-                 deterministic: bool = False, seed: int = 0):
+                 deterministic: bool = False, seed: int = 0, recorder: Any = None):
         self.server, self.env, self.policy, self.seed = server, env, policy, seed
+        self.recorder = recorder
+        """A :class:`~latentrl.viewer.record.Recorder` that keeps every frame shown (``--record``), or None."""
         self.lock = threading.Lock()
         self.stop = threading.Event()
         self.frames: collections.deque[np.ndarray] = collections.deque()
@@ -242,6 +245,8 @@ class LiveController:
     def _show_next(self) -> None:
         pose = self.frames.popleft()
         self.current = pose
+        if self.recorder is not None:
+            self.recorder.add(pose, self.env.text, self.goal)
         self.trail.append(pose[PELVIS])
         del self.trail[:-TRAIL_FRAMES]
         with self.server.atomic():

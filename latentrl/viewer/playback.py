@@ -63,8 +63,10 @@ class CameraFollower:
 class Player:
     """Plays the clips of a :class:`~latentrl.viewer.sources.Source` in a Viser server (a thread at 30 Hz)."""
 
-    def __init__(self, server: Any, source: Source):
+    def __init__(self, server: Any, source: Source, recorder: Any = None):
         self.server, self.source = server, source
+        self.recorder = recorder
+        """A :class:`~latentrl.viewer.record.Recorder` that keeps every frame played (``--record``), or None."""
         self.lock = threading.Lock()
         self.scene = SkeletonScene(server)
         self.clip: Clip | None = None
@@ -189,3 +191,7 @@ class Player:
             self.frame = 0.0
         with self.server.atomic():
             self._draw()
+        if self.recorder is not None:
+            i = int(min(max(self.frame, 0), self.clip.frames - 1))
+            goal = None if self.clip.goals is None else self.clip.goals[i]
+            self.recorder.add(self.clip.joints[i], self.clip.texts[i], goal)
