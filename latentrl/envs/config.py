@@ -28,7 +28,7 @@ from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import next_at_last_problem
 from latentrl.envs.reach_joint import ReachJointConfig
-from latentrl.envs.scene import scene_spec
+from latentrl.envs.scene import resolve_scene
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.tasks import TASKS, task_spec
 from latentrl.errors import ConfigError, LatentRLError, closest
@@ -277,14 +277,7 @@ class EnvConfig:
 
     def scene_spec(self) -> Any:
         """The env's scene (:func:`latentrl.envs.scene.scene_spec`), a file name resolved; None without one."""
-        value = self.scene
-        if isinstance(value, str):
-            found = task_file(value, "scenes")
-            if found is None:
-                raise ConfigError(f"scene: scene file not found: {value} (looked in {Path.cwd()} and "
-                                  f"{packaged() / 'tasks' / 'scenes'})")
-            value = found
-        return scene_spec(value)
+        return resolve_scene(self.scene)
 
     def step_settings(self) -> StepSettings:
         """How the env steps the motion (guidance, action bound, foot lock, autocast): the fields above."""

@@ -18,8 +18,9 @@ import torch
 from latentrl.envs.goal import body_forward
 from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import PELVIS
+from latentrl.resources import packaged, task_file
 from latentrl.scenes.random import RandomObstacles, clear_around
-from latentrl.scenes.scene import Scene, SceneBatch
+from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch
 from latentrl.scenes.spec import load_scene, parse_scene
 
 NUM_RAYS = 16
@@ -44,6 +45,17 @@ def scene_spec(value: Any) -> Scene | RandomObstacles | None:
             return parse_scene(value, "env.scene")
     raise ConfigError(f"scene: expected a scene file, a latentrl.scene/1 object or {{random_obstacles: {{...}}}}, "
                       f"got {str(value)[:60]}")
+
+
+def resolve_scene(value: Any) -> Scene | RandomObstacles | None:
+    """:func:`scene_spec` with a file name looked up as task files are: a path, or a name in ``tasks/scenes``."""
+    if isinstance(value, str):
+        found = task_file(value, "scenes")
+        if found is None:
+            raise ConfigError(f"scene: scene file not found: {value} (looked in {Path.cwd()} and "
+                              f"{packaged() / 'tasks' / 'scenes'})")
+        value = found
+    return scene_spec(value)
 
 
 class EnvScene:
@@ -82,6 +94,25 @@ class EnvScene:
         """Random scenes: drop the obstacles a new goal (N, 3) landed on (a fixed scene is never changed)."""
         if self.random:
             clear_around(self.batch, goal, self.spec.clearance)
+
+    def row(self, i: int) -> SceneBatch:
+        """Env ``i``'s scene as a one-row batch."""
+        return self.batch.index(slice(i, i + 1)) if self.random else self.batch
+
+    def scene_of(self, i: int) -> Scene:
+        """Env ``i``'s scene as objects (random obstacles as they stand now), e.g. to write beside its motion."""
+        if not self.random:
+            return self.spec
+        s = self.row(i)
+        objects = []
+        for (x, y, z), (hx, hy, hz), yaw in zip(s.box_center[0][s.box_mask[0]].tolist(),
+                                                s.box_half[0][s.box_mask[0]].tolist(),
+                                                s.box_yaw[0][s.box_mask[0]].tolist()):
+            objects.append(Box((x, y), (2 * hx, 2 * hy, 2 * hz), math.degrees(yaw), z - hz))
+        for (x, y, z), r, hh in zip(s.cyl_center[0][s.cyl_mask[0]].tolist(), s.cyl_radius[0][s.cyl_mask[0]].tolist(),
+                                    s.cyl_half_height[0][s.cyl_mask[0]].tolist()):
+            objects.append(Cylinder((x, y), r, 2 * hh, z - hh))
+        return Scene(tuple(objects), self.floor_height)
 
     def rays(self, history_world: torch.Tensor) -> torch.Tensor:
         """(N, NUM_RAYS) distances from the last history frame's pelvis, right to left, clipped at RAY_RANGE_M."""

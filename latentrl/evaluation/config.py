@@ -81,6 +81,8 @@ class EvalSettings(StepSettings):
     next_at_last: str = "repeat"
     """What a path or timed policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``,
     ``env.timed.next_at_last``); its training value."""
+    scene: Any = None
+    """The policy's training scene (``env.scene``, docs/scenes.md): the eval env has it too; None: the flat floor."""
 
     def take_training_env(self, env_cfg: Any) -> None:
         """Step the motion as the policy's training env did (its :class:`StepSettings`; None: the defaults).
@@ -90,6 +92,7 @@ class EvalSettings(StepSettings):
         for name, value in StepSettings.of(env_cfg).step_kwargs().items():
             setattr(self, name, value)
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
+        self.scene = getattr(env_cfg, "scene", None)
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""

@@ -3,6 +3,8 @@
 World frame seen from above: x right, y up on the page (the body starts at the origin facing +y),
 metres, equal aspect. Successful episodes are drawn in green, failures in red; waypoints are
 numbered in order of visit (a point visited twice reads "0,2"), the start is a black triangle.
+Scene objects are grey footprints; where each episode had its own random obstacles, every episode's are drawn
+faintly, so places that were often blocked read darker.
 """
 
 from __future__ import annotations
@@ -18,8 +20,27 @@ MAX_LABELS = 60
 """Paths with more distinct waypoints get numbers only at the first and last (10,000 labels take minutes)."""
 
 
+def _draw_scenes(ax, result: PathResult) -> None:
+    """The footprints of the episodes' scenes (each distinct scene once)."""
+    from matplotlib.patches import Circle, Polygon
+
+    from latentrl.scenes.spec import scene_from_json
+
+    distinct = list(dict.fromkeys(ep.scene for ep in result.episodes if ep.scene))
+    alpha = max(0.06, 0.6 / max(1, len(distinct)))
+    for text in distinct:
+        boxes, cylinders = scene_from_json(text).primitives()
+        for x, y, _, hx, hy, _, yaw in boxes:
+            c, s = math.cos(yaw), math.sin(yaw)
+            corners = [(x + c * u - s * v, y + s * u + c * v) for u, v in ((-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy))]
+            ax.add_patch(Polygon(corners, closed=True, color="dimgray", alpha=alpha, lw=0, zorder=1))
+        for x, y, _, r, _ in cylinders:
+            ax.add_patch(Circle((x, y), r, color="dimgray", alpha=alpha, lw=0, zorder=1))
+
+
 def _draw_path(ax, result: PathResult) -> None:
-    """One panel: every episode's pelvis track, then the waypoints on top."""
+    """One panel: the scene, every episode's pelvis track, then the waypoints on top."""
+    _draw_scenes(ax, result)
     for ep in result.episodes:
         color = SUCCESS_COLOR if ep.success else FAILURE_COLOR
         ax.plot(ep.pelvis_xy[:, 0], ep.pelvis_xy[:, 1], color=color, lw=0.8, alpha=0.45)

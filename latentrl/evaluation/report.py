@@ -47,6 +47,20 @@ METRICS: dict[str, tuple[str, str]] = {
 }
 """Every aggregated metric: key -> (column title, unit). Each is stored as ``{"mean", "ci95"}``."""
 
+SCENE_METRICS: dict[str, tuple[str, str]] = {
+    "collision": ("collision rate", ""),
+    "scene_penetration_cm": ("scene penetration", "cm"),
+    "scene_penetration_max_cm": ("max scene penetration", "cm"),
+}
+"""Aggregated only when the episodes had a scene (:func:`latentrl.scenes.contact.scene_metrics`): the share of
+episodes with a joint deeper than its skin radius in an object, the deepest joint per frame averaged over the
+episode, and the episode's deepest point."""
+
+
+def _keys(values: dict) -> list[str]:
+    """:data:`METRICS`, then the scene metrics when the episodes carry them."""
+    return [*METRICS, *(k for k in SCENE_METRICS if k in values)]
+
 COMPARE_METRICS = ("success_rate", "reach_time_s", "reach_time_success_s", "skate_cm_s", "floor_cm", "jerk")
 
 DART_TABLE4: dict[str, dict[str, float]] = {
@@ -78,7 +92,7 @@ def path_metrics(path: PathResult) -> dict[str, dict[str, float]]:
     """Mean and CI over the path's episodes, for every :data:`METRICS` key."""
     out = {name: M.mean_ci95(v) for name, v in _values(path).items()}
     out["reach_time_success_s"] = M.mean_ci95(_success_times([path]))
-    return {k: out[k] for k in METRICS}
+    return {k: out[k] for k in _keys(out)}
 
 
 def pooled_metrics(paths: Sequence[PathResult]) -> dict[str, dict[str, float]]:
@@ -86,7 +100,7 @@ def pooled_metrics(paths: Sequence[PathResult]) -> dict[str, dict[str, float]]:
     values = [_values(p) for p in paths]
     out = {name: M.dart_mean_ci95([v[name] for v in values]) for name in values[0]}
     out["reach_time_success_s"] = M.mean_ci95(_success_times(paths))
-    return {k: out[k] for k in METRICS}
+    return {k: out[k] for k in _keys(out)}
 
 
 def waypoint_times(path: PathResult) -> list[dict[str, float]]:
@@ -171,8 +185,8 @@ def build_report(
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "policy": policy,
         "motion": motion,
-        "settings": {**asdict(settings), "fps": FPS, "budget_s": settings.budget_s,
-                     "files": [s.file for s in suites]},
+        "settings": {**{k: v for k, v in asdict(settings).items() if k != "scene" or v is not None}, "fps": FPS,
+                     "budget_s": settings.budget_s, "files": [s.file for s in suites]},
         "hardware": hardware or {},
         "speed": speed or {},
         "suites": {
@@ -271,7 +285,8 @@ def _fmt(m: dict[str, float] | None, digits: int = 2) -> str:
 
 
 def _header(keys: Sequence[str], lead: Sequence[str]) -> list[str]:
-    titles = [f"{METRICS[k][0]} ({METRICS[k][1]})" if METRICS[k][1] else METRICS[k][0] for k in keys]
+    named = {**METRICS, **SCENE_METRICS}
+    titles = [f"{named[k][0]} ({named[k][1]})" if named[k][1] else named[k][0] for k in keys]
     cols = [*lead, *titles]
     return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
 
@@ -290,7 +305,7 @@ def _dart_row(name: str, keys: Sequence[str]) -> str | None:
 
 def results_table(report: dict[str, Any]) -> list[str]:
     """One row per path, one DART-aggregated row per suite (+ DART's published row), then ``overall``."""
-    keys = list(METRICS)
+    keys = _keys(report["overall"].get("metrics") or {})
     from latentrl.evaluation.results import prompts_label
 
     lines = _header(keys, ["suite", "path (prompts)"])

@@ -46,6 +46,8 @@ class EpisodeResult:
     motion_file: str | None = None
     segments: list[dict] = field(default_factory=list)
     """Per waypoint segment, whether the motion matched its text (:func:`latentrl.evaluation.skills.judge_clip`)."""
+    scene: str | None = None
+    """The episode's scene as ``latentrl.scene/1`` JSON text (None: the flat floor); ``paths.png`` draws it."""
 
 
 @dataclass

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from latentrl.envs.path import FollowPathEnv, WaypointPath, load_paths
+from latentrl.envs.scene import resolve_scene
 from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
@@ -45,6 +46,8 @@ from latentrl.evaluation.skills import judge_clip
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
+from latentrl.scenes.contact import scene_metrics
+from latentrl.scenes.spec import scene_to_json
 
 __all__ = ["EpisodeResult", "EvalSettings", "PathResult", "SuiteResult", "frames_after", "policy_fn", "fit_policy",
            "make_env", "run_path", "run_suites", "load_suites", "training_eval_hook", "measure_speed"]
@@ -129,6 +132,7 @@ def make_env(
         success_threshold=settings.success_threshold,
         **settings.motion_kwargs(),
         record_history=record_history,
+        **({"scene": resolve_scene(settings.scene)} if settings.scene is not None else {}),
     )
 
 
@@ -197,10 +201,13 @@ def run_path(
             reach_time_s=frames_after(steps) / FPS if success else settings.budget_s,
             waypoint_times_s=wp_times,
             final_dist_m=float(M.final_goal_distance_m(joints, final_goal)),
-            metrics=M.episode_metrics(joints, FPS, env.floor_height),
+            metrics={**M.episode_metrics(joints, FPS, env.floor_height),
+                     **(scene_metrics(joints, env.scene.row(i)) if env.scene is not None else {})},
             pelvis_xy=joints[:, 0, :2].numpy().copy(),
             segments=judge_clip(motion_i),
         )
+        if env.scene is not None:
+            motion_i.scene = result.scene = scene_to_json(env.scene.scene_of(i))
         if sink is not None:
             motion_i.waypoints = np.asarray(path.waypoints, np.float32)
             result.motion_file = sink(result, motion_i.to_dict())

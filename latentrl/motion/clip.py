@@ -21,6 +21,7 @@ key               shape, dtype        meaning
 ``goals``         (S, 3) float32      optional: the goal in force during each primitive, world metres
 ``primitive``     (T,) int32          optional: which primitive produced each frame (-1 = seed)
 ``waypoints``     (W, 3) float32      optional: the path an evaluation episode follows
+``scene``         () unicode          optional: the scene the motion moves in, ``latentrl.scene/1`` JSON text
 ================  ==================  ==========================================================
 
 Any other key is a 0-d (or small) value kept in :attr:`MotionClip.meta` (an evaluation writes
@@ -77,6 +78,8 @@ class MotionClip:
         primitive: (T,) primitive per frame (-1 = seed), or None.
         waypoints: (W, 3) path of an evaluation episode, or None.
         meta: other values written beside (scalars: seed, success, ...).
+        scene: the scene's ``latentrl.scene/1`` JSON text (docs/scenes.md), or None for the flat floor; kept as
+            text here (:func:`latentrl.scenes.scene_from_json` reads it).
     """
 
     joints: np.ndarray
@@ -90,6 +93,7 @@ class MotionClip:
     primitive: np.ndarray | None = None
     waypoints: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    scene: str | None = None
 
     def __post_init__(self) -> None:
         self.joints = np.asarray(self.joints, dtype=np.float32)
@@ -103,6 +107,12 @@ class MotionClip:
         if self.contacts is None:
             self.contacts = contacts_of(self.joints, self.floor)
         self.contacts = np.asarray(self.contacts, dtype=bool).reshape(t, 2)
+        if self.scene is not None:
+            scene = np.asarray(self.scene)
+            if scene.shape != () or scene.dtype.kind != "U" or len(str(scene)) > MAX_SCENE_CHARS:
+                raise DataError(f"field 'scene' must be the scene's JSON text (at most {MAX_SCENE_CHARS} characters), "
+                                f"got {scene.dtype} of shape {scene.shape}")
+            self.scene = str(scene)
 
     @property
     def frames(self) -> int:
@@ -123,13 +133,15 @@ class MotionClip:
 
         return MotionClip(self.joints[:frames], self.fps, self.texts[:frames], head(self.actions, steps),
                           head(self.goals, steps), self.contacts[:frames], self.floor, head(self.features, frames),
-                          head(self.primitive, frames), self.waypoints, dict(self.meta))
+                          head(self.primitive, frames), self.waypoints, dict(self.meta), scene=self.scene)
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a flat dict (``joints``, ``fps``, ``texts``, ``contacts``, present optional arrays, meta)."""
         out: dict[str, Any] = {"joints": self.joints, "fps": self.fps, "texts": list(self.texts),
                                "contacts": self.contacts, "floor": self.floor}
         out.update({k: getattr(self, k) for k in ARRAYS if getattr(self, k) is not None})
+        if self.scene is not None:
+            out["scene"] = self.scene
         out.update(self.meta)
         return out
 
@@ -148,6 +160,8 @@ class MotionClip:
             data["primitive"] = np.asarray(self.primitive, dtype=np.int32)
         if self.waypoints is not None:
             data["waypoints"] = np.asarray(self.waypoints, dtype=np.float32)
+        if self.scene is not None:
+            data["scene"] = np.asarray(self.scene, dtype=str)
         for key, value in self.meta.items():
             data[key] = np.asarray(value)
         return data
@@ -162,7 +176,7 @@ class MotionClip:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> MotionClip:
         """A clip from the schema's keys; unknown keys go to ``meta`` (``rest_offsets``, ``parents`` are derived)."""
-        known = {"joints", "fps", "texts", "contacts", "floor", *ARRAYS}
+        known = {"joints", "fps", "texts", "contacts", "floor", "scene", *ARRAYS}
         kwargs = {k: data[k] for k in known if k in data}
         if "fps" in kwargs:
             kwargs["fps"] = float(kwargs["fps"])
@@ -182,6 +196,8 @@ class MotionClip:
             raise DataError(f"{path}: {exc}") from None
 
 
+MAX_SCENE_CHARS = 1 << 20
+"""Longest scene JSON a motion file may carry (the scene file's own bound)."""
 MAX_FPS = 1000.0
 """Frame rates outside (0, MAX_FPS] are refused."""
 MAX_COORD_M = 10_000.0

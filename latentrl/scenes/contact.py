@@ -60,3 +60,20 @@ def foot_terrain_gap(joints: torch.Tensor, scene: SceneBatch) -> torch.Tensor:
 def contact_cost(joints: torch.Tensor, scene: SceneBatch, threshold: float = CONTACT_HEIGHT_M) -> torch.Tensor:
     """(N,) DART's ``cons_cont``: mean over frames of ``max(0, |foot_terrain_gap| - threshold)``, metres (>= 0)."""
     return (foot_terrain_gap(joints, scene).abs() - threshold).clamp(min=0.0).mean(dim=-1)
+
+
+SCENE_METRICS: tuple[str, ...] = ("collision", "scene_penetration_cm", "scene_penetration_max_cm")
+"""The per-episode scene metrics of :func:`scene_metrics`, as the evaluation report names them."""
+
+
+def scene_metrics(joints: torch.Tensor, scene: SceneBatch) -> dict[str, float]:
+    """One episode's scene metrics from its (T, 22, 3) world joints and its one-row scene.
+
+    ``collision``: 1 when any joint came deeper than its skin radius into an object at any frame, else 0 (its
+    mean over episodes is the collision rate); ``scene_penetration_cm``: the deepest joint's depth per frame,
+    averaged over frames; ``scene_penetration_max_cm``: the deepest depth of the episode.
+    """
+    depth = penetration(torch.as_tensor(joints, dtype=torch.float32)[None], scene)[0]  # (T, 22)
+    deepest = depth.amax(dim=-1)
+    return {"collision": float(deepest.max() > 0), "scene_penetration_cm": float(deepest.mean()) * 100.0,
+            "scene_penetration_max_cm": float(deepest.max()) * 100.0}

@@ -1,0 +1,85 @@
+"""Evaluation with a scene: collision rate and penetration in the report, obstacles in paths.png, the scene in the
+motion file; flat evaluations unchanged."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from latentrl.envs.path import WaypointPath
+from latentrl.errors import DataError
+from latentrl.evaluation import report as R
+from latentrl.evaluation.config import EvalSettings
+from latentrl.evaluation.plots import save_paths_png
+from latentrl.evaluation.results import SuiteResult
+from latentrl.evaluation.runner import run_path
+from latentrl.motion.clip import MotionClip
+from latentrl.scenes import Box, Cylinder, Scene, SceneBatch, scene_from_json, scene_to_dict, scene_to_json
+from latentrl.scenes.contact import scene_metrics
+
+AROUND = Scene((Box((0.0, 0.0), (1.0, 1.0, 2.0)), Cylinder((0.0, 3.0), 0.3, 1.0)))  # the start stands in the box
+PATH = WaypointPath(((0.0, 2.0, 0.0),), ("walk",))
+
+
+def zero(obs: torch.Tensor) -> torch.Tensor:
+    return torch.zeros(obs.shape[0], 16)
+
+
+def test_scene_metrics_known_answers():
+    scene = SceneBatch.from_scenes([Scene((Box((0.0, 0.0), (2.0, 2.0, 2.0)),))])
+    joints = torch.zeros(3, 22, 3)
+    joints[..., 0] = 5.0  # clear, then two frames with the pelvis 0.05 m and 0.3 m inside the box's face at x = 1
+    joints[1, 0] = torch.tensor([0.95, 0.0, 1.0])
+    joints[2, 0] = torch.tensor([0.70, 0.0, 1.0])
+    m = scene_metrics(joints, scene)
+    assert m["collision"] == 1.0
+    assert m["scene_penetration_max_cm"] == pytest.approx(40.0, abs=1e-3)  # 0.3 deep + the 0.10 skin
+    assert m["scene_penetration_cm"] == pytest.approx((0 + 15.0 + 40.0) / 3, abs=1e-3)
+    clear = torch.full((2, 22, 3), 5.0)
+    assert scene_metrics(clear, scene) == {"collision": 0.0, "scene_penetration_cm": 0.0,
+                                           "scene_penetration_max_cm": 0.0}
+
+
+def test_motion_clip_carries_the_scene(tmp_path):
+    joints = np.zeros((4, 22, 3), np.float32)
+    clip = MotionClip(joints, scene=scene_to_json(AROUND))
+    clip.save(tmp_path / "m.npz")
+    back = MotionClip.load(tmp_path / "m.npz")
+    assert scene_from_json(back.scene) == AROUND and back.meta == {}
+    assert back.cut(0).scene == back.scene and back.to_dict()["scene"] == back.scene
+    MotionClip(joints).save(tmp_path / "old.npz")  # files without a scene load as before
+    assert MotionClip.load(tmp_path / "old.npz").scene is None
+    with pytest.raises(DataError, match="field 'scene' must be the scene's JSON text"):
+        MotionClip(joints, scene=np.zeros(3))
+
+
+def test_run_path_with_a_scene_reports_collisions_and_draws_it(tiny_model, tmp_path):
+    settings = EvalSettings(episodes=2, max_steps=2)
+    settings.scene = scene_to_dict(AROUND)
+    motions = []
+    result = run_path(zero, tiny_model, PATH, settings, suite="s", sink=lambda ep, m: motions.append(m) or "f")
+    for ep, motion in zip(result.episodes, motions):
+        assert ep.metrics["collision"] == 1.0 and ep.metrics["scene_penetration_max_cm"] > 0
+        assert scene_from_json(motion["scene"]) == AROUND and ep.scene == motion["scene"]
+    report = R.build_report([SuiteResult("s", "s.json", [result])], settings, policy={}, motion={})
+    overall = report["overall"]["metrics"]
+    assert overall["collision"]["mean"] == 1.0 and "scene_penetration_max_cm" in overall
+    assert report["settings"]["scene"] == scene_to_dict(AROUND)
+    assert "| collision rate | scene penetration (cm) | max scene penetration (cm) |" in R.report_markdown(report)
+    png = save_paths_png(tmp_path / "paths.png", [SuiteResult("s", "s.json", [result])])
+    assert png.stat().st_size > 1000
+
+
+def test_random_obstacles_in_the_eval_env_and_flat_reports_unchanged(tiny_model):
+    settings = EvalSettings(episodes=3, max_steps=1)
+    settings.scene = {"random_obstacles": {"count": [3, 3], "distance": [1.0, 3.0]}}
+    result = run_path(zero, tiny_model, PATH, settings, suite="s")
+    scenes = [scene_from_json(ep.scene) for ep in result.episodes]
+    assert all(1 <= len(s.objects) <= 3 for s in scenes) and len({s for s in scenes}) == 3
+    flat = run_path(zero, tiny_model, PATH, EvalSettings(episodes=1, max_steps=1), suite="s")
+    assert "collision" not in flat.episodes[0].metrics and flat.episodes[0].scene is None
+    report = R.build_report([SuiteResult("s", "s.json", [flat])], EvalSettings(episodes=1, max_steps=1),
+                            policy={}, motion={})
+    assert "scene" not in report["settings"] and list(report["overall"]["metrics"]) == list(R.METRICS)
+    assert json.dumps(report, default=str)
