@@ -127,11 +127,23 @@ def mixed_skills() -> list[WaypointPath]:
     ]
 
 
+def reach_obstacles() -> list[WaypointPath]:
+    """Five seeded single goals 3-5 m ahead, within 45 degrees of the body's forward axis, walking.
+
+    The reach task among random obstacles: they come from the evaluated policy's training scene (docs/scenes.md).
+    """
+    rng = np.random.default_rng(20261127)
+    headings = 90.0 + rng.uniform(-45.0, 45.0, 5)
+    lengths = rng.uniform(3.0, 5.0, 5)
+    return [_path(_polyline([h], [d]), WALK) for h, d in zip(headings, lengths)]
+
+
 SUITES: dict[str, Callable[[], list[WaypointPath]]] = {
     "random_smooth": random_smooth,
     "sharp_turns": sharp_turns,
     "mixed_text": mixed_text,
     "mixed_skills": mixed_skills,
+    "reach_obstacles": reach_obstacles,
 }
 """Suite name (= file stem in ``tasks/paths/``) -> generator."""
 
