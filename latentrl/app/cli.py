@@ -385,6 +385,10 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--no-render", dest="render", action="store_const", const=0, help="render nothing")
     ev.add_argument("--no-motions", dest="motions", action="store_false", help="skip the per-episode .npz files")
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar (paths x episodes)")
+    ev.add_argument("--scene", metavar="SCENE",
+                    help="evaluate among objects: a latentrl.scene/1 file or a name in tasks/scenes, or "
+                         "random_obstacles (3-8 per episode); the report adds collision rate and penetration "
+                         "(docs/scenes.md). Default: the policy's training scene")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

@@ -31,8 +31,9 @@ from tqdm import tqdm
 import latentrl.evaluation.tasks  # noqa: F401  (attaches the shipped tasks' evaluators)
 from latentrl.envs.config import stored_env_config
 from latentrl.envs.path import load_paths
+from latentrl.envs.scene import resolve_scene
 from latentrl.envs.tasks import task_spec
-from latentrl.errors import ConfigError, DataError
+from latentrl.errors import ConfigError, DataError, LatentRLError
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.report import compare_reports
 from latentrl.evaluation.runner import policy_fn
@@ -73,6 +74,9 @@ class EvalRequest:
     motions: bool = True
     progress: bool = True
     """Show a progress bar over paths x episodes."""
+    scene: str | None = None
+    """A scene to evaluate in (a ``latentrl.scene/1`` file or name in tasks/scenes, or ``random_obstacles``); None:
+    the policy's training scene. A policy trained without a scene is evaluated blind to it (docs/scenes.md)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -80,7 +84,7 @@ class EvalRequest:
         options = (("--paths", self.paths), ("--episodes", self.episodes), ("--max-steps", self.max_steps),
                    ("--motion", self.motion), ("--foot-lock-min-weight", self.foot_lock_min_weight),
                    ("--device", self.device), ("--out", self.out),
-                   ("--render", self.render))
+                   ("--render", self.render), ("--scene", self.scene))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -160,6 +164,13 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
             attach_seed_history(model, env.seed_history)
     if req.foot_lock_min_weight is not None:
         settings.foot_lock_min_weight = float(req.foot_lock_min_weight)
+    if req.scene is not None:
+        settings.observe_scene = settings.scene is not None  # a policy trained without a scene has no rays
+        settings.scene = {"random_obstacles": {}} if req.scene == "random_obstacles" else req.scene
+        try:
+            resolve_scene(settings.scene)
+        except LatentRLError as exc:
+            raise ConfigError(f"--scene: {exc}") from None
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 

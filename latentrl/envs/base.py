@@ -99,7 +99,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         scene, terminate_on_collision: objects in the world (:mod:`latentrl.envs.scene`: a scene file, a
             :class:`~latentrl.scenes.Scene` or random obstacles; None: the flat floor alone) and whether a joint
             inside its skin radius of one ends the episode. A scene adds the ``scene_rays`` observation group
-            and the ``collision`` and ``terrain_contact`` reward terms (docs/scenes.md).
+            (unless ``observe_scene`` is False: a policy trained without a scene, evaluated among objects) and the
+            ``collision`` and ``terrain_contact`` reward terms (docs/scenes.md).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -139,6 +140,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         amp: str | None = None,
         scene: Any = None,
         terminate_on_collision: bool = False,
+        observe_scene: bool = True,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -179,6 +181,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         self._core = compile_step_core(self._motion_core, self.device) if self.compiled else self._motion_core
         self.scene = env_scene(scene, self.num_envs, self.device, self.floor_height)
         self.terminate_on_collision = bool(terminate_on_collision)
+        self.observe_scene = self.scene is not None and bool(observe_scene)
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
                 "needs a scene")
         self.rewards = RewardComposer(reward_config, reward_weights,
@@ -205,7 +208,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
     # ------------------------------------------------------------------ construction
     def _setup_spaces(self) -> None:
         self._obs = ObservationLayout(self.goal_fields, self.text_table.dim,
-                                      self.scene.num_rays if self.scene is not None else 0)
+                                      self.scene.num_rays if self.observe_scene else 0)
         bound, latent = self.step_settings.action_bound, self.motion.latent_dim
         self.single_action_space = gym.spaces.Box(-bound, bound, (latent,), np.float32)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (self._obs.size,), np.float32)
@@ -393,7 +396,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         history_world = state.world.apply(joints_of(state.history))
         return observe(state.history, history_world, self._goal_observation(history_world),
                        self.text_table.embeddings[self._text_idx], self.floor_height,
-                       self.scene.rays(history_world) if self.scene is not None else None)
+                       self.scene.rays(history_world) if self.observe_scene else None)
 
     def _goal_features(self, history_world: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """(N, 4) :func:`goal_features` of ``goal`` with this env's clips."""

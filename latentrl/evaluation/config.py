@@ -82,7 +82,10 @@ class EvalSettings(StepSettings):
     """What a path or timed policy's ``next_goal_*`` observes at the last waypoint (``env.path.next_at_last``,
     ``env.timed.next_at_last``); its training value."""
     scene: Any = None
-    """The policy's training scene (``env.scene``, docs/scenes.md): the eval env has it too; None: the flat floor."""
+    """The eval env's scene (docs/scenes.md): the policy's training scene (``env.scene``) or ``eval --scene``;
+    None: the flat floor."""
+    observe_scene: bool = True
+    """Whether the policy observes the scene (False: a policy trained without one, evaluated among objects)."""
 
     def take_training_env(self, env_cfg: Any) -> None:
         """Step the motion as the policy's training env did (its :class:`StepSettings`; None: the defaults).
@@ -93,6 +96,7 @@ class EvalSettings(StepSettings):
             setattr(self, name, value)
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
         self.scene = getattr(env_cfg, "scene", None)
+        self.observe_scene = True
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""

@@ -185,7 +185,8 @@ def build_report(
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "policy": policy,
         "motion": motion,
-        "settings": {**{k: v for k, v in asdict(settings).items() if k != "scene" or v is not None}, "fps": FPS,
+        "settings": {**{k: v for k, v in asdict(settings).items()
+                        if k not in ("scene", "observe_scene") or settings.scene is not None}, "fps": FPS,
                      "budget_s": settings.budget_s, "files": [s.file for s in suites]},
         "hardware": hardware or {},
         "speed": speed or {},

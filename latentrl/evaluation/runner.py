@@ -132,7 +132,8 @@ def make_env(
         success_threshold=settings.success_threshold,
         **settings.motion_kwargs(),
         record_history=record_history,
-        **({"scene": resolve_scene(settings.scene)} if settings.scene is not None else {}),
+        **({"scene": resolve_scene(settings.scene), "observe_scene": settings.observe_scene}
+           if settings.scene is not None else {}),
     )
 
 

@@ -83,3 +83,22 @@ def test_random_obstacles_in_the_eval_env_and_flat_reports_unchanged(tiny_model)
                             policy={}, motion={})
     assert "scene" not in report["settings"] and list(report["overall"]["metrics"]) == list(R.METRICS)
     assert json.dumps(report, default=str)
+
+
+def test_eval_command_with_a_scene_for_a_policy_trained_without_one(eval_files, tmp_path, capsys):
+    from latentrl.app.cli import main
+    from tests.evaluation.conftest import NEAR, write_paths
+
+    paths = write_paths(tmp_path, [NEAR], "mini.json")
+    base = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
+            "--episodes", "2", "--max-steps", "2", "--device", "cpu", "--no-render", "--no-progress"]
+    assert main([*base, "--out", str(tmp_path / "out"), "--scene", "random_obstacles"]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["settings"]["scene"] == {"random_obstacles": {}} and report["settings"]["observe_scene"] is False
+    assert "collision" in report["overall"]["metrics"]
+    motion = MotionClip.load(next((tmp_path / "out" / "motions").glob("*.npz")))
+    assert len(scene_from_json(motion.scene).objects) >= 1
+    capsys.readouterr()
+    assert main([*base, "--out", str(tmp_path / "bad"), "--scene", "nowhere.json"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--scene: scene: scene file not found: nowhere.json" in err[0]
