@@ -17,6 +17,12 @@ native and SB3 runs overlay. Tags use SB3's names where SB3 has one:
 ``time/collection_s``       seconds spent collecting the last rollout
 ``time/update_s``           seconds spent in the last PPO update
 ``reward/<term>``           rollout mean of each *unweighted* reward term (the env's ``reward/<term>`` infos)
+``Episode_Reward/<term>``   mean over the episodes that ended in the rollout of each term's *weighted* sum over
+                            the episode (rsl_rl/mjlab's name); the terms add up to those episodes' mean return
+``action/norm_mean``        mean Euclidean norm of the actions sent to the env (the latent noise z)
+``action/beyond_shell``     share of those actions with ``|z| > sqrt(d)``, outside the Gaussian shell of N(0, I_d)
+                            (a policy that leaves the motion prior's noise distribution)
+``eval/mean_reward``        periodic evaluation: mean return of its episodes (when the evaluator reports it)
 ``eval/<metric>``           periodic evaluation: ``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``
 ``eval/trajectories``       top-down trajectory plot (image)
 ``hyperparameters``         the resolved config as a markdown table (text)
@@ -46,8 +52,13 @@ COLLECTION_S = "time/collection_s"
 UPDATE_S = "time/update_s"
 REWARD_PREFIX = "reward/"
 """Prefix of reward-term tags, and of the env's per-step info keys they come from."""
+EPISODE_REWARD_PREFIX = "Episode_Reward/"
+"""Prefix of the weighted per-term episode sums (rsl_rl's and mjlab's tag)."""
+ACTION_NORM = "action/norm_mean"
+ACTION_BEYOND_SHELL = "action/beyond_shell"
 EVAL_PREFIX = "eval/"
 EVAL_METRICS = ("success_rate", "reach_time_s", "skate_cm_s", "floor_cm")
+EVAL_MEAN_REWARD = "eval/mean_reward"
 EVAL_TRAJECTORIES = "eval/trajectories"
 HPARAMS = "hyperparameters"
 MOTION_PREFIX = "motion/"
@@ -124,6 +135,16 @@ class Monitor:
         """Rollout means of the unweighted reward terms as ``reward/<term>`` (names without the prefix)."""
         for name, value in terms.items():
             self._scalar(tag_for("reward", name.removeprefix(REWARD_PREFIX)), value, step)
+
+    def log_episode_rewards(self, step: int, terms: Mapping[str, float]) -> None:
+        """Weighted per-term episode sums as ``Episode_Reward/<term>`` (names without a prefix)."""
+        for name, value in terms.items():
+            self._scalar(EPISODE_REWARD_PREFIX + name.removeprefix(REWARD_PREFIX), value, step)
+
+    def log_actions(self, step: int, norm_mean: float | None, beyond_shell: float | None) -> None:
+        """``action/norm_mean`` and ``action/beyond_shell`` of a rollout's actions (None writes nothing)."""
+        self._scalar(ACTION_NORM, norm_mean, step)
+        self._scalar(ACTION_BEYOND_SHELL, beyond_shell, step)
 
     def log_time(self, step: int, fps: float | None = None, collection_s: float | None = None,
                  update_s: float | None = None) -> None:

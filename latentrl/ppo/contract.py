@@ -37,6 +37,34 @@ INFO_KEYS = (FINAL_OBS, EPISODE, IS_SUCCESS, DIVERGED, REWARD_TERM_PREFIX + "<te
 """Every info key a trainer reads."""
 
 
+def reward_weights(env: Any) -> dict[str, float] | None:
+    """The weight of each ``reward/<term>`` (``env.rewards.weights``, optional), or None when the env has none.
+
+    With them the trainers log ``Episode_Reward/<term>``; the env (or the env an adapter wraps as
+    ``env.env``) must compute its reward as the weighted sum of its terms.
+    """
+    for candidate in (env, getattr(env, "env", None), getattr(env, "unwrapped", None)):
+        weights = getattr(getattr(candidate, "rewards", None), "weights", None)
+        if isinstance(weights, Mapping):
+            return {str(k): float(v) for k, v in weights.items()}
+    return None
+
+
+def action_magnitude(actions: Any) -> tuple[float, float] | None:
+    """``(mean |z|, share of |z| > sqrt(d))`` of actions (..., d) as the env received them; None for no actions.
+
+    A standard normal z in d dimensions has ``|z|`` close to ``sqrt(d)`` (the Gaussian shell), so the
+    share beyond it tells how far a policy pushes the motion prior's noise out of distribution.
+    """
+    import torch
+
+    z = torch.as_tensor(actions, dtype=torch.float32)
+    if z.numel() == 0:
+        return None
+    norms = torch.linalg.vector_norm(z.reshape(-1, z.shape[-1]), dim=-1)
+    return float(norms.mean()), float((norms > z.shape[-1] ** 0.5).float().mean())
+
+
 def observation_layout(env: Any, given: Mapping[str, Any] | None = None) -> Mapping[str, Any] | None:
     """The layout passed explicitly, else ``env.metadata["observation_layout"]``, else None."""
     if given is not None:

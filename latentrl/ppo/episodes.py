@@ -32,12 +32,20 @@ class RolloutSummary(NamedTuple):
     """Episodes that ended during this rollout."""
     diverged: int | None = None
     """Env steps of this rollout whose motion diverged (None: the env does not report ``diverged``)."""
+    episode_terms: dict[str, float] = {}
+    """Term name -> weighted sum over an episode, averaged over the episodes that ended in this rollout
+    (empty without reward weights or without an ended episode): ``Episode_Reward/<term>``."""
 
 
 class EpisodeRecorder:
-    """(T, N) device buffers of episode ends, returns, lengths and successes, plus per-term reward sums."""
+    """(T, N) device buffers of episode ends, returns, lengths and successes, plus per-term reward sums.
 
-    def __init__(self, num_steps: int, num_envs: int, device: str | torch.device = "cpu", window: int = 100):
+    ``reward_weights`` (term name -> weight, :func:`latentrl.ppo.contract.reward_weights`): also keep
+    each env's running weighted sum of every term and fold it in when its episode ends.
+    """
+
+    def __init__(self, num_steps: int, num_envs: int, device: str | torch.device = "cpu", window: int = 100,
+                 reward_weights: Mapping[str, float] | None = None):
         T, N, dev = num_steps, num_envs, torch.device(device)
         self.num_steps, self.num_envs, self.device = T, N, dev
         self.ended = torch.zeros(T, N, dtype=torch.bool, device=dev)
@@ -46,6 +54,11 @@ class EpisodeRecorder:
         self.success = torch.zeros(T, N, dtype=torch.bool, device=dev)
         self.has_success = False
         self.term_sums: dict[str, torch.Tensor] = {}
+        self.weights = {REWARD_PREFIX + k: float(v) for k, v in (reward_weights or {}).items()}
+        self.running: dict[str, torch.Tensor] = {}
+        """``reward/<term>`` -> (N,) weighted sum so far of each env's current episode."""
+        self.ended_sums: dict[str, torch.Tensor] = {}
+        """``reward/<term>`` -> weighted sums of the episodes that ended in this rollout, added up."""
         self.diverged: torch.Tensor | None = None
         self.window_returns: deque[float] = deque(maxlen=window)
         self.window_lengths: deque[float] = deque(maxlen=window)
@@ -70,8 +83,18 @@ class EpisodeRecorder:
             self.diverged = count if self.diverged is None else self.diverged + count
         for key, value in infos.items():
             if key.startswith(REWARD_PREFIX):
-                value = torch.as_tensor(value, device=self.device).float().sum()
-                self.term_sums[key] = self.term_sums[key] + value if key in self.term_sums else value
+                value = torch.as_tensor(value, device=self.device).float()
+                total = value.sum()
+                self.term_sums[key] = self.term_sums[key] + total if key in self.term_sums else total
+                if key in self.weights:
+                    weighted = self.weights[key] * value
+                    self.running[key] = self.running[key] + weighted if key in self.running else weighted
+        if self.running:  # the step that ends an episode belongs to it; the next one starts from zero
+            ended = self.ended[t].float()
+            for key, running in self.running.items():
+                done = (running * ended).sum()
+                self.ended_sums[key] = self.ended_sums[key] + done if key in self.ended_sums else done
+                self.running[key] = running * (1.0 - ended)
 
     def summarize(self, collective: Collective = SINGLE) -> RolloutSummary:
         """One host transfer: extend the rolling window, average the reward terms, reset the sums.
@@ -82,14 +105,19 @@ class EpisodeRecorder:
         ended = self.ended
         names = list(self.term_sums)
         sums = torch.stack([self.term_sums[k] for k in names]).tolist() if names else []
+        done_names = list(self.ended_sums)
+        done_sums = torch.stack([self.ended_sums[k] for k in done_names]).tolist() if done_names else []
         local = (self.returns[ended].tolist(), self.lengths[ended].tolist(),
                  self.success[ended].float().tolist() if self.has_success else [], dict(zip(names, sums)),
-                 ended.numel(), None if self.diverged is None else int(self.diverged))
-        self.term_sums, self.diverged = {}, None
+                 ended.numel(), None if self.diverged is None else int(self.diverged), dict(zip(done_names, done_sums)))
+        self.term_sums, self.diverged, self.ended_sums = {}, None, {}
         ranks = collective.gather(local)
         term_sums: dict[str, float] = {}
+        episode_sums: dict[str, float] = {}
         steps, episodes, diverged = 0, 0, None
-        for returns, lengths, success, terms, numel, div in ranks:
+        for returns, lengths, success, terms, numel, div, done in ranks:
+            for k, v in done.items():
+                episode_sums[k] = episode_sums.get(k, 0.0) + v
             self.window_returns.extend(returns)
             self.window_lengths.extend(lengths)
             self.window_success.extend(success)
@@ -99,7 +127,8 @@ class EpisodeRecorder:
             if div is not None:
                 diverged = (diverged or 0) + div
         means = {k.removeprefix(REWARD_PREFIX): v / steps for k, v in term_sums.items()}
-        return RolloutSummary(self.stats(), means, episodes, diverged)
+        per_episode = {k.removeprefix(REWARD_PREFIX): v / episodes for k, v in episode_sums.items()} if episodes else {}
+        return RolloutSummary(self.stats(), means, episodes, diverged, per_episode)
 
     def stats(self) -> RolloutStats:
         """Mean return, length and success over the rolling window of finished episodes."""

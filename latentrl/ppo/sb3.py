@@ -39,7 +39,7 @@ from latentrl.monitor import REWARD_PREFIX, TRAIN_PREFIX, Monitor, RolloutStats
 from latentrl.ppo import checkpoint as ckpt
 from latentrl.ppo.algorithm import adam_kwargs
 from latentrl.ppo.config import BatchPlan, PolicyConfig, PPOConfig
-from latentrl.ppo.contract import DIVERGED, observation_layout
+from latentrl.ppo.contract import DIVERGED, action_magnitude, observation_layout, reward_weights
 from latentrl.ppo.policy import ActorCritic, plain_layout
 from latentrl.ppo.runner import ROLLOUT_HINT, Runner, nonfinite_update, stop_if_nonfinite
 from latentrl.safe_io import atomic_write_bytes
@@ -179,6 +179,12 @@ class _TrainingHooks(BaseCallback):
         self.diverged: int | None = 0 if getattr(trainer.env, "reports_diverged", False) else None
         """Env steps with ``diverged`` infos this rollout (None: the VecEnv does not report them)."""
         self.moments: tuple[torch.Tensor, torch.Tensor, int] | None = None
+        self.weights = {REWARD_PREFIX + k: v for k, v in (reward_weights(trainer.env) or {}).items()}
+        self.running: dict[str, np.ndarray] = {}
+        """``reward/<term>`` -> (N,) weighted sum so far of each env's current episode."""
+        self.episode_sums: dict[str, float] = {}
+        self.episodes_ended = 0
+        self.actions: list[np.ndarray] = []
 
     def _on_training_start(self) -> None:
         self.trainer._on_training_start()
@@ -191,13 +197,24 @@ class _TrainingHooks(BaseCallback):
 
     def _on_step(self) -> bool:
         self._check_finite()
-        for info in self.locals["infos"]:
+        infos, dones = self.locals["infos"], np.asarray(self.locals["dones"], dtype=bool)
+        for i, info in enumerate(infos):
             for key, value in info.items():
                 if key.startswith(REWARD_PREFIX):
                     self.term_sums[key] = self.term_sums.get(key, 0.0) + float(value)
+                    if key in self.weights:
+                        running = self.running.setdefault(key, np.zeros(len(infos)))
+                        running[i] += self.weights[key] * float(value)
             if self.diverged is not None and info.get(DIVERGED):
                 self.diverged += 1
-        self.term_count += len(self.locals["infos"])
+        if dones.any():  # the step that ends an episode belongs to it; the next one starts from zero
+            self.episodes_ended += int(dones.sum())
+            for key, running in self.running.items():
+                self.episode_sums[key] = self.episode_sums.get(key, 0.0) + float(running[dones].sum())
+                running[dones] = 0.0
+        if self.locals.get("clipped_actions") is not None:  # what SB3 sent to the env
+            self.actions.append(np.array(self.locals["clipped_actions"], dtype=np.float32))
+        self.term_count += len(infos)
         return not self.trainer.stop_requested  # False aborts PPO.learn (an evaluation asked to stop)
 
     def _check_finite(self) -> None:
@@ -233,7 +250,12 @@ class _TrainingHooks(BaseCallback):
         terms = {k.removeprefix(REWARD_PREFIX): v / max(self.term_count, 1) for k, v in self.term_sums.items()}
         self.term_sums, self.term_count = {}, 0
         diverged, self.diverged = self.diverged, None if self.diverged is None else 0
-        self.trainer._after_iteration(terms, self.collection_s, update_s, diverged)
+        episodes = {k.removeprefix(REWARD_PREFIX): v / self.episodes_ended for k, v in self.episode_sums.items()
+                    } if self.episodes_ended else {}
+        self.episode_sums, self.episodes_ended = {}, 0
+        actions = action_magnitude(np.stack(self.actions)) if self.actions else None
+        self.actions = []
+        self.trainer._after_iteration(terms, self.collection_s, update_s, diverged, episodes, actions)
         self.rollout_end = None
 
 
@@ -302,7 +324,8 @@ class Sb3Trainer(Runner):
                             float(np.mean(succ)) if succ else None, len(eps))
 
     def _after_iteration(self, reward_terms: dict[str, float], collection_s: float, update_s: float,
-                         diverged: int | None = None) -> None:
+                         diverged: int | None = None, episode_terms: Mapping[str, float] | None = None,
+                         actions: tuple[float, float] | None = None) -> None:
         """Called after each PPO update: SB3's train/* dump, our extra tags, then the runner's eval and checkpoint."""
         recorded = {k[len(TRAIN_PREFIX):]: v for k, v in self.model.logger.name_to_value.items()
                     if k.startswith(TRAIN_PREFIX) and isinstance(v, (int, float, np.floating, np.integer))}
@@ -318,6 +341,8 @@ class Sb3Trainer(Runner):
         rollout = self.rollout_stats()
         if logging:
             self.monitor.log_rewards(step, reward_terms)
+            self.monitor.log_episode_rewards(step, episode_terms or {})
+            self.monitor.log_actions(step, *(actions or (None, None)))
             self.monitor.log_diverged(step, diverged)
             self.monitor.log_time(step, collection_s=collection_s, update_s=update_s)
             self.bar.log_iteration(k, step, fps, rollout, self.last_train, collection_s, update_s, reward_terms,

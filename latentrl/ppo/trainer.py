@@ -20,7 +20,7 @@ import torch
 from latentrl.monitor import RolloutStats
 from latentrl.ppo.algorithm import PPO
 from latentrl.ppo.config import PolicyConfig
-from latentrl.ppo.contract import FINAL_OBS, observation_layout
+from latentrl.ppo.contract import FINAL_OBS, action_magnitude, observation_layout, reward_weights
 from latentrl.ppo.episodes import EpisodeRecorder
 from latentrl.ppo.policy import ActorCritic
 from latentrl.ppo.runner import (
@@ -52,7 +52,8 @@ class NativeTrainer(Runner):
         self.policy = ActorCritic(obs_dim, action_dim, policy_cfg, observation_layout(env, layout)).to(self.device)
         self.algorithm = PPO(self.policy, ppo, self.plan, env.num_envs, self.device, self.dist)
         self.optimizer, self.buffer = self.algorithm.optimizer, self.algorithm.buffer
-        self.episodes = EpisodeRecorder(ppo.num_steps, env.num_envs, self.device, ppo.stats_window)
+        self.episodes = EpisodeRecorder(ppo.num_steps, env.num_envs, self.device, ppo.stats_window,
+                                        reward_weights(env))
         space = env.single_action_space
         self.action_low = torch.as_tensor(space.low, dtype=torch.float32, device=self.device)
         self.action_high = torch.as_tensor(space.high, dtype=torch.float32, device=self.device)
@@ -88,6 +89,13 @@ class NativeTrainer(Runner):
         ppo.compute_returns(obs.to(self.device))
         return obs
 
+    def action_magnitude(self) -> tuple[float, float] | None:
+        """``(mean |z|, share beyond sqrt(d))`` of this rank's last rollout, as the env received the actions."""
+        actions = self.buffer.actions
+        if self.cfg.clip_actions:
+            actions = actions.clamp(self.action_low, self.action_high)
+        return action_magnitude(actions)
+
     def update(self) -> dict[str, float]:
         """One PPO update over the collected rollout; returns its statistics."""
         return self.algorithm.update()
@@ -112,6 +120,8 @@ class NativeTrainer(Runner):
                 monitor.log_rollout(step, summary.stats, summary.diverged)
                 monitor.log_train(step, self.last_train)
                 monitor.log_rewards(step, summary.reward_terms)
+                monitor.log_episode_rewards(step, summary.episode_terms)
+                monitor.log_actions(step, *(self.action_magnitude() or (None, None)))
                 monitor.log_time(step, fps, t1 - t0, t2 - t1)
                 self.bar.log_iteration(self.iteration, step, fps, summary.stats, self.last_train, t1 - t0, t2 - t1,
                                        summary.reward_terms, summary.diverged)
