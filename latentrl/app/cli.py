@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -324,6 +326,8 @@ def _bench_commands(sub) -> None:
     motion.add_argument("--json", help="write all figures to this JSON file")
     motion.add_argument("--no-floor-snap", action="store_true",
                         help="measure the model alone, without the rollout's floor snap")
+    motion.add_argument("--snap-ramp", action="store_true",
+                        help="spread each primitive's floor-snap shift over its frames (docs/motion.md)")
     motion.add_argument("--foot-lock", action="store_true",
                         help="roll out with the foot lock (planted feet do not slide; docs/motion.md)")
     motion.set_defaults(func=_bench_motion)
@@ -672,6 +676,7 @@ def _convert_amass(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command; returns its exit status (argparse's too: 0 after ``--help``, 2 for bad arguments)."""
+    program = argv is None  # the process itself (console script, python -m), not a caller in Python
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:
@@ -692,6 +697,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"latentrl: error: {exc.strerror or exc}{where} (--debug shows the traceback)", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
+        if program and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)  # handled: another Ctrl-C must not cut the exit short
         print("latentrl: interrupted", file=sys.stderr)
         return 130
 

@@ -13,6 +13,9 @@ DART's definitions (``evaluation/goal_reach.py``, ``evaluation/inbetween.py``):
   3D displacement also counts (most of a locked walk's skate, docs/evaluation.md).
 - floor distance: mean over frames of ``|min(z_left_foot, z_right_foot)|`` -> m.
 - jerk: mean L2 norm of the third finite difference of all joints (m/s^3).
+- transition jerk (Table 1, FlowMDM's definition): per frame the largest joint's L1-norm third
+  difference (m/frame^3) over 30-frame clips centred at a transition; PJ its peak, AUJ its area
+  above or below the data's mean.
 
 CLoSD's definitions (Tevet et al. 2025, Table 3), with a 5 mm tolerance, on the lowest joint:
 penetration = mean depth below the floor beyond the tolerance, floating = mean height above the
@@ -70,11 +73,84 @@ def jerk(joints, fps: float = 30.0) -> torch.Tensor:
     return (d3 * fps**3).norm(dim=-1).mean(dim=(-1, -2))
 
 
-def peak_jerk(joints, fps: float = 30.0) -> torch.Tensor:
-    """Max over frames of the joint-mean jerk norm (DART's PJ for transitions) -> (...)."""
+#: Frames of DART's transition clip (Table 1): 30 frames centred at the split between two segments.
+TRANSITION_WINDOW = 30
+
+
+def transition_jerk_curve(joints) -> torch.Tensor:
+    """(..., T, 22, 3) -> (..., T-3): per frame, the largest joint jerk, m/frame^3 (DART's PJ/AUJ curve).
+
+    DART's Table 1 scores transitions with FlowMDM's jerk (Barquero et al. 2024): the third finite
+    difference of each joint's position, unscaled by fps, its L1 norm over x, y, z, then the maximum over
+    joints. (:func:`jerk` is the other jerk of DART's tables: mean L2 norm, times fps^3.)
+    """
     j = _t(joints)
     d3 = j[..., 3:, :, :] - 3 * j[..., 2:-1, :, :] + 3 * j[..., 1:-2, :, :] - j[..., :-3, :, :]
-    return (d3 * fps**3).norm(dim=-1).mean(dim=-1).amax(dim=-1)
+    return d3.abs().sum(dim=-1).amax(dim=-1)
+
+
+def transition_clips(joints, splits, window: int = TRANSITION_WINDOW) -> torch.Tensor:
+    """(B, T, 22, 3) joints and split frames -> (N, window, 22, 3): every whole clip centred on a split.
+
+    A split ``s`` is the first frame of the new segment; its clip is frames ``[s - window/2, s + window/2)``.
+    Splits too close to either end for a whole clip are left out (none left: an empty tensor).
+    """
+    j = _t(joints)
+    half = window // 2
+    starts = [s - half for s in splits if s - half >= 0 and s - half + window <= j.shape[-3]]
+    if not starts:
+        return j.new_zeros(0, window, *j.shape[-2:])
+    return torch.cat([j[..., a:a + window, :, :].reshape(-1, window, *j.shape[-2:]) for a in starts])
+
+
+def peak_jerk(clips) -> float:
+    """DART's PJ: the maximum over frames of the transition jerk curve averaged over clips (N, W, 22, 3)."""
+    return float(transition_jerk_curve(clips).mean(dim=0).amax())
+
+
+def area_under_jerk(clips, reference: float) -> float:
+    """DART's AUJ: sum over frames of |mean transition jerk curve - ``reference``|, m/frame^3.
+
+    ``reference`` is the data's mean jerk (FlowMDM's "GT jerk"), so data transitions score about 0 and a
+    pop adds its excess jerk; clips (N, W, 22, 3) as :func:`transition_clips` cuts them.
+    """
+    return float((transition_jerk_curve(clips).mean(dim=0) - reference).abs().sum())
+
+
+def primitive_seams(num_frames: int, history: int = 2, future: int = 8) -> list[int]:
+    """First frames of the decoded primitives of a rollout (``history`` seed frames, then ``future`` per step)."""
+    return list(range(history, num_frames, future))
+
+
+def seam_ratios(joints, history: int = 2, future: int = 8, floor: float = 0.0,
+                threshold: float = SKATE_THRESHOLD_M, fps: float = 30.0) -> dict[str, float]:
+    """Pops at primitive boundaries: planted-foot step and pelvis acceleration, boundary vs inside.
+
+    Args:
+        joints: (..., T, 22, 3) a rollout's world joints, the ``history`` seed frames first.
+
+    Returns ``step_boundary_cm`` / ``step_inside_cm`` (mean horizontal step of a foot joint within
+    ``threshold`` of the floor in both frames, across a boundary / inside a primitive) and ``step_ratio``;
+    ``pelvis_acc_boundary`` / ``pelvis_acc_rest`` (mean pelvis acceleration norm, m/s^2, at the last frame
+    of a primitive and the first of the next / elsewhere) and ``pelvis_acc_ratio``. Data scores about 1.
+    """
+    j = _t(joints)
+    t = j.shape[-3]
+    first = torch.zeros(t, dtype=torch.bool, device=j.device)
+    first[primitive_seams(t, history, future)] = True
+    feet = foot_positions(j)
+    h = feet[..., 2] - floor
+    down = (h[..., 1:, :] < threshold) & (h[..., :-1, :] < threshold)  # (..., T-1, 2)
+    step = torch.linalg.vector_norm(feet[..., 1:, :, :2] - feet[..., :-1, :, :2], dim=-1)
+    seam = first[1:, None].expand_as(down)  # transition t -> t+1 enters a new primitive
+    b = step[down & seam].mean() * 100.0
+    i = step[down & ~seam].mean() * 100.0
+    p = j[..., PELVIS, :]
+    acc = torch.linalg.vector_norm(p[..., 2:, :] - 2 * p[..., 1:-1, :] + p[..., :-2, :], dim=-1) * fps**2
+    at = first[1:-1] | first[2:]  # frame k (1..T-2) is a primitive's first frame or the one before it
+    ab, ar = acc[..., at].mean(), acc[..., ~at].mean()
+    return {"step_boundary_cm": float(b), "step_inside_cm": float(i), "step_ratio": float(b / i),
+            "pelvis_acc_boundary": float(ab), "pelvis_acc_rest": float(ar), "pelvis_acc_ratio": float(ab / ar)}
 
 
 def closd_penetration_mm(joints, floor: float = 0.0, tol: float = CLOSD_TOLERANCE_M) -> torch.Tensor:

@@ -120,3 +120,52 @@ def test_dart_aggregation_averages_episode_index_over_paths_first():
     assert out["mean"] == 3.0 and out["ci95"] == pytest.approx(1.96 * 1.0 / math.sqrt(2))
     with pytest.raises(ValueError, match="paths, episodes"):
         M.dart_mean_ci95([1.0, 2.0])
+
+
+def test_transition_jerk_curve_is_the_largest_joint_l1_third_difference():
+    t = torch.arange(12, dtype=torch.float32)
+    j = torch.zeros(12, 22, 3)
+    j[:, 5, 0] = 0.002 * t**3  # third difference 0.012 per frame on x
+    j[:, 7, 1] = -0.001 * t**3  # a smaller one on another joint
+    curve = M.transition_jerk_curve(j)
+    assert curve.shape == (9,) and torch.allclose(curve, torch.full((9,), 0.012), atol=1e-5)
+
+
+def test_peak_jerk_and_area_under_jerk_of_a_pop():
+    """A 5 cm jump of the whole body at frame 40: third differences d, -2d, d around it."""
+    j = torch.zeros(1, 80, 22, 3)
+    j[:, 40:, :, 0] = 0.05
+    clips = M.transition_clips(j, [40, 2, 79])  # the two splits too near the ends have no whole clip
+    assert clips.shape == (1, 30, 22, 3)
+    assert M.peak_jerk(clips) == pytest.approx(0.10)
+    assert M.area_under_jerk(clips, reference=0.0) == pytest.approx(0.05 + 0.10 + 0.05)
+    assert M.area_under_jerk(clips, reference=0.01) == pytest.approx(0.04 + 0.09 + 0.04 + 24 * 0.01)
+    smooth = torch.zeros(1, 80, 22, 3)
+    assert M.peak_jerk(M.transition_clips(smooth, [40])) == 0.0
+
+
+def test_seam_ratios_of_a_rollout_that_pops_at_each_primitive():
+    """2 seed frames then 4 primitives of 8: a planted foot creeps 1 cm a frame and jumps 5 cm into each
+    primitive; the pelvis accelerates evenly upwards (1 mm/frame^2) and jumps 3 mm sideways at each seam."""
+    frames = 2 + 4 * 8
+    seam = torch.zeros(frames)
+    seam[M.primitive_seams(frames)] = 1.0
+    assert M.primitive_seams(frames) == [2, 10, 18, 26]
+    j = torch.zeros(frames, 22, 3)
+    step = 0.01 + 0.04 * seam  # frame k arrives with this step
+    for foot in (10, 11):
+        j[:, foot, 0] = torch.cumsum(step, 0)
+    t = torch.arange(frames, dtype=torch.float32)
+    j[:, 0, 2] = 0.9 + 0.5 * 0.001 * t**2
+    j[:, 0, 0] = 0.003 * torch.cumsum(seam, 0)
+    r = M.seam_ratios(j)
+    assert r["step_boundary_cm"] == pytest.approx(5.0) and r["step_inside_cm"] == pytest.approx(1.0)
+    assert r["step_ratio"] == pytest.approx(5.0)
+    assert r["pelvis_acc_rest"] == pytest.approx(0.001 * 900, rel=1e-3)
+    assert r["pelvis_acc_boundary"] == pytest.approx(math.hypot(0.001, 0.003) * 900, rel=1e-3)
+    assert r["pelvis_acc_ratio"] == pytest.approx(math.sqrt(10), rel=1e-3)
+    smooth = j.clone()
+    smooth[:, 10, 0] = smooth[:, 11, 0] = 0.01 * t
+    smooth[:, 0, 0] = 0.0
+    r = M.seam_ratios(smooth)
+    assert r["step_ratio"] == pytest.approx(1.0) and r["pelvis_acc_ratio"] == pytest.approx(1.0, rel=1e-3)

@@ -9,7 +9,7 @@ import torch
 
 from latentrl.app.bench.common import write_json
 from latentrl.constants import GUIDANCE_SCALE
-from latentrl.motion.representation import FUTURE_LENGTH
+from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS
 from latentrl.timing import hardware
 
@@ -25,6 +25,7 @@ class MotionBenchRequest:
     seed: int = 0
     json: str | None = None
     no_floor_snap: bool = False
+    snap_ramp: bool = False
     foot_lock: bool = False
 
 
@@ -58,9 +59,40 @@ def _data_reference(model) -> dict | None:
     pelvis_z = [float(s["joints"][:, 0, 2].min()) for s in seqs] + [float(s["joints"][:, 0, 2].max()) for s in seqs]
     body = [_pelvis_over_feet(torch.as_tensor(s["joints"])) for s in seqs]
     stats = dataset_statistics(seqs)
+    stats["transitions"] = _data_transitions(seqs)
     stats["pelvis_z_range"] = [min(pelvis_z), max(pelvis_z)]
     stats["pelvis_over_feet_range"] = [float(min(b.min() for b in body)), float(max(b.max() for b in body))]
     return stats
+
+
+def _data_transitions(seqs: list[dict]) -> dict:
+    """The data's transition figures: mean jerk (AUJ's reference), PJ/AUJ at its text splits, seam ratios.
+
+    The seam ratios cut each sequence on the rollout's grid (2 frames, then 8 per primitive): the data has no
+    primitives, so it scores about 1 -- what a model without pops scores.
+    """
+    from latentrl.evaluation import metrics as M
+
+    clips = torch.cat([M.transition_clips(torch.as_tensor(s["joints"], dtype=torch.float32)[None],
+                                          [int(x) for x in s["seg_start"][1:]]) for s in seqs])
+    reference = float(M.transition_jerk_curve(clips).mean())
+    frames = min(len(s["joints"]) for s in seqs)  # pooled over every sequence, cut to the shortest
+    seams = M.seam_ratios(torch.stack([torch.as_tensor(s["joints"][:frames], dtype=torch.float32) for s in seqs]))
+    return {"jerk_reference": reference, "text_pj": M.peak_jerk(clips),
+            "text_auj": M.area_under_jerk(clips, reference), "text_splits": int(clips.shape[0]),
+            "step_ratio": seams["step_ratio"], "pelvis_acc_ratio": seams["pelvis_acc_ratio"]}
+
+
+def transition_figures(joints: torch.Tensor, splits: list[int], jerk_reference: float | None) -> dict:
+    """PJ and AUJ (None without a data reference) over the 30-frame clips centred on ``splits`` of (B, T, 22, 3)."""
+    from latentrl.evaluation import metrics as M
+
+    clips = M.transition_clips(joints, splits)
+    if clips.shape[0] == 0:
+        return {"pj": None, "auj": None, "clips": 0}
+    return {"pj": M.peak_jerk(clips),
+            "auj": None if jerk_reference is None else M.area_under_jerk(clips, jerk_reference),
+            "clips": int(clips.shape[0])}
 
 
 def _pelvis_over_feet(joints: torch.Tensor) -> torch.Tensor:
@@ -118,13 +150,15 @@ def _skill_signature(text: str, joints: torch.Tensor) -> torch.Tensor:
     return (speed > 0.5) & (speed < 2.0) & (shares["left_only"] >= 0.15) & (shares["right_only"] >= 0.15)
 
 
-def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float = GUIDANCE_SCALE) -> dict:
+def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float = GUIDANCE_SCALE,
+                         jerk_reference: float | None = None) -> dict:
     """Roll ``SWITCH_TIMELINE`` out; per switch, seconds until the new skill's signature holds.
 
     Latency is from the text change to the start of the first 0.5 s window that moves like the new
     text (run: speed > 2 m/s; hop on left leg: left foot alone >= 50 % of frames, right alone <= 10 %;
     walk: 0.5-2 m/s with each foot alone >= 15 %); ``inf`` where it never does. Also the lowest joint's
-    worst depth below the floor over the whole timeline.
+    worst depth below the floor over the whole timeline, and DART's PJ/AUJ over the text changes
+    (``text_transitions``; AUJ against ``jerk_reference``, the data's mean transition jerk).
     """
     from latentrl.evaluation import metrics as M
 
@@ -148,6 +182,8 @@ def skill_switch_seconds(model, batch: int = 8, seed: int = 0, guidance: float =
             "median_s": float(latency.median()),
             "within_1s": float((latency <= 1.0).float().mean()),
         })
+    splits = [HISTORY_LENGTH + start * FUTURE_LENGTH for start in starts[1:]]
+    out["text_transitions"] = transition_figures(roll.joints_world, splits, jerk_reference)
     out["deepest_below_floor_cm"] = float((-j[..., 2].amin(dim=-1)).clamp(min=0).max()) * 100
     out["penetration_cm"] = float(M.lowest_joint_penetration_cm(j).mean())
     return out
@@ -159,6 +195,8 @@ STEER_FLOOR_DEG = {"walk": 35.0, "run": 30.0, "hop on left leg": 25.0, "hop on r
 FLOOR_MAX_CM = {"walk": 3.0, "run": 3.0, "stand still": 3.0, "hop on left leg": 5.0, "hop on right leg": 5.0,
                 "jump forward": 5.0}
 SKATE_MAX_CM_S = {"walk": 2.0, "run": 3.0, "hop on left leg": 3.0, "hop on right leg": 3.0}
+#: Ceiling of the boundary/inside ratios of the planted-foot step and the pelvis acceleration (no pops).
+SEAM_RATIO_MAX = 1.5
 
 
 def motion_targets(p: dict, switch: dict, ref: dict | None) -> dict[str, bool]:
@@ -184,9 +222,30 @@ def motion_targets(p: dict, switch: dict, ref: dict | None) -> dict[str, bool]:
                                           and abs(p["sidestep left"]["forward_m_s"]) < 0.1)
     checks["sidestep right moves right"] = (p["sidestep right"]["rightward_m_s"] > 0.1
                                             and abs(p["sidestep right"]["forward_m_s"]) < 0.1)
+    for key, what in (("step_ratio", "planted-foot step"), ("pelvis_acc_ratio", "pelvis acceleration")):
+        high = [t for t, r in p.items() if not r["seams"][key] <= SEAM_RATIO_MAX]  # NaN (no planted foot) fails too
+        checks[f"{what} at primitive boundaries <= {SEAM_RATIO_MAX:g}x elsewhere, every prompt"
+               + (f" (over: {', '.join(high)})" if high else "")] = not high
     checks["walk -> run -> hop -> walk: each switch within 1 s in >= 75% of rollouts, on the floor"] = (
         all(x["within_1s"] >= 0.75 for x in switch["switches"]) and switch["deepest_below_floor_cm"] <= 1.0)
     return checks
+
+
+def _fmt(x: float | None, digits: int = 3) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def _print_seams(probes: dict, ref: dict | None) -> None:
+    """The primitive-boundary table: planted-foot step and pelvis acceleration ratios, PJ and AUJ."""
+    print(f"{'prompt':>18} {'step at/in cm':>13} {'ratio':>5} {'pelvis acc':>10} {'PJ':>6} {'AUJ':>6}")
+    for text, r in probes.items():
+        s, t = r["seams"], r["primitive_transitions"]
+        print(f"{text:>18} {s['step_boundary_cm']:6.2f}/{s['step_inside_cm']:<6.2f} {s['step_ratio']:5.2f} "
+              f"{s['pelvis_acc_ratio']:10.2f} {_fmt(t['pj']):>6} {_fmt(t['auj']):>6}")
+    if ref:
+        d = ref["transitions"]
+        print(f"{'data':>18} {'':13} {d['step_ratio']:5.2f} {d['pelvis_acc_ratio']:10.2f} {d['text_pj']:6.3f} "
+              f"{d['text_auj']:6.3f}  (text splits; mean jerk {d['jerk_reference']:.4f} m/frame^3)", flush=True)
 
 
 def bench_motion(args: MotionBenchRequest) -> int:
@@ -197,6 +256,7 @@ def bench_motion(args: MotionBenchRequest) -> int:
     model = load_motion_model(args.motion)
     if args.no_floor_snap:
         model.floor_snap = None
+    model.floor_snap_ramp = bool(args.snap_ramp)
     model.foot_lock = bool(args.foot_lock)
     steps = max(1, round(args.seconds * FPS / FUTURE_LENGTH))
     ref = _data_reference(model)
@@ -208,6 +268,7 @@ def bench_motion(args: MotionBenchRequest) -> int:
         "seconds": args.seconds,
         "batch": args.batch,
         "floor_snap": model.floor_snap,
+        "snap_ramp": model.floor_snap_ramp,
         "foot_lock": model.foot_lock,
         "probes": {},
     }
@@ -242,6 +303,10 @@ def bench_motion(args: MotionBenchRequest) -> int:
         }
         fwd, side = M.body_frame_velocity_m_s(j)
         row["forward_m_s"], row["rightward_m_s"] = float(fwd.mean()), float(side.mean())
+        full = roll.joints_world  # seed frames included: the first decoded frame crosses a boundary too
+        row["seams"] = M.seam_ratios(full)
+        row["primitive_transitions"] = transition_figures(
+            full, M.primitive_seams(full.shape[1]), ref["transitions"]["jerk_reference"] if ref else None)
         if ref and skill in ref["skills"]:
             row["data"] = ref["skills"][skill]
         out["probes"][text] = row
@@ -252,10 +317,14 @@ def bench_motion(args: MotionBenchRequest) -> int:
             f"{row['steer_spread_box4_deg']:5.1f} {row['penetration_cm']:6.2f} {row['forward_m_s']:5.2f} "
             f"{row['rightward_m_s']:5.2f}", flush=True
         )
-    out["skill_switch"] = sw = skill_switch_seconds(model, batch=args.batch, seed=args.seed, guidance=args.guidance)
+    _print_seams(out["probes"], ref)
+    out["skill_switch"] = sw = skill_switch_seconds(model, batch=args.batch, seed=args.seed, guidance=args.guidance,
+                                                    jerk_reference=ref["transitions"]["jerk_reference"] if ref else None)
+    tt = sw["text_transitions"]
     print("skill switch:", ", ".join(f"->{x['to']} {x['median_s']:.2f}s ({x['within_1s']:.0%} <= 1 s)"
                                      for x in sw["switches"]),
-          f"deepest below floor {sw['deepest_below_floor_cm']:.1f} cm")
+          f"deepest below floor {sw['deepest_below_floor_cm']:.1f} cm; text transitions PJ {_fmt(tt['pj'])} "
+          f"AUJ {_fmt(tt['auj'])}")
     p = out["probes"]
     checks = {
         "stable: finite, body height (pelvis over lower foot) in data range +-10 cm": all(
@@ -278,7 +347,8 @@ def bench_motion(args: MotionBenchRequest) -> int:
     checks.update(motion_targets(p, out["skill_switch"], ref))
     if ref:
         out["data_reference"] = {"pelvis_z_range": ref["pelvis_z_range"],
-                                 "pelvis_over_feet_range": ref["pelvis_over_feet_range"], "skills": ref["skills"]}
+                                 "pelvis_over_feet_range": ref["pelvis_over_feet_range"], "skills": ref["skills"],
+                                 "transitions": ref["transitions"]}
     train_s = model.info.get("train_seconds")
     if train_s is not None:
         out["train_seconds"] = train_s
