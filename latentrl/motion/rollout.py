@@ -142,6 +142,8 @@ class MotionModel(nn.Module):
         self.info = dict(info or {})
         self.amp_dtype: torch.dtype | None = None
         self.floor_snap: float | None = FLOOR_SNAP_M
+        self.floor_snap_ramp = False
+        """Spread each primitive's floor-snap shift over its frames (:func:`ramp_snap`) instead of one step."""
         self.foot_lock = False
         """Keep feet on the floor from sliding (:func:`lock_feet`); off by default, envs turn it on (``foot_lock``)."""
         self._text_cache: dict[str, torch.Tensor] = {}
@@ -345,13 +347,16 @@ class MotionModel(nn.Module):
             placement = state.world
             joints_world = placement.apply(joints_of(sample.future))
             airborne = state.airborne  # without the snap nothing lands: the flags pass through
+            future = sample.future
             if self.floor_snap is not None:
                 joints_world, placement, airborne = self._snap_to_floor(
                     joints_world, placement, state.airborne_flags()
                 )
+                if self.floor_snap_ramp:
+                    lift = placement.translation[:, 2] - state.world.translation[:, 2]
+                    joints_world, future = ramp_snap(future, joints_world, lift)
             history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
             world = placement.compose(rotation, origin)
-            future = sample.future
             if self.foot_lock if foot_lock is None else foot_lock:
                 before = state.world.apply(foot_positions(joints_of(state.history[:, -1])))
                 joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight)
@@ -456,6 +461,42 @@ class MotionModel(nn.Module):
             state = out.state
         return Rollout(torch.cat(joints, dim=1), torch.cat(feats, dim=1), torch.stack(noises), torch.stack(latents),
                        state)
+
+
+def ramp_snap(
+    future: torch.Tensor, joints_world: torch.Tensor, lift: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Let the floor snap's vertical shift grow over the primitive's frames instead of jumping at its start.
+
+    Why: the snap moves each primitive as a whole, so the pelvis steps by the change in shift (millimetres)
+    in the frame that enters the primitive: a vertical judder at the primitive rate (3.75 Hz), the largest
+    part of the pelvis's boundary acceleration with the snap on (docs/motion.md, "Pops at primitive
+    boundaries"). Here frame ``i`` of ``F`` keeps ``(i + 1) / F`` of ``lift``: the last frame, and so the next
+    primitive's placement, is where the snap put it, and each frame takes ``lift / F`` of the step. Earlier
+    frames sit up to ``lift (F - 1) / F`` short of the snapped height.
+
+    Args:
+        future: (B, F, 276) canonical features of the primitive; the canonical frame keeps z up, so its z
+            values shift as the world's do.
+        joints_world: (B, F, 22, 3) the primitive snapped as a whole.
+        lift: (B,) metres the snap moved the primitive (z).
+
+    Returns ``(joints_world, future)``, both with the ramped heights.
+    """
+    f = future.shape[1]
+    frac = torch.arange(1, f + 1, device=future.device, dtype=future.dtype) / f
+    off = lift[:, None] * (frac - 1.0)  # (B, F): 0 at the last frame
+    joints_world = joints_world.clone()
+    joints_world[..., 2] += off[..., None]
+    delta = torch.cat((off[:, 1:], off[:, -1:]), dim=1) - off  # delta k = frame k+1 - frame k (last: 0)
+    edit = torch.zeros_like(future)
+    edit[..., SLICES["transl"].start + 2] = off
+    edit[..., SLICES["transl_delta"].start + 2] = delta
+    z_joints = torch.arange(SLICES["joints"].start + 2, SLICES["joints"].stop, 3, device=future.device)
+    z_deltas = torch.arange(SLICES["joints_delta"].start + 2, SLICES["joints_delta"].stop, 3, device=future.device)
+    edit[..., z_joints] = off[..., None].expand(-1, -1, NUM_JOINTS)
+    edit[..., z_deltas] = delta[..., None].expand(-1, -1, NUM_JOINTS)
+    return joints_world, future + edit
 
 
 def lock_feet(

@@ -147,3 +147,35 @@ def test_v_prediction_reads_back_the_clean_latent():
     assert torch.allclose(den.x0_from_output(x_t[3:4], torch.tensor(3), v[3:4]), x0[3:4], atol=1e-5)
     with pytest.raises(ValueError, match="prediction must be one of"):
         build_denoiser(DenoiserConfig(prediction="eps"))
+
+
+def test_ramped_floor_snap_spreads_the_shift_over_the_primitive(tiny_model):
+    """Known answer: frame i of 8 keeps (i + 1)/8 of the snap's lift; the last frame and the next state are
+    the plain snap's, and the world features stay in step with the joints."""
+    from latentrl.motion.canonical import features_to_world
+    from latentrl.motion.representation import joints_of
+
+    state = tiny_model.initial_state(3, generator=torch.Generator().manual_seed(0))
+    state = state._replace(world=state.world._replace(translation=state.world.translation + torch.tensor(
+        [0.0, 0.0, 0.04])))  # 4 cm up: the snap lowers the primitive
+    emb, noise = tiny_model.encode_text(["walk"] * 3), torch.randn(3, 1, 16, generator=torch.Generator().manual_seed(1))
+    plain = tiny_model.rollout_step(state, emb, noise)
+    tiny_model.floor_snap_ramp = True
+    try:
+        ramped = tiny_model.rollout_step(state, emb, noise)
+    finally:
+        tiny_model.floor_snap_ramp = False
+    lift = plain.placement.translation[:, 2] - state.world.translation[:, 2]
+    assert (lift.abs() > 1e-3).all()
+    frac = torch.arange(1, 9) / 8.0
+    want = plain.joints_world.clone()
+    want[..., 2] += (lift[:, None] * (frac - 1.0))[..., None]
+    torch.testing.assert_close(ramped.joints_world, want, atol=1e-5, rtol=0)
+    torch.testing.assert_close(ramped.state.history, plain.state.history)
+    torch.testing.assert_close(ramped.state.world.translation, plain.state.world.translation)
+    world = features_to_world(ramped.future, ramped.placement, tiny_model.pelvis_delta)
+    torch.testing.assert_close(joints_of(world), ramped.joints_world, atol=1e-5, rtol=0)
+    before = features_to_world(plain.future, plain.placement, tiny_model.pelvis_delta)
+    added = lift[:, None] / 8.0  # each step within the primitive takes 1/8 of the lift (the deltas in step)
+    torch.testing.assert_close(world[:, :-1, 212:276:3] - before[:, :-1, 212:276:3],
+                               added[..., None].expand(3, 7, 22), atol=1e-5, rtol=0)
