@@ -7,6 +7,8 @@ the scheduled stage, and 1 in the rollout stage. Each primitive is one optimizer
 
 - VAE: smooth-L1 reconstruction + KL (weight 1e-6) + auxiliary temporal-difference consistency
   (translation, orientation and joint deltas vs. the differences of predicted frames, weight 100).
+  Optional, off by default: the planted-foot loss (``plant_weight``) and the seam loss (``seam_weight``, the
+  step from the last history frame to the first decoded frame against the data's), in both stages.
   Afterwards ``latent_std`` is the standard deviation of encoded latents (Rombach et al.).
 - Denoiser: smooth-L1 on the predicted clean latent (DDPM x0 objective) + reconstruction and
   auxiliary losses on the decoded frames (weights 1 and 1e4); text dropped with probability 0.1
@@ -92,6 +94,8 @@ class VAETrainConfig(StageConfig):
     """Weight of each temporal-difference consistency term."""
     plant_weight: float = 0.0
     """Weight of the planted-foot loss (``plant_loss``): feet still in the data stay still when decoded."""
+    seam_weight: float = 0.0
+    """Weight of the seam loss (``seam_loss``): the first decoded frame continues the history as the data does."""
     batch_size: int = 128
     num_primitives: int = 8
 
@@ -101,6 +105,7 @@ class VAETrainConfig(StageConfig):
         require(self.kl_weight >= 0, "kl_weight", f"must be >= 0, got {self.kl_weight}")
         require(self.aux_weight >= 0, "aux_weight", f"must be >= 0, got {self.aux_weight}")
         require(self.plant_weight >= 0, "plant_weight", f"must be >= 0, got {self.plant_weight}")
+        require(self.seam_weight >= 0, "seam_weight", f"must be >= 0, got {self.seam_weight}")
 
 
 @dataclass
@@ -113,11 +118,13 @@ class DenoiserTrainConfig(StageConfig):
     """Encode the target latent with the rollout history (DART's ``train_rollout_history rollout``)."""
     plant_weight: float = 0.0
     """Weight of the planted-foot loss on the decoded prediction (see ``VAETrainConfig.plant_weight``)."""
+    seam_weight: float = 0.0
+    """Weight of the seam loss on the decoded prediction (see ``VAETrainConfig.seam_weight``)."""
 
     def validate(self) -> None:
         """Check the common stage fields, then that the loss weights are not negative."""
         super().validate()
-        for name in ("latent_rec_weight", "feature_rec_weight", "aux_weight", "plant_weight"):
+        for name in ("latent_rec_weight", "feature_rec_weight", "aux_weight", "plant_weight", "seam_weight"):
             require(getattr(self, name) >= 0, name, f"must be >= 0, got {getattr(self, name)}")
 
 
@@ -181,6 +188,24 @@ def plant_loss(future: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (step(future).pow(2).sum(-1) * planted).sum() / planted.sum().clamp(min=1.0)
 
 
+def seam_loss(
+    history: torch.Tensor, future: torch.Tensor, target_history: torch.Tensor, target: torch.Tensor
+) -> torch.Tensor:
+    """Mean squared error (m^2) of every joint's step from the last history frame to the first decoded frame.
+
+    Why: the rollout hands the last H decoded frames on as the next history, so the step across a primitive
+    boundary is always this one. The planted-foot and consistency losses weigh it as one transition among
+    nine or not at all, and a decoder trained without this term places its whole future a few centimetres off
+    the history: a planted foot jumps 3.3 cm at the seam against 0.2 cm inside a reconstructed primitive
+    (docs/motion.md, "Seam loss"). The target step is the data's, from its own history (in the rollout stages
+    the input history is the model's, ``history``, and the data's is ``target_history``). Inputs unnormalized:
+    histories (B, H, 276), futures (B, F, 276); squared norms over xyz, mean over joints and batch.
+    """
+    step = joints_of(future[:, 0]) - joints_of(history[:, -1])
+    true_step = joints_of(target[:, 0]) - joints_of(target_history[:, -1])
+    return (step - true_step).pow(2).sum(-1).mean()
+
+
 def rollout_history(
     future_n: torch.Tensor, normalizer: Normalizer, pelvis_delta: torch.Tensor, history: int
 ) -> torch.Tensor:
@@ -232,9 +257,11 @@ def vae_step(
     normalizer: Normalizer,
     cfg: VAETrainConfig,
     generator: torch.Generator | None = None,
+    history_gt_n: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict, torch.Tensor]:
     """Loss of one VAE step. Inputs normalized: history (B, H, 276), future (B, F, 276).
 
+    ``history_gt_n``: the data's history of ``future_n`` (the seam loss's reference), default ``history_n``.
     Returns ``(loss, terms, prediction_normalized)``.
     """
     mu, std = vae.encode(future_n, history_n)
@@ -252,8 +279,18 @@ def vae_step(
     if cfg.plant_weight:
         terms["plant"] = plant_loss(normalizer.denormalize(pred), normalizer.denormalize(future_n))
         loss = loss + cfg.plant_weight * terms["plant"]
+    if cfg.seam_weight:
+        gt = history_n if history_gt_n is None else history_gt_n
+        terms["seam"] = _seam(history_n, pred, gt, future_n, normalizer)
+        loss = loss + cfg.seam_weight * terms["seam"]
     terms["loss"] = loss
     return loss, terms, pred
+
+
+def _seam(history_n, pred_n, history_gt_n, future_n, normalizer: Normalizer) -> torch.Tensor:
+    """:func:`seam_loss` of normalized inputs (only the last history frame and the first future frame)."""
+    return seam_loss(normalizer.denormalize(history_n[:, -1:]), normalizer.denormalize(pred_n[:, :1]),
+                     normalizer.denormalize(history_gt_n[:, -1:]), normalizer.denormalize(future_n[:, :1]))
 
 
 def denoiser_step(
@@ -290,6 +327,9 @@ def denoiser_step(
     if cfg.plant_weight:
         terms["plant"] = plant_loss(normalizer.denormalize(pred), normalizer.denormalize(future_n))
         loss = loss + cfg.plant_weight * terms["plant"]
+    if cfg.seam_weight:
+        terms["seam"] = _seam(history_n, pred, history_gt_n, future_n, normalizer)
+        loss = loss + cfg.seam_weight * terms["seam"]
     terms["loss"] = loss
     return loss, terms
 

@@ -334,7 +334,7 @@ class MotionTrainer:
             cfg = self.cfg.vae_train
 
             def vae_train_step(history, gt_history, future, text):
-                return vae_step(self.vae, history, future, normalizer, cfg, generator)
+                return vae_step(self.vae, history, future, normalizer, cfg, generator, gt_history)
 
             return _Stage("vae", cfg, self.vae, self.vae_opt, self.vae_ema, vae_train_step,
                           lambda pred, history, text: pred.detach(), coin_after_last=True)

@@ -161,3 +161,46 @@ def test_consistency_losses_zero_for_consistent_frames():
     shifted = feats.clone()
     shifted[:, 3:10, 144:210] += 0.5
     assert float(consistency_losses(shifted[:, 1:2], shifted[:, 2:10])["joints_delta"]) > 1e-3
+
+
+def test_seam_loss_known_answer():
+    """The step from the last history frame to the first future frame, against the data's, in m^2."""
+    from latentrl.motion_training.losses import seam_loss
+
+    history, target = torch.zeros(1, 2, FEATURE_DIM), torch.zeros(1, 8, FEATURE_DIM)
+    assert float(seam_loss(history, target, history, target)) == 0.0
+    popped = target.clone()
+    popped[:, :, 144:210] += torch.tensor([0.03, 0.04, 0.0]).repeat(22)  # the whole future 5 cm off the history
+    assert float(seam_loss(history, popped, history, target)) == pytest.approx(0.05**2)
+    later = target.clone()
+    later[:, 1:, 144:210] += 0.5  # only later frames differ: not the seam's business
+    assert float(seam_loss(history, later, history, target)) == 0.0
+    # a rollout history placed elsewhere: only the step counts, not where the history is
+    moved = history.clone()
+    moved[:, :, 144:210] += 0.2
+    assert float(seam_loss(moved, target, history, target)) == pytest.approx(3 * 0.2**2)
+    shifted = target.clone()
+    shifted[:, :, 144:210] += 0.2
+    assert float(seam_loss(moved, shifted, history, target)) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_vae_step_adds_the_weighted_seam_term():
+    from latentrl.motion.representation import Normalizer, compute_features
+    from latentrl.motion.vae import PrimitiveVAE, VAEConfig
+    from latentrl.motion_training.losses import VAETrainConfig, vae_step
+    from tests.helpers import walking_clip
+
+    clips = [walking_clip(11, seed=s) for s in range(4)]
+    motion = torch.stack([compute_features(c["transl"], c["rotations"], c["joints"]) for c in clips])
+    norm = Normalizer.from_data(motion)
+    hist, fut = norm.normalize(motion[:, :2]), norm.normalize(motion[:, 2:])
+    torch.manual_seed(0)
+    vae = PrimitiveVAE(VAEConfig(latent_dim=(1, 8), h_dim=16, ff_size=32, num_layers=1, dropout=0.0))
+    base, terms0, _ = vae_step(vae, hist, fut, norm, VAETrainConfig(), torch.Generator().manual_seed(1))
+    loss, terms, _ = vae_step(vae, hist, fut, norm, VAETrainConfig(seam_weight=10.0), torch.Generator().manual_seed(1))
+    assert "seam" not in terms0 and float(terms["seam"]) > 0.0
+    assert float(loss) == pytest.approx(float(base) + 10.0 * float(terms["seam"]), rel=1e-5)
+    with pytest.raises(ConfigError, match=r"vae_train.seam_weight: must be >= 0"):
+        load_config(MotionTrainConfig, TINY, ["vae_train.seam_weight=-1"])
+    with pytest.raises(ConfigError, match=r"denoiser_train.seam_weight: must be >= 0"):
+        load_config(MotionTrainConfig, TINY, ["denoiser_train.seam_weight=-1"])
