@@ -152,19 +152,34 @@ def test_v_prediction_reads_back_the_clean_latent():
 def test_ramped_floor_snap_spreads_the_shift_over_the_primitive(tiny_model):
     """Known answer: frame i of 8 keeps (i + 1)/8 of the snap's lift; the last frame and the next state are
     the plain snap's, and the world features stay in step with the joints."""
+    _check_ramped_snap(tiny_model)
+
+
+def test_ramped_floor_snap_on_a_dart_format_model(parity_dir):
+    """The same on a model in DART's own checkpoint format (the parity model, untrained), given a seed."""
+    from latentrl.motion import load_motion_model
+    from tests.helpers import seed_history
+
+    model = load_motion_model(parity_dir / "mld_denoiser/mld_parity_A/checkpoint_1.pt", seed_history=seed_history())
+    _check_ramped_snap(model)
+
+
+def _check_ramped_snap(model) -> None:
     from latentrl.motion.canonical import features_to_world
     from latentrl.motion.representation import joints_of
 
-    state = tiny_model.initial_state(3, generator=torch.Generator().manual_seed(0))
+    state = model.initial_state(3, generator=torch.Generator().manual_seed(0))
     state = state._replace(world=state.world._replace(translation=state.world.translation + torch.tensor(
         [0.0, 0.0, 0.04])))  # 4 cm up: the snap lowers the primitive
-    emb, noise = tiny_model.encode_text(["walk"] * 3), torch.randn(3, 1, 16, generator=torch.Generator().manual_seed(1))
-    plain = tiny_model.rollout_step(state, emb, noise)
-    tiny_model.floor_snap_ramp = True
+    emb = torch.zeros(3, model.text_dim)
+    emb[:, 0] = 1.0
+    noise = torch.randn(3, *model.latent_shape, generator=torch.Generator().manual_seed(1))
+    plain = model.rollout_step(state, emb, noise)
+    model.floor_snap_ramp = True
     try:
-        ramped = tiny_model.rollout_step(state, emb, noise)
+        ramped = model.rollout_step(state, emb, noise)
     finally:
-        tiny_model.floor_snap_ramp = False
+        model.floor_snap_ramp = False
     lift = plain.placement.translation[:, 2] - state.world.translation[:, 2]
     assert (lift.abs() > 1e-3).all()
     frac = torch.arange(1, 9) / 8.0
@@ -173,9 +188,9 @@ def test_ramped_floor_snap_spreads_the_shift_over_the_primitive(tiny_model):
     torch.testing.assert_close(ramped.joints_world, want, atol=1e-5, rtol=0)
     torch.testing.assert_close(ramped.state.history, plain.state.history)
     torch.testing.assert_close(ramped.state.world.translation, plain.state.world.translation)
-    world = features_to_world(ramped.future, ramped.placement, tiny_model.pelvis_delta)
+    world = features_to_world(ramped.future, ramped.placement, model.pelvis_delta)
     torch.testing.assert_close(joints_of(world), ramped.joints_world, atol=1e-5, rtol=0)
-    before = features_to_world(plain.future, plain.placement, tiny_model.pelvis_delta)
+    before = features_to_world(plain.future, plain.placement, model.pelvis_delta)
     added = lift[:, None] / 8.0  # each step within the primitive takes 1/8 of the lift (the deltas in step)
     torch.testing.assert_close(world[:, :-1, 212:276:3] - before[:, :-1, 212:276:3],
                                added[..., None].expand(3, 7, 22), atol=1e-5, rtol=0)
