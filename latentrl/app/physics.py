@@ -127,7 +127,7 @@ def track_command(req: TrackRequest) -> int:
                         f"humanoid's [1.0, 2.5] m (set --height)")
     with locked_output(out):
         humanoid = build_humanoid(height)
-        ref = build_reference(clip.joints, clip.features, clip.fps, humanoid.rest_joints)
+        ref = build_reference(clip.joints, clip.features, clip.fps, humanoid)
         start = time.perf_counter()
         result = track(humanoid, ref, req.assist_hz or None)
         if not np.isfinite(result.joints).all():

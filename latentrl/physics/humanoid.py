@@ -141,6 +141,31 @@ def _f(values) -> str:
     return " ".join(f"{float(v):.6g}" for v in np.atleast_1d(values))
 
 
+def foot_box(j: int, rest: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre (relative to joint ``j``, rest axes) and half sizes of the box of an ankle (rear foot) or foot (toes)."""
+    ankle = rest[j] if kind(j) == "ankle" else rest[PARENTS[j]]
+    toe = rest[j] if kind(j) == "foot" else rest[children(j)[0]]
+    heel = ankle[1] - HEEL_BACK * h
+    y0, y1 = (heel, toe[1]) if kind(j) == "ankle" else (toe[1], heel + FOOT_LENGTH * h)
+    top = ankle[2] if kind(j) == "ankle" else 2.0 * TOE_HEIGHT_M
+    center = np.array([rest[j][0], (y0 + y1) / 2, top / 2]) - rest[j]
+    return center, np.array([FOOT_HALF_WIDTH * h, (y1 - y0) / 2, top / 2])
+
+
+SOLE_JOINTS = (7, 8, 10, 11)
+"""The joints whose bodies carry the foot boxes: ankles (rear feet) and feet (toes)."""
+
+
+def sole_points(rest: np.ndarray, h: float) -> np.ndarray:
+    """(4, 4, 3): the four bottom corners of each foot box of :data:`SOLE_JOINTS`, relative to the joint, rest axes."""
+    out = np.empty((len(SOLE_JOINTS), 4, 3))
+    for i, j in enumerate(SOLE_JOINTS):
+        center, size = foot_box(j, rest, h)
+        for c, (sx, sy) in enumerate(((-1, -1), (-1, 1), (1, -1), (1, 1))):
+            out[i, c] = center + np.array([sx * size[0], sy * size[1], -size[2]])
+    return out
+
+
 def _geoms(j: int, rest: np.ndarray, h: float, mass: float) -> list[str]:
     """The geoms of joint ``j``'s body, in its frame (origin at the joint, axes of the rest pose)."""
     k = kind(j)
@@ -148,14 +173,7 @@ def _geoms(j: int, rest: np.ndarray, h: float, mass: float) -> list[str]:
     here = rest[j]
     name = JOINT_NAMES[j]
     if k in ("ankle", "foot"):
-        w = FOOT_HALF_WIDTH * h
-        ankle = rest[j] if k == "ankle" else rest[PARENTS[j]]
-        toe = rest[j] if k == "foot" else rest[children(j)[0]]
-        heel = ankle[1] - HEEL_BACK * h
-        y0, y1 = (heel, toe[1]) if k == "ankle" else (toe[1], heel + FOOT_LENGTH * h)
-        top = ankle[2] if k == "ankle" else 2.0 * TOE_HEIGHT_M
-        center = np.array([here[0], (y0 + y1) / 2, top / 2]) - here
-        size = (w, (y1 - y0) / 2, top / 2)
+        center, size = foot_box(j, rest, h)
         return [f'<geom name="{name}" type="box" pos="{_f(center)}" size="{_f(size)}" mass="{m:.6g}"/>']
     r = RADIUS[k] * h
     if k == "head":

@@ -11,9 +11,11 @@ A motion without features (an evaluation's episode files) gets its rotations fro
 same swings, starting from the parent's orientation (bones keep no twist of their own).
 
 Bone lengths differ too: the humanoid is rigid, a generated motion is not (the default model's run
-stretches a shank between 0.31 and 0.69 m). So that contacts happen when the motion's do, the pelvis height
-is shifted per frame to put the humanoid's lowest foot joint (ankles, toe bases) at the height of the
-motion's lowest foot joint (:func:`foot_height_shift`).
+stretches a shank between 0.31 and 0.69 m). Swinging bones alone would then carry every length difference
+down to the feet, so the legs are solved last by two-bone IK (:func:`leg_ik`): each ankle goes where the
+motion's is, each toe points at the motion's toe, with heights such that the motion's usual contact height
+becomes the humanoid's sole on the floor (:func:`foot_targets`). Where a target is out of reach the pelvis
+is lowered just enough for the soles to meet the floor when the motion's feet do (:func:`foot_height_shift`).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 
 from latentrl.errors import DataError
 from latentrl.motion.skeleton import NUM_JOINTS, PARENTS, children
-from latentrl.physics.humanoid import AXIS_ORDER, BODY_JOINTS
+from latentrl.physics.humanoid import AXIS_ORDER, BODY_JOINTS, SOLE_JOINTS, Humanoid, sole_points
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -192,10 +194,20 @@ def forward_joints(rest: np.ndarray, local: np.ndarray, root_pos: np.ndarray) ->
     return out
 
 
-def foot_height_shift(rest: np.ndarray, local: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """(T,) metres to add to the pelvis height so the humanoid's lowest foot joint meets the motion's."""
+def foot_height_shift(rest: np.ndarray, height: float, local: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """(T,) metres to add to the pelvis height so the humanoid's soles touch the floor when the motion's feet do.
+
+    The motion's feet are in contact at its usual lowest foot-joint height (the 5th percentile over the clip:
+    about 0 for a floor-snapped rollout, 2 cm for latentrl's training data); each frame the humanoid's lowest
+    sole corner is put that far above the floor as the motion's lowest foot joint is above its contact height.
+    """
     fk = forward_joints(rest, local, joints[:, 0])
-    return joints[:, FOOT_AND_ANKLE, 2].min(-1) - fk[:, FOOT_AND_ANKLE, 2].min(-1)
+    world = global_rotations(local)[:, SOLE_JOINTS]
+    corners = fk[:, SOLE_JOINTS, None, :] + np.einsum("tjab,jcb->tjca", world, sole_points(rest, height))
+    sole = corners[..., 2].reshape(len(joints), -1).min(-1)
+    ref_low = joints[:, FOOT_AND_ANKLE, 2].min(-1)
+    contact = np.percentile(ref_low, 5)
+    return (ref_low - contact) - sole
 
 
 def _rate(x: np.ndarray, fps: float) -> np.ndarray:
@@ -210,8 +222,57 @@ def _angular_velocity(rot: np.ndarray, fps: float) -> np.ndarray:
     return np.stack((d[:, 2, 1] - d[:, 1, 2], d[:, 0, 2] - d[:, 2, 0], d[:, 1, 0] - d[:, 0, 1]), axis=-1) / 2
 
 
-def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float, rest: np.ndarray) -> Reference:
-    """The :class:`Reference` of a motion: (T, 22, 3) joints, (T, 276) world features or None, fps, humanoid rest."""
+LEGS = ((1, 4, 7, 10), (2, 5, 8, 11))
+"""(hip, knee, ankle, toe base) of the left and the right leg."""
+
+
+def foot_targets(joints: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """(T, 4, 3) where the humanoid's ankles and toe bases (7, 8, 10, 11) should be.
+
+    The motion's own ones, raised or lowered so that each joint's usual contact height in the motion (its 5th
+    percentile over the clip) becomes the humanoid's height of that joint standing flat.
+    """
+    feet = joints[:, FOOT_AND_ANKLE].copy()
+    contact = np.percentile(feet[..., 2], 5, axis=0)
+    feet[..., 2] += rest[list(FOOT_AND_ANKLE), 2] - contact
+    return feet
+
+
+def leg_ik(local: np.ndarray, root_pos: np.ndarray, rest: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Local rotations with each leg bent to put its ankle on its target (two-bone IK) and its toe toward its own.
+
+    The knee stays in the plane the current pose bends it in; a target out of reach straightens the leg towards
+    it. ``targets``: (T, 4, 3) from :func:`foot_targets` (order of ``FOOT_AND_ANKLE``).
+    """
+    world = global_rotations(local)
+    pos = forward_joints(rest, local, root_pos)
+    for side, (hip, knee, ankle, toe) in enumerate(LEGS):
+        ankle_goal, toe_goal = targets[:, side], targets[:, 2 + side]
+        l1 = float(np.linalg.norm(rest[knee] - rest[hip]))
+        l2 = float(np.linalg.norm(rest[ankle] - rest[knee]))
+        h = pos[:, hip]
+        d = ankle_goal - h
+        dist = np.linalg.norm(d, axis=-1, keepdims=True).clip(1e-9)
+        axis = d / dist
+        dist = dist.clip(abs(l1 - l2) + 1e-4, l1 + l2 - 1e-4)
+        along = (l1**2 - l2**2 + dist**2) / (2 * dist)
+        radial = np.sqrt(np.clip(l1**2 - along**2, 0.0, None))
+        pole = pos[:, knee] - h
+        pole = pole - np.sum(pole * axis, axis=-1, keepdims=True) * axis
+        pole /= np.linalg.norm(pole, axis=-1, keepdims=True).clip(1e-9)
+        k = h + along * axis + radial * pole
+        a = h + dist * axis
+        for joint, child, start, end in ((hip, knee, h, k), (knee, ankle, k, a), (ankle, toe, a, toe_goal)):
+            bone = np.einsum("tab,b->ta", world[:, joint], rest[child] - rest[joint])
+            world[:, joint] = _swing(bone, end - start) @ world[:, joint]
+            if joint != ankle:  # children follow their parent until their own turn
+                world[:, child] = _swing(bone, end - start) @ world[:, child]
+        world[:, toe] = world[:, ankle] @ local[:, toe]
+    return local_rotations(world)
+
+
+def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float, humanoid: Humanoid) -> Reference:
+    """The :class:`Reference` of a motion, (T, 22, 3) joints and (T, 276) world features or None, on ``humanoid``."""
     joints = np.asarray(joints, dtype=np.float64)
     if features is not None:
         features = np.asarray(features, dtype=np.float64)
@@ -219,11 +280,15 @@ def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float,
             raise DataError(f"field 'features' must be (T, 276) with T = {len(joints)} frames, got {features.shape}")
         if not np.isfinite(features).all():
             raise DataError("field 'features' holds NaN or inf")
+    rest = humanoid.rest_joints
     local = reference_rotations(None if features is None else features_rotations(features), joints, rest)
+    root_pos = joints[:, 0].copy()
+    targets = foot_targets(joints, rest)
+    local = leg_ik(local, root_pos, rest, targets)
+    root_pos[:, 2] += foot_height_shift(rest, humanoid.height, local, joints)
+    local = leg_ik(local, root_pos, rest, targets)
     angles = hinge_angles(local)
     root_rot = local[:, 0]
-    root_pos = joints[:, 0].copy()
-    root_pos[:, 2] += foot_height_shift(rest, local, joints)
     return Reference(fps=float(fps), joints=joints, root_pos=root_pos, root_rot=root_rot, angles=angles,
                      root_vel=_rate(root_pos, fps), root_angvel=_angular_velocity(root_rot, fps),
                      angle_vel=_rate(angles, fps))

@@ -53,7 +53,8 @@ class TrackResult:
         fps: frames per second (the reference's).
         falls: frames at which a fall was counted.
         assist_force: (T,) mean |assist force| over each frame's physics steps, N (0 for frame 0).
-        assist_torque: (T,) the same for the assist torque, N m.
+        assist_vector: (T, 3) mean assist force vector over each frame's physics steps, world axes, N.
+        assist_torque: (T,) the same as ``assist_force`` for the assist torque, N m.
         mass: body mass, kg.
         sim_seconds: wall-clock seconds spent in physics and control.
     """
@@ -64,6 +65,7 @@ class TrackResult:
     falls: list[int] = field(default_factory=list)
     assist_force: np.ndarray | None = None
     assist_torque: np.ndarray | None = None
+    assist_vector: np.ndarray | None = None
     mass: float = 0.0
     sim_seconds: float = 0.0
 
@@ -191,6 +193,7 @@ def track(humanoid: Humanoid, ref: Reference, assist_hz: float | None = ASSIST_H
     joints = np.empty((frames, NUM_JOINTS, 3))
     world = np.empty((frames, NUM_JOINTS, 3, 3))
     force_log = np.zeros(frames)
+    force_vec = np.zeros((frames, 3))
     torque_log = np.zeros(frames)
     falls: list[int] = []
     joints[0], world[0] = sim.joints(), sim.world_rotations()
@@ -210,7 +213,9 @@ def track(humanoid: Humanoid, ref: Reference, assist_hz: float | None = ASSIST_H
                 spring_t = kp_t * _rotvec(r_ref @ r.T) + kd_t * w_ref
                 d.xfrc_applied[sim.pelvis, 0:3] = spring_f
                 d.xfrc_applied[sim.pelvis, 3:6] = spring_t
-                f_sum += float(np.linalg.norm(spring_f - kd_f * d.qvel[0:3]))
+                applied = spring_f - kd_f * d.qvel[0:3]
+                force_vec[t] += applied / steps
+                f_sum += float(np.linalg.norm(applied))
                 tau_sum += float(np.linalg.norm(spring_t - kd_t * (r @ d.qvel[3:6])))
             mj.mj_step(m, d)
         force_log[t], torque_log[t] = f_sum / steps, tau_sum / steps
@@ -221,5 +226,5 @@ def track(humanoid: Humanoid, ref: Reference, assist_hz: float | None = ASSIST_H
                           ref.angle_vel[t])
     d.xfrc_applied[:] = 0.0
     return TrackResult(joints=joints, rotations=local_rotations(world), fps=ref.fps, falls=falls,
-                       assist_force=force_log, assist_torque=torque_log, mass=humanoid.mass,
+                       assist_force=force_log, assist_vector=force_vec, assist_torque=torque_log, mass=humanoid.mass,
                        sim_seconds=time.perf_counter() - t0)

@@ -47,3 +47,20 @@ def test_corrected_rotations_keep_a_rigid_motion_and_fix_a_wrong_one():
 def test_fit_height_recovers_the_skeleton_height():
     rest = rest_joints(1.68)
     assert fit_height(np.tile(rest, (3, 1, 1))) == pytest.approx(1.68, abs=0.005)  # the 2 cm toe height is absolute
+
+
+def test_leg_ik_puts_ankles_on_reachable_targets_and_keeps_the_upper_body():
+    from latentrl.physics.reference import FOOT_AND_ANKLE, leg_ik
+
+    rng = np.random.default_rng(2)
+    rest = rest_joints(1.75)
+    local = random_rotations(rng, (15, NUM_JOINTS), 0.3)
+    root = np.tile(rest[0], (15, 1))
+    joints = forward_joints(rest, local, root)
+    same = forward_joints(rest, leg_ik(local, root, rest, joints[:, FOOT_AND_ANKLE]), root)
+    assert np.abs(same - joints).max() < 1e-6
+    targets = joints[:, FOOT_AND_ANKLE] + np.array([0.03, -0.04, 0.05])  # feet moved 7 cm, still within reach
+    moved = forward_joints(rest, leg_ik(local, root, rest, targets), root)
+    assert np.abs(moved[:, [7, 8]] - targets[:, :2]).max() < 1e-6
+    upper = [0, 3, 6, 9, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21]
+    assert np.abs(moved[:, upper] - joints[:, upper]).max() < 1e-9

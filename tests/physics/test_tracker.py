@@ -24,7 +24,7 @@ def standing_features(rest: np.ndarray, frames: int) -> tuple[np.ndarray, np.nda
 def test_standing_reference_needs_almost_no_assist():
     humanoid = build_humanoid(1.75)
     joints, feats = standing_features(humanoid.rest_joints, 90)
-    result = track(humanoid, build_reference(joints, feats, 30.0, humanoid.rest_joints))
+    result = track(humanoid, build_reference(joints, feats, 30.0, humanoid))
     summary = result.assist_summary()
     assert result.falls == []
     assert np.linalg.norm(result.joints - joints, axis=-1).mean() < 0.01
@@ -34,10 +34,11 @@ def test_standing_reference_needs_almost_no_assist():
 
 def test_assist_off_reports_zero_and_a_lifted_body_falls():
     humanoid = build_humanoid(1.75)
-    joints, feats = standing_features(humanoid.rest_joints, 60)
-    joints = joints + np.array([0.0, 0.0, 1.0])  # a reference floating 1 m up: without assist the body drops
-    feats[:, 144:210] += np.tile([0.0, 0.0, 1.0], NUM_JOINTS)
-    ref = build_reference(joints, feats, 30.0, humanoid.rest_joints)
+    joints, feats = standing_features(humanoid.rest_joints, 90)
+    lift = np.clip((np.arange(90) - 10) / 30, 0, 1) * 0.8  # the reference rises 0.8 m in 1 s and floats there
+    joints[..., 2] += lift[:, None]
+    feats[:, 146:210:3] += lift[:, None]
+    ref = build_reference(joints, feats, 30.0, humanoid)
     off = track(humanoid, ref, assist_hz=None)
     assert off.assist_summary()["force_Ns_per_s"] == 0.0
     assert len(off.falls) >= 1
@@ -51,7 +52,7 @@ def test_tracks_a_sampled_walk_without_falls(sampled_walk):
 
     clip = MotionClip.load(sampled_walk)
     humanoid = build_humanoid(1.72)
-    ref = build_reference(clip.joints, clip.features, clip.fps, humanoid.rest_joints)
+    ref = build_reference(clip.joints, clip.features, clip.fps, humanoid)
     result = track(humanoid, ref)
     assert result.falls == []
     assert np.isfinite(result.joints).all()
