@@ -40,7 +40,7 @@ from latentrl.envs.scene import resolve_scene
 from latentrl.errors import CheckpointError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
-from latentrl.evaluation.episodes import end_of, rollout
+from latentrl.evaluation.episodes import collect_returns, end_of, rollout
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, frames_after
 from latentrl.evaluation.skills import judge_clip
 from latentrl.motion.clip import MotionClip
@@ -259,8 +259,8 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
     Runs ``eval_cfg.paths``' suites (already resolved to ``files``) with ``eval_cfg.episodes``,
     ``max_steps``, ``deterministic`` and ``text``, and returns the overall DART-aggregated means
-    (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ..., and ``segment_skill_match``;
-    undefined ones left out),
+    (``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``, ..., ``segment_skill_match``;
+    undefined ones left out) and the episodes' mean return ``mean_reward``,
     the ``eval/trajectories`` figure, and ``stop`` once ``success_rate >= eval_cfg.success_target``.
     ``env_cfg`` gives ``guidance_scale``, ``action_bound``, ``foot_lock`` and, for path policies,
     ``observe_next``. Files and texts are checked now, not at the first evaluation. The trainer restores its
@@ -280,10 +280,13 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
         from latentrl.evaluation.report import pooled_metrics, skill_summary
         from latentrl.monitor import EVAL_TRAJECTORIES, EvalReport
 
-        suites = run_suites(policy_fn(policy, settings.deterministic), motion, files, settings,
-                            observe_next=observe_next, text=eval_cfg.text)
+        with collect_returns() as returns:
+            suites = run_suites(policy_fn(policy, settings.deterministic), motion, files, settings,
+                                observe_next=observe_next, text=eval_cfg.text)
         paths = [p for s in suites for p in s.paths]
         metrics = {k: v["mean"] for k, v in pooled_metrics(paths).items() if np.isfinite(v["mean"])}
+        if returns:
+            metrics["mean_reward"] = float(np.mean(returns))
         match = skill_summary(paths)["segment_skill_match"]
         if np.isfinite(match):
             metrics["segment_skill_match"] = match

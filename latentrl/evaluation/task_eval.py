@@ -183,12 +183,16 @@ def training_hook(run: Callable[[Callable, Any], list], env_cfg: Any, eval_cfg: 
     target = getattr(eval_cfg, "success_target", None)
 
     def evaluate(policy: torch.nn.Module):
+        from latentrl.evaluation.episodes import collect_returns
         from latentrl.evaluation.runner import policy_fn
         from latentrl.monitor import EvalReport
 
-        suites = run(policy_fn(policy, settings.deterministic), settings)
+        with collect_returns() as returns:
+            suites = run(policy_fn(policy, settings.deterministic), settings)
         pooled = aggregate([ep for _, _, results in suites for r in results for ep in r.episodes])
         metrics = {k: v["mean"] for k, v in pooled.items() if math.isfinite(v["mean"])}
+        if returns:
+            metrics["mean_reward"] = sum(returns) / len(returns)
         stop = target is not None and success is not None and metrics.get(success, 0.0) >= target
         return EvalReport(metrics, {}, stop)
 
