@@ -194,20 +194,20 @@ def forward_joints(rest: np.ndarray, local: np.ndarray, root_pos: np.ndarray) ->
     return out
 
 
-def foot_height_shift(rest: np.ndarray, height: float, local: np.ndarray, joints: np.ndarray) -> np.ndarray:
+def foot_height_shift(rest: np.ndarray, height: float, local: np.ndarray, joints: np.ndarray,
+                      contact: np.ndarray | None = None) -> np.ndarray:
     """(T,) metres to add to the pelvis height so the humanoid's soles touch the floor when the motion's feet do.
 
-    The motion's feet are in contact at its usual lowest foot-joint height (the 5th percentile over the clip:
-    about 0 for a floor-snapped rollout, 2 cm for latentrl's training data); each frame the humanoid's lowest
-    sole corner is put that far above the floor as the motion's lowest foot joint is above its contact height.
+    The motion's foot joints are on the floor at their ``contact`` heights (:func:`contact_heights`: about 0 for
+    a floor-snapped rollout's toes, 2 cm for latentrl's training data); each frame the humanoid's lowest sole
+    corner is put as far above the floor as the motion's foot joint nearest its contact height is above it.
     """
     fk = forward_joints(rest, local, joints[:, 0])
     world = global_rotations(local)[:, SOLE_JOINTS]
     corners = fk[:, SOLE_JOINTS, None, :] + np.einsum("tjab,jcb->tjca", world, sole_points(rest, height))
     sole = corners[..., 2].reshape(len(joints), -1).min(-1)
-    ref_low = joints[:, FOOT_AND_ANKLE, 2].min(-1)
-    contact = np.percentile(ref_low, 5)
-    return (ref_low - contact) - sole
+    above = joints[:, FOOT_AND_ANKLE, 2] - (contact_heights(joints) if contact is None else np.asarray(contact))
+    return above.min(-1) - sole
 
 
 def _rate(x: np.ndarray, fps: float) -> np.ndarray:
@@ -226,14 +226,20 @@ LEGS = ((1, 4, 7, 10), (2, 5, 8, 11))
 """(hip, knee, ankle, toe base) of the left and the right leg."""
 
 
-def foot_targets(joints: np.ndarray, rest: np.ndarray) -> np.ndarray:
+def contact_heights(joints: np.ndarray) -> np.ndarray:
+    """(4,) each of a motion's ankles and toe bases' usual height on the floor: its 5th percentile over the clip."""
+    return np.percentile(np.asarray(joints)[:, FOOT_AND_ANKLE, 2], 5, axis=0)
+
+
+def foot_targets(joints: np.ndarray, rest: np.ndarray, contact: np.ndarray | None = None) -> np.ndarray:
     """(T, 4, 3) where the humanoid's ankles and toe bases (7, 8, 10, 11) should be.
 
-    The motion's own ones, raised or lowered so that each joint's usual contact height in the motion (its 5th
-    percentile over the clip) becomes the humanoid's height of that joint standing flat.
+    The motion's own ones, raised or lowered so that each joint's usual contact height in the motion
+    (``contact``, default :func:`contact_heights` of ``joints``) becomes the humanoid's height of that joint
+    standing flat.
     """
     feet = joints[:, FOOT_AND_ANKLE].copy()
-    contact = np.percentile(feet[..., 2], 5, axis=0)
+    contact = contact_heights(joints) if contact is None else np.asarray(contact)
     feet[..., 2] += rest[list(FOOT_AND_ANKLE), 2] - contact
     return feet
 
@@ -271,8 +277,13 @@ def leg_ik(local: np.ndarray, root_pos: np.ndarray, rest: np.ndarray, targets: n
     return local_rotations(world)
 
 
-def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float, humanoid: Humanoid) -> Reference:
-    """The :class:`Reference` of a motion, (T, 22, 3) joints and (T, 276) world features or None, on ``humanoid``."""
+def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float, humanoid: Humanoid,
+                    contact: np.ndarray | None = None) -> Reference:
+    """The :class:`Reference` of a motion, (T, 22, 3) joints and (T, 276) world features or None, on ``humanoid``.
+
+    ``contact``: the motion's foot-joint contact heights (default: :func:`contact_heights` of ``joints``; a
+    motion executed piece by piece passes those of the whole motion so far).
+    """
     joints = np.asarray(joints, dtype=np.float64)
     if features is not None:
         features = np.asarray(features, dtype=np.float64)
@@ -283,9 +294,10 @@ def build_reference(joints: np.ndarray, features: np.ndarray | None, fps: float,
     rest = humanoid.rest_joints
     local = reference_rotations(None if features is None else features_rotations(features), joints, rest)
     root_pos = joints[:, 0].copy()
-    targets = foot_targets(joints, rest)
+    contact = contact_heights(joints) if contact is None else contact
+    targets = foot_targets(joints, rest, contact)
     local = leg_ik(local, root_pos, rest, targets)
-    root_pos[:, 2] += foot_height_shift(rest, humanoid.height, local, joints)
+    root_pos[:, 2] += foot_height_shift(rest, humanoid.height, local, joints, contact)
     local = leg_ik(local, root_pos, rest, targets)
     angles = hinge_angles(local)
     root_rot = local[:, 0]

@@ -75,14 +75,21 @@ class TrackResult:
         return max(len(self.joints) - 1, 1) / self.fps
 
     def assist_summary(self) -> dict[str, float]:
-        """The assist as impulse per second of motion (N s/s, N m s/s), percent of body weight, peak force."""
+        """The assist per second of motion (N s/s, N m s/s), as percent of body weight, its peak and direction.
+
+        ``mean_lift_N`` and ``mean_horizontal_N`` are the mean force vector's upward part and horizontal size:
+        whether the assist mostly carries the body or pushes it along.
+        """
         force = np.asarray(self.assist_force[1:]) if self.assist_force is not None else np.zeros(1)
         torque = np.asarray(self.assist_torque[1:]) if self.assist_torque is not None else np.zeros(1)
         mean_force = float(force.mean()) if force.size else 0.0
+        vec = np.asarray(self.assist_vector[1:]) if self.assist_vector is not None else np.zeros((1, 3))
         return {
             "force_Ns_per_s": mean_force,
             "force_percent_body_weight": 100.0 * mean_force / (self.mass * GRAVITY),
             "peak_force_N": float(force.max()) if force.size else 0.0,
+            "mean_lift_N": float(vec[:, 2].mean()) if len(vec) else 0.0,
+            "mean_horizontal_N": float(np.linalg.norm(vec[:, :2].mean(0))) if len(vec) else 0.0,
             "torque_Nms_per_s": float(torque.mean()) if torque.size else 0.0,
         }
 
