@@ -141,6 +141,7 @@ class FrameRenderer:
         self.font = ImageFont.load_default(size=max(10, self.size // 36))
         self.small = ImageFont.load_default(size=max(9, self.size // 44))
         self.background = self._backdrop()
+        self.legend = self._legend()
         self.bones = [(PARENTS[j], j) for j in range(1, NUM_JOINTS)]
         self.radii = np.array([_bone_radius(j) for _, j in self.bones])
         self.colours = [side_colour(j) for _, j in self.bones]
@@ -153,28 +154,33 @@ class FrameRenderer:
             draw.rectangle((0, y, self.size, y + 4), fill=_scaled(SKY, 1.0 - 0.12 * (1 - y / self.size)))
         return img
 
-    def _legend(self, draw) -> None:
-        x, y = 8, self.size - 8 - self.small.size
+    def _legend(self):
+        """The legend (left, right, track, goal) as an RGBA strip, pasted onto every frame."""
+        height = self.small.size + 4
+        strip = self._image.new("RGBA", (self.size, height), (0, 0, 0, 0))
+        draw = self._draw.Draw(strip)
+        x = 8
         for colour, name in ((LEFT, "left"), (RIGHT, "right"), (TRAIL, "pelvis track"), (WAYPOINT, "goal")):
-            draw.rectangle((x, y + 2, x + 12, y + self.small.size - 2), fill=colour)
-            draw.text((x + 16, y), name, fill=(40, 40, 40), font=self.small)
+            draw.rectangle((x, 4, x + 12, height - 2), fill=colour)
+            draw.text((x + 16, 2), name, fill=(40, 40, 40), font=self.small)
             x += 24 + int(draw.textlength(name, font=self.small))
+        return strip
 
     def _floor(self, draw, cam: Camera, target: np.ndarray) -> None:
-        """1 m tiles in two shades around the target, fading into the sky with distance."""
+        """1 m tiles in two shades around the target, fading into the sky with distance (on-screen ones only)."""
         x0, y0 = int(np.floor(target[0])) - 6, int(np.floor(target[1])) - 2
         xs, ys = np.meshgrid(np.arange(x0, x0 + 13), np.arange(y0, y0 + 14), indexing="ij")
-        corners = np.stack((xs, ys, np.zeros_like(xs)), axis=-1).astype(np.float64)
-        pix, depth = cam.project(corners)
-        for i in range(xs.shape[0] - 1):
-            for k in range(xs.shape[1] - 1):
-                d = depth[i : i + 2, k : k + 2]
-                if d.min() <= NEAR:
-                    continue
-                base = FLOOR_LIGHT if (xs[i, k] + ys[i, k]) % 2 else FLOOR_DARK
-                fade = min(1.0, max(0.0, (float(d.mean()) - 6.0) / 8.0))
-                quad = [tuple(pix[i, k]), tuple(pix[i + 1, k]), tuple(pix[i + 1, k + 1]), tuple(pix[i, k + 1])]
-                draw.polygon(quad, fill=_mix(base, SKY, fade))
+        pix, depth = cam.project(np.stack((xs, ys, np.zeros_like(xs)), axis=-1).astype(np.float64))
+        quads = np.stack((pix[:-1, :-1], pix[1:, :-1], pix[1:, 1:], pix[:-1, 1:]), axis=2)  # (12, 13, 4, 2)
+        depths = np.stack((depth[:-1, :-1], depth[1:, :-1], depth[1:, 1:], depth[:-1, 1:]), axis=2)
+        lo, hi = quads.min(axis=2), quads.max(axis=2)
+        shown = (depths.min(axis=2) > NEAR) & (hi >= 0).all(axis=-1) & (lo <= self.size).all(axis=-1)
+        light = ((xs[:-1, :-1] + ys[:-1, :-1]) % 2).astype(bool)[..., None]
+        base = np.where(light, np.array(FLOOR_LIGHT, float), np.array(FLOOR_DARK, float))
+        fade = np.clip((depths.mean(axis=2) - 6.0) / 8.0, 0.0, 1.0)[..., None]
+        colours = np.rint((1 - fade) * base + fade * np.array(SKY, float)).astype(int)
+        for i, k in zip(*np.nonzero(shown)):
+            draw.polygon(quads[i, k].ravel().tolist(), fill=tuple(colours[i, k].tolist()))
 
     def _path(self, draw, cam: Camera, points: np.ndarray, colour, width: int) -> None:
         """A floor-level polyline through ``points`` (T, 2+), every 2nd point, cut where it passes behind the camera."""
@@ -258,7 +264,7 @@ class FrameRenderer:
             draw.text((8, 6), self.title, fill=(30, 30, 30), font=self.small)
         if label:
             draw.text((8, 10 + self.small.size), label, fill=(10, 10, 10), font=self.font)
-        self._legend(draw)
+        img.paste(self.legend, (0, self.size - self.legend.height - 6), self.legend)
         return img
 
 
