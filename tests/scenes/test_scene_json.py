@@ -109,3 +109,11 @@ def test_bad_files(tmp_path):
         load_scene(bad)
     with pytest.raises(DataError, match=r"^<scene>: invalid JSON"):
         scene_from_json("[")
+
+
+def test_the_shipped_scene_loads_by_name():
+    from latentrl.envs.scene import resolve_scene
+
+    scene = resolve_scene("obstacle_course")
+    assert len(scene.objects) == 5 and {type(o).__name__ for o in scene.objects} == {"Box", "Cylinder", "Seat",
+                                                                                      "Stairs"}
