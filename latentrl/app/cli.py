@@ -71,6 +71,7 @@ EXAMPLES = {
     "list": "latentrl list policies",
     "physics": "latentrl physics track walk.npz --out tracked-walk",
     "physics track": "latentrl physics track walk.npz --out tracked-walk --assist-hz 2",
+    "physics loop": "latentrl physics loop --text walk --seconds 10 --out loop-walk",
 }
 """One example line per command, shown at the end of its ``--help`` (keyed by the words after ``latentrl``)."""
 
@@ -496,6 +497,22 @@ def _physics_commands(sub) -> None:
     tr.add_argument("--height", type=float, help="humanoid height in m (default: fitted to the motion's bones)")
     tr.add_argument("--assist-hz", type=float, default=2.0, help="root assist frequency, 0 = off (default: 2)")
     tr.set_defaults(func=_physics_track)
+    lp = psub.add_parser("loop", help="closed loop: the motion model plans each primitive from the last two simulated "
+                                      "frames; beside the open loop of the same noise (docs/physics.md)")
+    lp.add_argument("--out", required=True, help="output folder for closed.npz, open_kinematic.npz and report.json")
+    lp.add_argument("--text", action="append", help="prompt; repeat to chain prompts (as motion sample)")
+    lp.add_argument("--seconds", type=float, help="length of the motion (default: 10)")
+    lp.add_argument("--seed", type=int, default=0, help="random seed of the noise and the seed history")
+    lp.add_argument("--motion", default="default", help="'default' or a latentrl model file")
+    lp.add_argument("--height", type=float, default=1.72, help="humanoid height in m")
+    lp.add_argument("--assist-hz", type=float, default=2.0, help="root assist frequency, 0 = off")
+    lp.set_defaults(func=_physics_loop)
+
+
+def _physics_loop(args: argparse.Namespace) -> int:
+    from latentrl.app.physics import LoopRequest, loop_command
+
+    return loop_command(request(LoopRequest, args))
 
 
 def _physics_track(args: argparse.Namespace) -> int:

@@ -149,3 +149,118 @@ def track_command(req: TrackRequest) -> int:
           f"falls {report['falls']}, assist {a['force_Ns_per_s']:.0f} N s/s ({a['force_percent_body_weight']:.0f} % "
           f"of body weight), {rtf:.1f}x real time; wrote {out / 'motion.npz'} and {out / 'report.json'}")
     return 0 if math.isfinite(rtf) else 1
+
+
+@dataclass
+class LoopRequest:
+    """``latentrl physics loop``: a text timeline planned by a motion model and executed in closed loop."""
+
+    out: str
+    text: list[str] | None = None
+    seconds: float | None = None
+    seed: int = 0
+    motion: str = "default"
+    height: float = 1.72
+    assist_hz: float = 2.0
+
+
+def loop_command(req: LoopRequest) -> int:
+    """Closed loop beside the open loop of the same noise: ``closed.npz``, ``open_kinematic.npz``, ``report.json``."""
+    import torch
+
+    from latentrl.app.motion import timeline
+    from latentrl.config import seed_problem
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.motion.clip import MotionClip, primitive_layout
+    from latentrl.motion.text import prompt_problem
+    from latentrl.physics import require_mujoco
+    from latentrl.physics.humanoid import GRAVITY, build_humanoid
+    from latentrl.physics.loop import closed_loop
+    from latentrl.physics.reference import build_reference, kinematic_joints
+    from latentrl.physics.tracker import track
+    from latentrl.preflight import check_writable, locked_output
+    from latentrl.safe_io import atomic_write_text
+    from latentrl.timing import hardware
+
+    _check(TrackRequest(motion="", out=req.out, height=req.height, assist_hz=req.assist_hz))
+    if req.seconds is not None and not 0 < req.seconds <= 3600:  # also refuses nan
+        raise ConfigError(f"--seconds must be in (0, 3600], got {req.seconds}")
+    per_step = timeline(req.text or ["walk"], req.seconds)
+    if seed_problem(req.seed) is not None:
+        raise ConfigError(f"--seed: {seed_problem(req.seed)}")
+    for text in dict.fromkeys(per_step):
+        if prompt_problem(text) is not None:
+            raise ConfigError(f"--text: {prompt_problem(text)}")
+    require_mujoco()
+    out = Path(req.out)
+    check_writable(out, "--out")
+    model = load_motion_model(req.motion)
+    model.encode_text(list(dict.fromkeys(per_step)))  # fail early on unknown prompts
+    steps = len(per_step)
+    noise = torch.randn(steps, 1, *model.latent_shape, generator=torch.Generator().manual_seed(req.seed))
+    with locked_output(out):
+        humanoid = build_humanoid(req.height)
+        start = torch.Generator().manual_seed(req.seed)
+        state = model.initial_state(1, start)
+        roll = model.rollout(per_step, steps, noise=noise, state=state)
+        kin = roll.joints_world[0].double().numpy()
+        kin_clip = MotionClip(kin, texts=[""] * 2 + [t for t in per_step for _ in range(8)],
+                              features=roll.features_world[0].numpy(), primitive=primitive_layout(steps))
+        ref = build_reference(kin, kin_clip.features, kin_clip.fps, humanoid)
+        tracked = track(humanoid, ref, req.assist_hz or None)
+        begin = time.perf_counter()
+        closed = closed_loop(model, humanoid, per_step, noise=noise, assist_hz=req.assist_hz or None,
+                             state=model.initial_state(1, torch.Generator().manual_seed(req.seed)))
+        loop_seconds = time.perf_counter() - begin
+        weight = humanoid.mass * GRAVITY
+        seconds = (len(closed.simulated) - 1) / kin_clip.fps
+        closed_assist = float(closed.assist_force[2:].mean())
+        report = {
+            "command": f"latentrl physics loop --out {req.out} --seed {req.seed}",
+            "date": time.strftime("%Y-%m-%d", time.gmtime()),
+            "motion_model": req.motion,
+            "texts": list(dict.fromkeys(per_step)),
+            "primitives": steps,
+            "seconds": seconds,
+            "humanoid": {"height_m": humanoid.height, "mass_kg": round(humanoid.mass, 3)},
+            "open_loop": {
+                "kinematic": quality(kin),
+                "tracked": quality(tracked.joints),
+                "falls": len(tracked.falls),
+                "assist": tracked.assist_summary(),
+                "mpjpe_mm": float(np.linalg.norm(tracked.joints - kin, axis=-1).mean() * 1000),
+                "retarget_mpjpe_mm": float(np.linalg.norm(kinematic_joints(humanoid.rest_joints, ref) - kin,
+                                                          axis=-1).mean() * 1000),
+                "pelvis_travel_m": _travel(kin),
+            },
+            "closed_loop": {
+                "planned": quality(closed.planned),
+                "simulated": quality(closed.simulated),
+                "falls": len(closed.falls),
+                "assist": {"force_Ns_per_s": closed_assist,
+                           "force_percent_body_weight": 100.0 * closed_assist / weight},
+                "plan_vs_simulation_mpjpe_mm": float(np.linalg.norm(closed.planned - closed.simulated,
+                                                                    axis=-1).mean() * 1000),
+                "pelvis_travel_m": _travel(closed.simulated),
+                "real_time_factor": seconds / max(loop_seconds, 1e-9),
+            },
+            "hardware": hardware(),
+        }
+        frame_texts = kin_clip.texts
+        MotionClip(closed.simulated, texts=frame_texts, features=closed.features.astype(np.float32),
+                   primitive=primitive_layout(steps), actions=noise[:, 0, 0].numpy(),
+                   meta={"physics": "latentrl physics loop", "seed": req.seed}).save(out / "closed.npz")
+        MotionClip(closed.planned, texts=frame_texts, primitive=primitive_layout(steps),
+                   meta={"physics": "latentrl physics loop (plans)", "seed": req.seed}).save(out / "closed_plans.npz")
+        kin_clip.save(out / "open_kinematic.npz")
+        atomic_write_text(out / "report.json", json.dumps(report, indent=2, allow_nan=False) + "\n")
+    c, o = report["closed_loop"], report["open_loop"]
+    print(f"closed loop, {steps} primitives ({seconds:.1f} s): falls {c['falls']}, assist "
+          f"{c['assist']['force_percent_body_weight']:.0f} % of body weight, pelvis travel "
+          f"{c['pelvis_travel_m']:.2f} m (open loop {o['pelvis_travel_m']:.2f} m); wrote {out}")
+    return 0
+
+
+def _travel(joints: np.ndarray) -> float:
+    """Horizontal pelvis path length, metres."""
+    return float(np.linalg.norm(np.diff(np.asarray(joints)[:, 0, :2], axis=0), axis=-1).sum())

@@ -88,3 +88,27 @@ def test_kinematic_imports_never_load_mujoco():
             "build_parser()\n"
             "assert 'mujoco' not in sys.modules, 'mujoco was imported'\n")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_loop_writes_closed_and_open_loop_motions_and_a_report(tmp_path, capsys):
+    out = tmp_path / "loop"
+    assert main(["physics", "loop", "--text", "walk", "--seconds", "1", "--out", str(out)]) == 0
+    assert "closed loop, 4 primitives" in capsys.readouterr().out
+    report = json.loads((out / "report.json").read_text())
+    for side in ("open_loop", "closed_loop"):
+        assert report[side]["falls"] == 0
+        assert report[side]["assist"]["force_percent_body_weight"] > 0
+    assert set(report["closed_loop"]["simulated"]) == {"penetration_mm", "floating_mm", "skating_mm"}
+    closed = MotionClip.load(out / "closed.npz")
+    assert closed.frames == MotionClip.load(out / "open_kinematic.npz").frames == 2 + 8 * 4
+    assert closed.features.shape == (closed.frames, 276) and closed.actions.shape[0] == 4
+
+
+@pytest.mark.parametrize("args, word", [(["--text", ""], "--text"), (["--assist-hz", "-1"], "assist"),
+                                        (["--height", "0.2"], "height"), (["--seconds", "0"], "seconds")])
+def test_loop_refuses_bad_settings_in_one_line(args, word, tmp_path, capsys):
+    out = tmp_path / "loop"
+    assert main(["physics", "loop", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and word in err[0], err
+    assert not out.exists()
