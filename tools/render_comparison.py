@@ -1,11 +1,12 @@
 """Time the matplotlib GIF renderer latentrl used until 2026-11-27 against today's Pillow renderer, same motion.
 
-    python tools/render_comparison.py MOTION.npz [--out DIR] [--repeats 1]
+    python tools/render_comparison.py MOTION.npz [--out DIR] [--repeats 3]
 
 Draws MOTION.npz (the shared motion format, e.g. from ``latentrl motion sample``) as a GIF with the
 old renderer (kept below only for this comparison), as a GIF with :func:`latentrl.render.render_video`
 (both every 3rd frame, as ``latentrl eval`` draws), and as an MP4 of every frame; prints seconds per
-file and per second of motion, and the speed-up of the GIF (docs/benchmarks.md).
+file (median of ``--repeats`` rounds in which the four take turns) and per second of motion, and the
+speed-up over the old GIF (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -83,21 +84,22 @@ def old_matplotlib_gif(path, joints, fps=30.0, texts=None, title="", stride=3, s
     return Path(path)
 
 
-def timed(fn, repeats: int) -> float:
-    """Median wall seconds of ``repeats`` calls of ``fn``."""
-    times = []
+def timed_rows(rows: dict, repeats: int) -> dict[str, float]:
+    """Median wall seconds of each row's call; the rows take turns, so a change in machine load hits all alike."""
+    times: dict[str, list[float]] = {name: [] for name in rows}
     for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
+        for name, fn in rows.items():
+            start = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - start)
+    return {name: float(np.median(t)) for name, t in times.items()}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("motion", help="motion .npz (shared format)")
     parser.add_argument("--out", help="folder for the three files (default: a temporary folder)")
-    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     motion = load_motion_npz(args.motion)
     joints, fps = motion["joints"], float(motion["fps"])
@@ -105,15 +107,12 @@ def main() -> None:
     out = Path(args.out or tempfile.mkdtemp(prefix="render-"))
     out.mkdir(parents=True, exist_ok=True)
     seconds = len(joints) / fps
-    rows = {
-        "old matplotlib GIF": timed(lambda: old_matplotlib_gif(out / "old.gif", joints, fps, texts, stride=GIF_STRIDE),
-                                    args.repeats),
-        "Pillow GIF (body)": timed(lambda: render_video(out / "new.gif", joints, fps, texts), args.repeats),
-        "Pillow GIF (skeleton)": timed(lambda: render_video(out / "skeleton.gif", joints, fps, texts,
-                                                            style="skeleton"), args.repeats),
-        "Pillow MP4 (body, every frame)": timed(lambda: render_video(out / "new.mp4", joints, fps, texts),
-                                                args.repeats),
-    }
+    rows = timed_rows({
+        "old matplotlib GIF": lambda: old_matplotlib_gif(out / "old.gif", joints, fps, texts, stride=GIF_STRIDE),
+        "Pillow GIF (body)": lambda: render_video(out / "new.gif", joints, fps, texts),
+        "Pillow GIF (skeleton)": lambda: render_video(out / "skeleton.gif", joints, fps, texts, style="skeleton"),
+        "Pillow MP4 (body, every frame)": lambda: render_video(out / "new.mp4", joints, fps, texts),
+    }, args.repeats)
     old = rows["old matplotlib GIF"]
     print(f"motion: {args.motion} ({len(joints)} frames, {seconds:.1f} s); hardware: {hardware()}")
     for name, s in rows.items():
