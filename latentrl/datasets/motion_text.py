@@ -15,7 +15,10 @@ field                     dtype, shape       meaning
 ``seg_end``               int32 (S,)         one past the last frame of each text segment
 ``seg_text``              unicode (S,)       segment texts; segments may overlap and cover every frame
 ``seats`` (optional)      float32 (K, 4)     seats sat on: x, y of the seat point under the seated pelvis,
-                                             seat height (m), facing yaw (rad, counter-clockwise from +y)
+                                             seat top height (m), facing yaw (rad, counter-clockwise from +x)
+``stairs`` (optional)     float32 (J, 8)     stair flights: x, y of the bottom edge's midpoint, climbing
+                                             direction (rad from +x), width, riser, tread (m), steps, base z
+``foot_floor`` (optional) float32 (T, 2)     terrain height under the left and right foot joints (10, 11)
 ========================  =================  =========================================================
 
 Optional fields (``OPTIONAL_FIELDS``) are scene data: a file without them has none of that kind.
@@ -55,6 +58,8 @@ FIELDS: dict[str, tuple[str, tuple]] = {
 #: Scene fields a sequence may carry (same notation); "K" is the number of seats.
 OPTIONAL_FIELDS: dict[str, tuple[str, tuple]] = {
     "seats": ("float32", ("K", 4)),
+    "stairs": ("float32", ("J", 8)),
+    "foot_floor": ("float32", ("T", 2)),
 }
 
 #: Largest allowed distance (m) between stored ``joints`` and the forward kinematics of the stored pose.

@@ -1,6 +1,6 @@
 """Checks of the scene skills on a decoded motion, each returning its measure as a tensor.
 
-Crouch depth and sitting on a seat; stairs and reaches join as the generator makes them.
+Crouch depth, sitting on a seat and feet on stair treads; reaches join as the generator makes them.
 
 Inputs are world joints ``(..., T, 22, 3)`` in metres, z up, floor at z = 0, as the metrics of
 ``evaluation/metrics.py`` take them; scene parameters are the fields the procedural generator stores
@@ -9,14 +9,19 @@ with its sequences (``docs/datasets.md``), so the same function judges the data 
 - crouch: how far the pelvis drops below its standing height (target >= ``CROUCH_MIN_DROP_M``).
 - sit: the pelvis resting on the seat, ``SEATED_PELVIS_ABOVE_SEAT_M`` above its surface, within
   ``SEAT_HEIGHT_TOL_M`` in height and ``SEAT_XY_TOL_M`` across.
+- stairs: each foot joint's height above the tread under it while the foot is planted: its depth below
+  the tread (penetration, target <= 1 cm) and its height above it (float, target <= 3 cm; a flat foot's
+  toe joint sits 2 cm up).
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
+from latentrl.datasets.locomotion.feet import stairs_height
 from latentrl.datasets.locomotion.skills import SEATED_PELVIS_ABOVE_SEAT_M
-from latentrl.motion.skeleton import PELVIS
+from latentrl.motion.skeleton import FOOT_JOINTS, FPS, PELVIS
 
 CROUCH_MIN_DROP_M = 0.25
 """A crouch lowers the pelvis at least this far below standing."""
@@ -24,16 +29,26 @@ SEAT_HEIGHT_TOL_M = 0.05
 """Largest pelvis height error on a seat (from the seat surface plus ``SEATED_PELVIS_ABOVE_SEAT_M``)."""
 SEAT_XY_TOL_M = 0.10
 """Largest horizontal distance of the pelvis from the seat point."""
+STAIR_PENETRATION_TOL_M = 0.01
+"""Largest mean depth of a planted foot joint below its tread."""
+STAIR_FLOAT_TOL_M = 0.03
+"""Largest mean height of a planted foot joint above its tread."""
+PLANTED_SPEED_M_S = 0.15
+"""A foot joint slower than this is planted (for the stairs check)."""
 
 __all__ = [
     "CROUCH_MIN_DROP_M",
     "SEATED_PELVIS_ABOVE_SEAT_M",
     "SEAT_HEIGHT_TOL_M",
     "SEAT_XY_TOL_M",
+    "STAIR_FLOAT_TOL_M",
+    "STAIR_PENETRATION_TOL_M",
     "crouch_depth",
     "pelvis_drop",
     "seat_errors",
     "sit_check",
+    "stair_check",
+    "tread_clearance",
 ]
 
 
@@ -90,3 +105,47 @@ def sit_check(joints: torch.Tensor, seat: torch.Tensor, hold_frames: int = 15) -
     h = height[..., -hold_frames:].abs().amax(dim=-1)
     d = xy[..., -hold_frames:].amax(dim=-1)
     return {"seated": (h <= SEAT_HEIGHT_TOL_M) & (d <= SEAT_XY_TOL_M), "height_err_m": h, "xy_err_m": d}
+
+
+def tread_clearance(joints: torch.Tensor, stairs: torch.Tensor) -> torch.Tensor:
+    """(..., T, 2) height (m) of the foot joints (10, 11) above the ground of one flight under them.
+
+    ``stairs`` is one row of the generator's ``stairs`` field (8 numbers: x, y, climbing direction, width,
+    riser, tread, steps, base; the fields of ``latentrl.scenes.Stairs``); the ground is the base before the
+    flight and the top step's height after it.
+    """
+    joints = _as_tensor(joints)
+    feet = joints[..., list(FOOT_JOINTS), :]
+    row = np.asarray(_as_tensor(stairs).detach().cpu(), dtype=np.float64)
+    xy = feet[..., :2].detach().cpu().double().numpy()
+    ground = torch.from_numpy(stairs_height(row, xy, landings=True)).to(feet.device, feet.dtype)
+    return feet[..., 2] - ground
+
+
+def stair_check(joints: torch.Tensor, stairs: torch.Tensor, fps: float = FPS) -> dict[str, torch.Tensor]:
+    """Feet on the treads of a flight: penetration and float of the planted foot joints, as means (m).
+
+    A foot joint is planted in a frame where it moves slower than ``PLANTED_SPEED_M_S`` (to the next
+    frame). Returns ``(...,)`` tensors: ``penetration_m`` (mean depth below the tread), ``float_m`` (mean
+    height above it), their largest values ``penetration_max_m``, ``float_max_m``, the number of planted
+    foot-frames ``planted`` and ``ok`` (both means within the targets).
+    """
+    joints = _as_tensor(joints)
+    clear = tread_clearance(joints, stairs)[..., :-1, :]
+    feet = joints[..., list(FOOT_JOINTS), :]
+    speed = torch.linalg.vector_norm(feet[..., 1:, :, :] - feet[..., :-1, :, :], dim=-1) * fps
+    planted = speed < PLANTED_SPEED_M_S
+    count = planted.sum(dim=(-1, -2))
+    zero = torch.zeros((), dtype=clear.dtype, device=clear.device)
+    depth = torch.where(planted, (-clear).clamp(min=0.0), zero)
+    height = torch.where(planted, clear.clamp(min=0.0), zero)
+    n = count.clamp(min=1).to(clear.dtype)
+    out = {
+        "penetration_m": depth.sum(dim=(-1, -2)) / n,
+        "float_m": height.sum(dim=(-1, -2)) / n,
+        "penetration_max_m": depth.amax(dim=(-1, -2)),
+        "float_max_m": height.amax(dim=(-1, -2)),
+        "planted": count,
+    }
+    out["ok"] = (out["penetration_m"] <= STAIR_PENETRATION_TOL_M) & (out["float_m"] <= STAIR_FLOAT_TOL_M)
+    return out

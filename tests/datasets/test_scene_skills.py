@@ -1,4 +1,4 @@
-"""The scene skills of the procedural generator (crouch, crouch walk, sit down, stand up): known answers
+"""The scene skills of the procedural generator (crouch, crouch walk, sit down, stand up, stairs): known answers
 on generated sequences, checked with the bench's own skill checks (latentrl/evaluation/skill_checks.py)."""
 
 import functools
@@ -22,10 +22,19 @@ from latentrl.datasets.locomotion import (
     generate_dataset,
     generate_sequences,
 )
-from latentrl.datasets.locomotion.skills import SEAT_HEIGHT_RANGE
+from latentrl.datasets.locomotion.skills import RISER_RANGE, SEAT_HEIGHT_RANGE, TREAD_RANGE
 from latentrl.datasets.motion_text import read_sequence, validate_sequence
 from latentrl.errors import ConfigError
-from latentrl.evaluation.skill_checks import CROUCH_MIN_DROP_M, crouch_depth, pelvis_drop, seat_errors, sit_check
+from latentrl.evaluation.skill_checks import (
+    CROUCH_MIN_DROP_M,
+    crouch_depth,
+    pelvis_drop,
+    seat_errors,
+    sit_check,
+    stair_check,
+    tread_clearance,
+)
+from latentrl.motion.skeleton import FOOT_JOINTS
 
 FPS = 30
 POSTURE_SET = ("stand", "walk", "crouch", "crouch_walk", "sit_down", "stand_up")
@@ -162,12 +171,103 @@ def test_seats_round_trip_through_files_and_skill_weights_share_the_frames(tmp_p
             np.testing.assert_array_equal(loaded["seats"], seq["seats"])
             with_seats += 1
     assert with_seats >= 1
-    full = dataset_statistics(generate_sequences(LocomotionConfig(num_sequences=12, seed=3, skills=SKILLS)))
+    full = dataset_statistics(generate_sequences(LocomotionConfig(num_sequences=24, seed=3, skills=SKILLS)))
     light = dataset_statistics(generate_sequences(LocomotionConfig(
-        num_sequences=12, seed=3, skills=SKILLS, skill_weights={s: 0.3 for s in SCENE_SKILLS})))
+        num_sequences=24, seed=3, skills=SKILLS, skill_weights={s: 0.25 for s in SCENE_SKILLS})))
 
     def scene_share(stats):
         frames = {k: v["frames"] for k, v in stats["skills"].items()}
         return sum(frames.get(s, 0) for s in SCENE_SKILLS) / sum(frames.values())
 
-    assert scene_share(light) < 0.7 * scene_share(full)
+    assert scene_share(light) < 0.8 * scene_share(full)
+
+
+# --- stairs -----------------------------------------------------------------------------------------------
+
+STAIR_SET = ("stand", "walk", "stairs_up", "stairs_down")
+
+
+@functools.cache
+def stair_data(num=12, seconds=14.0, seed=3):
+    return generate_sequences(LocomotionConfig(num_sequences=num, seconds_per_sequence=seconds, seed=seed,
+                                               skills=STAIR_SET))
+
+
+def planted(seq, speed_m_s=0.15):
+    """(T, 2) foot joints moving slower than ``speed_m_s`` to the next frame (the last frame: False)."""
+    toe = seq["joints"][:, list(FOOT_JOINTS)].astype(np.float64)
+    speed = np.linalg.norm(np.diff(toe, axis=0), axis=-1) * FPS
+    return np.concatenate([speed < speed_m_s, np.zeros((1, 2), bool)])
+
+
+def runs(mask):
+    """[start, end) ranges where ``mask`` is True."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(np.int8), [0]))))
+    return list(zip(edges[::2], edges[1::2]))
+
+
+def stair_frames(seq):
+    """(T,) frames labelled by a stairs text alone, and (T,) frames with any stairs label."""
+    count, stairs = np.zeros(len(seq["joints"]), int), np.zeros(len(seq["joints"]), bool)
+    for a, b, skill in segments(seq):
+        count[a:b] += 1
+        stairs[a:b] |= skill in ("stairs_up", "stairs_down")
+    return stairs & (count == 1), stairs
+
+
+def test_stairs_put_planted_feet_flat_on_the_treads_of_the_stored_flights():
+    checked, texts = 0, set()
+    for seq in stair_data():
+        validate_sequence(seq, "stairs.npz", check_fk=True)
+        texts |= set(map(str, seq["seg_text"]))
+        only, labelled = stair_frames(seq)
+        if "stairs" not in seq:
+            assert not labelled.any()
+            continue
+        rows, ground = seq["stairs"], seq["foot_floor"].astype(np.float64)
+        assert rows.shape[1] == 8 and ground.shape == (len(seq["joints"]), 2)
+        assert np.all((rows[:, 4] >= RISER_RANGE[0]) & (rows[:, 4] <= RISER_RANGE[1]))
+        assert np.all((rows[:, 5] >= TREAD_RANGE[0]) & (rows[:, 5] <= TREAD_RANGE[1])) and np.all(rows[:, 6] >= 1)
+        assert ground.min() >= 0.0 and rows[:, 7].min() >= 0.0  # the lowest ground is the floor
+        toe = seq["joints"][:, list(FOOT_JOINTS)].astype(np.float64)
+        clear = toe[..., 2] - ground
+        down = planted(seq) & only[:, None]
+        assert down.sum() > FPS
+        assert clear[down].min() >= -0.01  # penetration <= 1 cm
+        assert clear[down].mean() <= 0.03 and clear[down].max() <= 0.04  # float <= 3 cm (toe joint 2 cm up)
+        air = ~planted(seq) & only[:, None]
+        assert clear[air].min() >= -0.01  # swings clear the tread edges
+        # planted feet do not slide on the treads: no creep over a run of still frames (< 1 mm per frame)
+        still = planted(seq, speed_m_s=0.03) & only[:, None]
+        for leg in range(2):
+            for a, b in runs(still[:, leg]):
+                if b - a >= 5:
+                    assert np.linalg.norm(toe[b - 1, leg, :2] - toe[a, leg, :2]) < 0.003
+        # the ground under a planted foot changes only under a stairs label (the labels switch with the terrain)
+        for leg in range(2):
+            frames = np.flatnonzero(planted(seq)[:, leg])
+            changes = frames[1:][np.abs(np.diff(ground[frames, leg])) > 1e-6]
+            assert labelled[changes].all()
+        checked += 1
+    assert checked >= 4
+    assert set(SYNONYMS["stairs_up"]) | set(SYNONYMS["stairs_down"]) <= texts
+
+
+@pytest.mark.parametrize("skill", ["stairs_up", "stairs_down"])
+def test_stair_check_passes_the_data_and_fails_a_misplaced_flight(skill):
+    seq = generate_sequences(LocomotionConfig(num_sequences=1, seconds_per_sequence=5.0, seed=2, skills=(skill,)))[0]
+    joints, row = torch.from_numpy(seq["joints"].astype(np.float64)), torch.from_numpy(seq["stairs"][0])
+    result = stair_check(joints, row)
+    assert bool(result["ok"]) and float(result["penetration_m"]) <= 0.001 and float(result["float_m"]) <= 0.025
+    # the flight's geometry gives the stored terrain height under the feet
+    clear = tread_clearance(joints, row).numpy()
+    np.testing.assert_allclose(joints[:, list(FOOT_JOINTS), 2].numpy() - clear, seq["foot_floor"], atol=1e-5)
+    climb = float(joints[-1, 0, 2] - joints[0, 0, 2])
+    assert (climb > 0.5) == (skill == "stairs_up") and abs(climb) > 0.5
+    walking = (1.0 if skill == "stairs_up" else -1.0) * torch.stack((torch.cos(row[2]), torch.sin(row[2])))
+    moved = row.clone()
+    moved[:2] -= 0.5 * row[5] * walking  # half a tread back: every edge now lies under a planted toe
+    assert not bool(stair_check(joints, moved)["ok"])
+    moved = row.clone()
+    moved[7] += 0.05  # 5 cm higher: the feet sink into the treads
+    assert not bool(stair_check(joints, moved)["ok"])

@@ -29,7 +29,7 @@ LOCOMOTION_SKILLS: tuple[str, ...] = (
     "stand",
 )
 
-#: Skills that change posture or use the scene: crouching, sitting on a seat and getting up. A config
+#: Skills that change posture or use the scene: crouching, sitting on a seat, getting up and stairs. A config
 #: selects them through ``LocomotionConfig.skills``; the default leaves them out, so older configs
 #: reproduce their data bit for bit.
 SCENE_SKILLS: tuple[str, ...] = (
@@ -37,6 +37,8 @@ SCENE_SKILLS: tuple[str, ...] = (
     "crouch_walk",
     "sit_down",
     "stand_up",
+    "stairs_up",
+    "stairs_down",
 )
 
 #: Every skill. Each has a synonym list in ``SYNONYMS``; the first synonym is the canonical text.
@@ -59,6 +61,8 @@ SYNONYMS: dict[str, tuple[str, ...]] = {
     "crouch_walk": ("crouch walk", "walk crouched"),
     "sit_down": ("sit down", "sit down on the seat"),
     "stand_up": ("stand up", "get up"),
+    "stairs_up": ("walk up stairs", "climb the stairs"),
+    "stairs_down": ("walk down stairs", "go down the stairs"),
 }
 
 #: Texts that only describe some speeds: text -> (min, max) speed in m/s; other texts fit any speed.
@@ -98,6 +102,10 @@ _TRANSITIONS: tuple[tuple[str, str], ...] = (
     ("walk_backward", "sidestep_left"),
     ("walk_backward", "sidestep_right"),
     ("crouch", "crouch_walk"),
+    ("stand", "stairs_up"),
+    ("walk", "stairs_up"),
+    ("stand", "stairs_down"),
+    ("walk", "stairs_down"),
 )
 # One-way transitions: a posture is left only the way it was entered (a crouch or a seat by standing up).
 _ONE_WAY: tuple[tuple[str, str], ...] = (

@@ -166,13 +166,24 @@ def _swing_feet(feet: _Feet, held: np.ndarray, held_pitch: np.ndarray, heading: 
                 tau = np.zeros(len(frames))
             start = feet.toe[a - 1, leg] if prev else held[frames, leg]
             end = feet.toe[b, leg] if nxt else held[frames, leg]
-            along = _smootherstep(tau / 0.88)[:, None]
+            stair = ch["stair"][(a + b) // 2]
+            if stair > 0:  # up a step: lift first, then forward over the tread edge
+                along = _smootherstep((tau - 0.15) / 0.7)[:, None]
+            elif stair < 0:  # down a step: forward over the edge first, then down
+                along = _smootherstep(tau / 0.7)[:, None]
+            else:
+                along = _smootherstep(tau / 0.88)[:, None]
             toe = start + (end - start) * along
             mid = (a + b) // 2
             lift = ch["clearance"][mid] * _swing_arc(tau, ch["swing_peak"][mid])
             if prev and nxt:
                 lift += pelvis_z[frames] - (pelvis_z[a - 1] * (1 - tau) + pelvis_z[b] * tau)
-            rise = _smoothstep((tau - 0.3) / 0.7)  # towards the landing pose late in the swing
+            if stair > 0:
+                rise = _smoothstep(tau / 0.45)
+            elif stair < 0:
+                rise = _smoothstep((tau - 0.4) / 0.55)
+            else:
+                rise = _smoothstep((tau - 0.3) / 0.7)  # towards the landing pose late in the swing
             toe[:, 2] = start[..., 2] + (end[..., 2] - start[..., 2]) * rise + lift
             feet.toe[a:b, leg] = toe
             p0 = feet.pitch[a - 1, leg] if prev else held_pitch[frames]
@@ -211,6 +222,149 @@ def _reach_drop(pelvis: np.ndarray, pelvis_rot: np.ndarray, feet: _Feet, body: B
         drop = np.where(feet.grounded[:, leg], hip[:, 2] - ankle[:, 2] - allowed, 0.0)
         need = np.maximum(need, drop)
     return _smooth_cover(np.clip(need, 0.0, 0.3))
+
+
+# --- stairs -----------------------------------------------------------------------------------------------
+
+STAIR_TOE_BACK_M = 0.07
+"""A foot on a tread has its toe joint this far behind the next riser (the toes clear it, the heel is on)."""
+STAIR_WIDTH_M = 1.2
+"""Nominal width of a generated flight (stored for scenes; the data's walker keeps to its middle)."""
+
+
+def _stairs(blocks, feet: _Feet, contact: np.ndarray,
+            heading: np.ndarray) -> tuple[list[list[float]], list[tuple[int, int]], np.ndarray]:
+    """Build a flight under each stair block's footprints and lift every footprint to its ground level.
+
+    Each stance of a stair block moves (along the block's heading) onto the nearest tread, one tread per
+    step from the last footprint before the block: tread ``j`` is ``j`` risers up (or down) and holds the
+    toe joint ``STAIR_TOE_BACK_M`` behind the next riser. The ground stays at the last tread's height
+    after the flight. Every other stance stands on the level reached so far; all levels are then shifted so
+    that the lowest is the floor (z = 0). Returns the flights as rows of ``latentrl.scenes.Stairs``
+    (x, y of the bottom edge's midpoint, climbing direction in rad from +x, width, riser, tread, count of
+    steps, base height; the top step continues as a landing), the frames each flight is walked (first
+    stance to last) and the (T, 2) ground level under each stance. A stair block's label is stretched
+    until both feet stand on its end level (the closing step onto the landing is part of the flight).
+    Without stair blocks nothing changes and the levels are zero.
+    """
+    total = len(contact)
+    level = np.zeros((total, 2))
+    stair_blocks = [b for b in blocks if b.skill in ("stairs_up", "stairs_down")]
+    if not stair_blocks:
+        return [], [], level
+    stances = sorted((a, b, leg) for leg in range(2) for a, b in _runs(contact[:, leg]))
+    height = np.zeros(len(stances))
+    current, done, flights, spans = 0.0, 0, [], []
+    for blk in stair_blocks:
+        lo, hi = blk.start + blk.blend_in // 2, blk.end - blk.blend_out // 2
+        members = [k for k, (a, _, _) in enumerate(stances) if lo <= a < hi and k >= done]
+        if not members:
+            continue
+        height[done:members[0]] = current
+        first_a, _, first_leg = stances[members[0]]
+        yaw = float(heading[first_a])
+        d = np.array([-math.sin(yaw), math.cos(yaw)])
+        tread, riser = blk.params["tread"], blk.params["riser"]
+        if members[0] > 0:
+            a0, _, leg0 = stances[members[0] - 1]
+            origin = feet.toe[a0, leg0, :2].copy()
+        else:
+            origin = feet.toe[first_a, first_leg, :2] - tread * d
+        top = 0
+        for k in members:
+            a, b, leg = stances[k]
+            rel = feet.toe[a, leg, :2] - origin
+            along = float(rel @ d)
+            j = max(1, round(along / tread))
+            feet.toe[a:b, leg, :2] = origin + d * (j * tread) + (rel - d * along)
+            height[k] = current + riser * j
+            top = max(top, j)
+        edge = origin + d * (STAIR_TOE_BACK_M - tread)  # the riser in front of tread 0
+        if riser > 0:
+            start, direction, base = edge + d * tread, yaw + math.pi / 2, current
+        else:
+            start, direction, base = edge + d * (top * tread), yaw - math.pi / 2, current + riser * top
+        flights.append([start[0], start[1], math.atan2(math.sin(direction), math.cos(direction)), STAIR_WIDTH_M,
+                        abs(riser), tread, top, base])
+        spans.append((max(first_a - FPS, 0), max(stances[k][1] for k in members)))  # with the swing onto it
+        for leg in range(2):  # the label lasts until each foot stands on the flight's end level
+            after = [a for a, _, lg in stances[members[-1] + 1:] if lg == leg]
+            last = [k for k in members if stances[k][2] == leg]
+            if after and last and height[last[-1]] != current + riser * top:
+                blk.end = max(blk.end, after[0] + 3)
+        current += riser * top
+        done = members[-1] + 1
+    height[done:] = current
+    shift = -min(float(height.min()), 0.0)
+    for row in flights:
+        row[7] += shift
+    for k, (a, b, leg) in enumerate(stances):
+        z = height[k] + shift
+        feet.toe[a:b, leg, 2] += z
+        level[a:b, leg] = z
+        g = a - 1
+        while g >= 0 and feet.grounded[g, leg] and not contact[g, leg]:  # a heel-first landing's roll
+            feet.toe[g, leg, 2] += z
+            level[g, leg] = z
+            g -= 1
+    return flights, spans, level
+
+
+def _support_level(level: np.ndarray, contact: np.ndarray, sigma: float = 4.0) -> np.ndarray:
+    """(T,) smooth ground height under the body: the feet's levels, eased across each swing, averaged."""
+    total = len(contact)
+    frames = np.arange(total)
+    legs = []
+    for leg in range(2):
+        down = contact[:, leg]
+        legs.append(np.interp(frames, frames[down], level[down, leg]) if down.any() else np.zeros(total))
+    mean = 0.5 * (legs[0] + legs[1])
+    x = np.arange(-3 * round(sigma), 3 * round(sigma) + 1)
+    kernel = np.exp(-0.5 * (x / sigma) ** 2)
+    return np.convolve(np.pad(mean, len(x) // 2, mode="edge"), kernel / kernel.sum(), mode="valid")
+
+
+def _ground_under_feet(flights: list, spans: list[tuple[int, int]], level: np.ndarray, grounded: np.ndarray,
+                       toe: np.ndarray) -> np.ndarray:
+    """(T, 2) terrain height under each toe joint.
+
+    A grounded foot has its stance's level; in the air over a flight (while it is walked) the step under
+    the toe, elsewhere the levels of the stances before and after, eased between them.
+    """
+    out = level.copy()
+    frames = np.arange(len(grounded))
+    for leg in range(2):
+        down = grounded[:, leg]
+        if not down.any():
+            continue
+        before = np.interp(frames, frames[down], level[down, leg])  # air frames: the level of the stances
+        out[~down, leg] = before[~down]
+        for row, (a, b) in zip(flights, spans):  # over a flight: the tread under the toe
+            h = stairs_height(np.asarray(row), toe[a:b, leg, :2])
+            inside = ~down[a:b] & ~np.isnan(h)
+            out[a:b][inside, leg] = h[inside]
+    return out
+
+
+def stairs_height(row: np.ndarray, xy: np.ndarray, landings: bool = False) -> np.ndarray:
+    """(...,) ground height of a flight (a ``stairs`` row) under points (..., 2).
+
+    Inside the flight's width and between its bottom edge and the far end of its top step the height is
+    the step under the point, and before the bottom edge (up to a tread) the base; elsewhere NaN (another
+    surface's business). With ``landings`` the flight is the whole ground: the base before it and the top
+    step's height after it, at any distance across (what a walker of this one flight stands on).
+    """
+    x, y, direction, width, riser, tread, count, base = (float(v) for v in row[:8])
+    d = np.array([math.cos(direction), math.sin(direction)])
+    rel = np.asarray(xy, dtype=np.float64) - np.array([x, y])
+    along = rel @ d
+    step = np.clip(np.floor(along / tread) + 1, 0, count)
+    h = base + riser * step
+    if landings:
+        return h
+    across = rel @ np.array([-d[1], d[0]])
+    inside = (np.abs(across) <= width / 2) & (along >= -tread) & (along < count * tread)
+    return np.where(inside, h, np.nan)
 
 
 # --- pose -------------------------------------------------------------------------------------------------

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +18,17 @@ from latentrl.datasets.body import (
     yaw_roll_pitch,
 )
 from latentrl.datasets.locomotion.config import _PAD_S, SKILLS, TEXT_TO_SKILL, G, LocomotionConfig
-from latentrl.datasets.locomotion.feet import _Feet, _held_feet, _local_rotations, _plant_feet, _reach_drop, _swing_feet
+from latentrl.datasets.locomotion.feet import (
+    _Feet,
+    _ground_under_feet,
+    _held_feet,
+    _local_rotations,
+    _plant_feet,
+    _reach_drop,
+    _stairs,
+    _support_level,
+    _swing_feet,
+)
 from latentrl.datasets.locomotion.plan import (
     _blend_channels,
     _Block,
@@ -64,9 +74,21 @@ def _schedule(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, count
     return blocks, ch, contact
 
 
-def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, ch: dict,
-                  contact: np.ndarray) -> tuple[np.ndarray, np.ndarray, _Feet, np.ndarray]:
-    """Steps 3-4: (T, 3) pelvis position and (T, 3, 3) orientation, world, the foot targets and (T,) heading."""
+@dataclass
+class _Terrain:
+    """The ground of one sequence: its stair flights and the height under each foot."""
+
+    flights: np.ndarray  # (J, 8) rows of ``latentrl.scenes.Stairs`` (see ``feet._stairs``)
+    ground: np.ndarray  # (T, 2) terrain height under the left and right toe joints, padded timeline
+
+
+def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, ch: dict, contact: np.ndarray,
+                  blocks: list[_Block]) -> tuple[np.ndarray, np.ndarray, _Feet, np.ndarray, _Terrain]:
+    """Steps 3-4: the pelvis, the foot targets and the ground.
+
+    Returns (T, 3) pelvis position and (T, 3, 3) orientation (world), the foot targets, the (T,) heading
+    and the terrain (stair flights built under the stair blocks' steps).
+    """
     heading = rng.uniform(0, 2 * math.pi) + np.cumsum(ch["yaw_rate"]) / FPS
     c, s = np.cos(heading), np.sin(heading)
     vel = np.stack((c * ch["v_side"] - s * ch["v_fwd"], s * ch["v_side"] + c * ch["v_fwd"]), axis=-1)
@@ -75,23 +97,31 @@ def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, c
     pelvis = np.concatenate((root_xy + offset, (body.pelvis_height + ch["dz"])[:, None]), axis=-1)
     pelvis_rot = yaw_roll_pitch(heading + ch["pelvis_yaw"], ch["pelvis_roll"], ch["pelvis_pitch"])
     feet = _plant_feet(contact, root_xy, heading, ch, body)
+    flights, spans, level = _stairs(blocks, feet, contact, heading)
+    if flights:  # the body rides on the ground its feet stand on
+        pelvis[:, 2] += _support_level(level, contact)
     pelvis[:, 2] -= _reach_drop(pelvis, pelvis_rot, feet, body)
     held, held_pitch = _held_feet(pelvis, pelvis_rot, heading, ch, body)
     _swing_feet(feet, held, held_pitch, heading, pelvis[:, 2], ch)
-    return pelvis, pelvis_rot, feet, heading
+    ground = _ground_under_feet(flights, spans, level, feet.grounded, feet.toe) if flights else level
+    return pelvis, pelvis_rot, feet, heading, _Terrain(np.array(flights, dtype=np.float64).reshape(-1, 8), ground)
 
 
-def _seats(blocks: list[_Block], pelvis: np.ndarray, heading: np.ndarray, visible: tuple[int, int]) -> np.ndarray:
+def _seats(blocks: list[_Block], pelvis: np.ndarray, heading: np.ndarray, ground: np.ndarray,
+           visible: tuple[int, int]) -> np.ndarray:
     """(K, 4) seats of the ``sit_down`` blocks seen in the ``visible`` frames: x, y, height, facing yaw.
 
-    The seat point is the pelvis' ground position once seated; x and y are in the visible frames' world.
+    The seat point is the pelvis' ground position once seated; the height is the seat top's z (its
+    height above the ground it stands on, plus that ground); the yaw is the direction the sitter faces,
+    in radians counter-clockwise from +x (``latentrl.scenes.Seat``'s ``yaw_deg``, in radians).
     """
     seats = []
     for b in blocks:
         if b.skill != "sit_down" or not (b.start < visible[1] and b.end > visible[0]):
             continue
         at = min(round((b.params["t0"] + b.params["duration"]) * FPS), len(pelvis) - 1)
-        seats.append((pelvis[at, 0], pelvis[at, 1], b.params["seat"], heading[at]))
+        facing = math.atan2(math.cos(heading[at]), -math.sin(heading[at]))
+        seats.append((pelvis[at, 0], pelvis[at, 1], b.params["seat"] + ground[at].mean(), facing))
     return np.array(seats, dtype=np.float32).reshape(-1, 4)
 
 
@@ -101,7 +131,7 @@ def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> di
     body = make_body(rng.uniform(*cfg.height_range))
     pad, frames = round(_PAD_S * FPS), round(cfg.seconds_per_sequence * FPS)
     blocks, ch, contact = _schedule(cfg, rng, body, counts, frames + 2 * pad, pad)
-    pelvis, pelvis_rot, feet, heading = _trajectories(cfg, rng, body, ch, contact)
+    pelvis, pelvis_rot, feet, heading, terrain = _trajectories(cfg, rng, body, ch, contact, blocks)
     keep = slice(pad, pad + frames)  # step 5 on the visible frames only
     local = _local_rotations(body, pelvis[keep], pelvis_rot[keep], {k: v[keep] for k, v in ch.items()},
                              _Feet(feet.toe[keep], feet.yaw[keep], feet.pitch[keep], feet.grounded[keep]))
@@ -109,9 +139,12 @@ def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> di
                 if min(b.end, pad + frames) > max(b.start, pad)]
     seq = make_sequence(body.rest_joints, matrix_to_axis_angle_np(local), pelvis[keep] - body.rest_joints[0],
                         segments)
-    seats = _seats(blocks, pelvis, heading, (pad, pad + frames))
+    seats = _seats(blocks, pelvis, heading, terrain.ground, (pad, pad + frames))
     if len(seats):
         seq["seats"] = seats
+    if len(terrain.flights):
+        seq["stairs"] = terrain.flights.astype(np.float32)
+        seq["foot_floor"] = terrain.ground[keep].astype(np.float32)
     return seq
 
 

@@ -164,6 +164,7 @@ _CHANNEL_DEFAULTS: dict[str, float] = {
     "toe_land": 0.0,  # heel-up foot pitch at a toe-first landing
     "tuck_hip": math.radians(30),  # hip and knee flexion of a leg held off the floor
     "tuck_knee": math.radians(100),
+    "stair": 0.0,  # +1 climbing, -1 descending stairs: the swing rises early / descends late
 }
 
 
@@ -195,6 +196,8 @@ def _sample_params(skill: str, rng: np.random.Generator, body: Body, steering: s
     """
     if skill in _POSTURE_SKILLS or skill == "crouch_walk":
         return _posture_params(skill, rng, body, prev)
+    if skill in STAIR_SKILLS:
+        return _stair_params(skill, rng, body)
     low = flights == "low"
     scale = _cadence_scale(body)
     if skill in ("walk", "turn_left", "turn_right"):
@@ -546,6 +549,39 @@ def _crouch_walk(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple
     return ch, contact
 
 
+# --- stairs -----------------------------------------------------------------------------------------------
+
+#: Range of the stair risers (m) and treads (m) of ``stairs_up`` and ``stairs_down``.
+RISER_RANGE = (0.10, 0.20)
+TREAD_RANGE = (0.28, 0.34)
+#: Skills that walk a flight of stairs (straight, one tread per step; geometry in ``feet._stairs``).
+STAIR_SKILLS = ("stairs_up", "stairs_down")
+
+
+def _stair_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
+    """A flight walked straight at one tread per step: the speed is the tread depth times the step rate."""
+    tread, riser = rng.uniform(*TREAD_RANGE), rng.uniform(*RISER_RANGE)
+    steps = rng.uniform(1.3, 1.7) * _cadence_scale(body)
+    up = skill == "stairs_up"
+    return dict(v_fwd=tread * steps, v_side=0.0, k=0.0, f=steps / 2, yaw_rate=0.0, rocker=0.0, toe_off=0.62,
+                drift=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), width=0.045 * body.height, shift=-0.04 * body.height,
+                tread=tread, riser=riser if up else -riser)
+
+
+def _stairs_walk(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple[dict, np.ndarray]:
+    """Walking a flight: flat-footed landings (no heel strike), the trunk forward going up, upright going down."""
+    ch, contact = _walk_like(phase, t, p, body)
+    up = p["riser"] > 0
+    ch["heel_strike"][:] = 0.0
+    ch["rocker_s"][:] = 0.0
+    ch["toe_land"][:] = 0.0
+    ch["heel_rise"][:] = math.radians(15 if up else 8)
+    ch["clearance"][:] = 0.05
+    ch["trunk_pitch"][:] = -math.radians(8 if up else 3)
+    ch["stair"][:] = 1.0 if up else -1.0
+    return ch, contact
+
+
 _SKILL_FNS: dict[str, _ChannelFn] = {
     "walk": _walk_like,
     "turn_left": _walk_like,
@@ -562,6 +598,8 @@ _SKILL_FNS: dict[str, _ChannelFn] = {
     "crouch_walk": _crouch_walk,
     "sit_down": _posture,
     "stand_up": _posture,
+    "stairs_up": _stairs_walk,
+    "stairs_down": _stairs_walk,
 }
 
 
