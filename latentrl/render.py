@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import DataError
 from latentrl.motion.clip import (  # noqa: F401  (the old address)
     MAX_COORD_M,
@@ -26,7 +27,16 @@ from latentrl.motion.clip import (  # noqa: F401  (the old address)
     load_motion_npz,
     save_motion_npz,
 )
-from latentrl.motion.skeleton import FPS, HEAD, JOINT_NAMES, NUM_JOINTS, PARENTS, SMPL_REST_OFFSETS, rest_offsets
+from latentrl.motion.skeleton import (
+    FOOT_JOINTS,
+    FPS,
+    HEAD,
+    JOINT_NAMES,
+    NUM_JOINTS,
+    PARENTS,
+    SMPL_REST_OFFSETS,
+    rest_offsets,
+)
 from latentrl.safe_io import atomic_write_bytes, atomic_write_with
 
 # --------------------------------------------------------------------------- pictures
@@ -160,7 +170,8 @@ class FrameRenderer:
         strip = self._image.new("RGBA", (self.size, height), (0, 0, 0, 0))
         draw = self._draw.Draw(strip)
         x = 8
-        for colour, name in ((LEFT, "left"), (RIGHT, "right"), (TRAIL, "pelvis track"), (WAYPOINT, "goal")):
+        for colour, name in ((LEFT, "left"), (RIGHT, "right"), (CONTACT, "foot on floor"), (TRAIL, "pelvis track"),
+                             (WAYPOINT, "goal")):
             draw.rectangle((x, 4, x + 12, height - 2), fill=colour)
             draw.text((x + 16, 2), name, fill=(40, 40, 40), font=self.small)
             x += 24 + int(draw.textlength(name, font=self.small))
@@ -203,6 +214,18 @@ class FrameRenderer:
             if depth.min() > NEAR:
                 draw.polygon([tuple(p) for p in pix], fill=WAYPOINT, outline=_scaled(WAYPOINT, 0.7))
 
+    def _colours(self, p: np.ndarray) -> list[tuple[int, int, int]]:
+        """Each bone's colour: its side's, the foot bones turning green with their floor contact (as in the viewer).
+
+        The contact weight is DART's skate weight ``2 - 2^clamp(h / 3 cm, 0, 1)`` of the foot joint's height.
+        """
+        colours = list(self.colours)
+        for b, (_, c) in enumerate(self.bones):
+            if c in FOOT_JOINTS:
+                w = 2.0 - 2.0 ** float(np.clip(p[c, 2] / CONTACT_HEIGHT_M, 0.0, 1.0))
+                colours[b] = _mix(colours[b], CONTACT, w)
+        return colours
+
     def _capsules(self, draw, cam: Camera, p: np.ndarray, shadow: bool) -> None:
         """Bones as round-capped thick lines, far ones first; ``shadow``: the same flattened onto the floor.
 
@@ -216,13 +239,14 @@ class FrameRenderer:
         if depth.min() <= NEAR:
             return
         scale = cam.focal / depth
+        colours = self._colours(p)
         order = sorted(range(len(self.bones)), key=lambda b: -(depth[self.bones[b][0]] + depth[self.bones[b][1]]))
         passes = ((1.0, 1.0),) if shadow else ((1.0, 0.62), (0.78, 1.0), (0.3, 1.3))
         head = pix[HEAD] + (0.0, -0.4 * HEAD_RADIUS * scale[HEAD])
         for k, shade in passes:
             for b in order:
                 a, c = self.bones[b]
-                colour = SHADOW if shadow else _scaled(self.colours[b], shade)
+                colour = SHADOW if shadow else _scaled(colours[b], shade)
                 r = max(0.75, k * self.radii[b] * 0.5 * (scale[a] + scale[c]))
                 draw.line((tuple(pix[a]), tuple(pix[c])), fill=colour, width=max(1, int(round(2 * r))))
                 for q in (pix[a], pix[c]):
@@ -237,7 +261,7 @@ class FrameRenderer:
         if depth.min() <= NEAR:
             return
         width = max(2, self.size // 160)
-        for (a, c), colour in zip(self.bones, self.colours):
+        for (a, c), colour in zip(self.bones, self._colours(p)):
             draw.line((tuple(pix[a]), tuple(pix[c])), fill=colour, width=width)
         for j in range(NUM_JOINTS):
             r = width * 1.2

@@ -202,3 +202,15 @@ def test_viewer_and_renders_share_their_colours():
 
     assert scene.side_colour(1) == render.LEFT and scene.side_colour(2) == render.RIGHT  # left_hip, right_hip
     assert tuple(scene.BONE_COLOURS[0, 0]) == render.LEFT  # pelvis -> left_hip
+
+
+def test_foot_bones_turn_green_in_floor_contact_as_in_the_viewer():
+    from latentrl.render import CONTACT, LEFT, RIGHT, FrameRenderer
+
+    renderer = FrameRenderer(128)
+    joints = t_pose(1)[0]
+    feet = [b for b, (_, c) in enumerate(renderer.bones) if c in (10, 11)]  # ankle -> foot
+    joints[:, 2] += 0.1 - joints[[10, 11], 2].min()  # both feet 10 cm up: their sides' colours
+    assert [renderer._colours(joints)[b] for b in feet] == [LEFT, RIGHT]
+    joints[:, 2] -= joints[[10, 11], 2].max()  # both on (or a little into) the floor: contact weight 1
+    assert [renderer._colours(joints)[b] for b in feet] == [CONTACT, CONTACT]
