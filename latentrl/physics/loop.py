@@ -35,6 +35,7 @@ class ClosedLoopResult:
         planned: (2 + 8 S, 22, 3) the model's plans as it placed them (seed frames first), world metres.
         simulated: (2 + 8 S, 22, 3) what the humanoid did, world metres.
         features: (2 + 8 S, 276) world features of the simulated motion.
+        soles: (2 + 8 S, 2, 3) each foot's lowest sole corner (the seed frames: the first simulated pose's).
         histories: S (2, 22, 3) world joints of the history each primitive was planned from (as the model got it).
         falls: frames at which the tracker counted a fall.
         assist_force: (2 + 8 S,) mean |assist force| per frame, N.
@@ -44,6 +45,7 @@ class ClosedLoopResult:
     planned: np.ndarray
     simulated: np.ndarray
     features: np.ndarray
+    soles: np.ndarray | None = None
     histories: list[np.ndarray] = field(default_factory=list)
     falls: list[int] = field(default_factory=list)
     assist_force: np.ndarray | None = None
@@ -91,6 +93,7 @@ def closed_loop(model: MotionModel, humanoid: Humanoid, texts: Sequence[str], no
                   first.root_angvel[-1], first.angle_vel[-1])
     sim_joints = [planned[0][:-1], sim.joints()[None]]
     sim_local = [features_rotations(seed[:-1]), _local(sim)[None]]
+    sim_soles = [np.repeat(sim.soles()[None], HISTORY_LENGTH, axis=0)]
     assist = [np.zeros(HISTORY_LENGTH)]
     histories, falls = [], []
     frame = HISTORY_LENGTH
@@ -112,6 +115,7 @@ def closed_loop(model: MotionModel, humanoid: Humanoid, texts: Sequence[str], no
         result = track(humanoid, ref, assist_hz, simulator=sim, start_state=False)
         sim_joints.append(result.joints[1:])
         sim_local.append(result.rotations[1:])
+        sim_soles.append(result.soles[1:])
         assist.append(result.assist_force[1:])
         falls += [frame + f - 1 for f in result.falls]
         frame += len(plan)
@@ -123,7 +127,8 @@ def closed_loop(model: MotionModel, humanoid: Humanoid, texts: Sequence[str], no
     local = np.concatenate(sim_local)
     return ClosedLoopResult(planned=np.concatenate(planned), simulated=joints,
                             features=simulated_features(joints, local, pelvis_delta), histories=histories,
-                            falls=falls, assist_force=np.concatenate(assist), mass=humanoid.mass)
+                            soles=np.concatenate(sim_soles), falls=falls, assist_force=np.concatenate(assist),
+                            mass=humanoid.mass)
 
 
 def _local(sim: Simulator) -> np.ndarray:

@@ -30,8 +30,10 @@ from latentrl.physics.humanoid import (
     BODY_JOINTS,
     GAINS,
     GRAVITY,
+    SOLE_JOINTS,
     Humanoid,
     kind,
+    sole_points,
 )
 from latentrl.physics.reference import Reference, local_rotations
 
@@ -50,6 +52,7 @@ class TrackResult:
     Attributes:
         joints: (T, 22, 3) simulated joint positions (body origins), metres.
         rotations: (T, 22, 3, 3) simulated local rotations (entry 0 = pelvis orientation).
+        soles: (T, 2, 3) the lowest sole corner of the left and the right foot, metres.
         fps: frames per second (the reference's).
         falls: frames at which a fall was counted.
         assist_force: (T,) mean |assist force| over each frame's physics steps, N (0 for frame 0).
@@ -61,6 +64,7 @@ class TrackResult:
 
     joints: np.ndarray
     rotations: np.ndarray
+    soles: np.ndarray
     fps: float
     falls: list[int] = field(default_factory=list)
     assist_force: np.ndarray | None = None
@@ -110,6 +114,7 @@ class Simulator:
         self.actuator_index = np.array([m.actuator(n).id for n in names])
         self.body_index = np.array([m.body(JOINT_NAMES[j]).id for j in range(NUM_JOINTS)])
         self.pelvis = int(self.body_index[0])
+        self.sole_offsets = sole_points(humanoid.rest_joints, humanoid.height)
         kp = np.array([GAINS[kind(j)][0] for j in BODY_JOINTS for _ in AXIS_ORDER[j]])
         kv = np.array([GAINS[kind(j)][1] for j in BODY_JOINTS for _ in AXIS_ORDER[j]])
         self.lead = kv / kp
@@ -156,6 +161,14 @@ class Simulator:
         """(22, 3, 3) world rotations of the 22 bodies now."""
         return self.data.xmat[self.body_index].reshape(NUM_JOINTS, 3, 3).copy()
 
+    def soles(self) -> np.ndarray:
+        """(2, 3) the lowest sole corner of the left and of the right foot (rear foot and toe boxes) now."""
+        ids = self.body_index[list(SOLE_JOINTS)]
+        rot = self.data.xmat[ids].reshape(-1, 3, 3)
+        corners = self.data.xpos[ids][:, None] + np.einsum("jab,jcb->jca", rot, self.sole_offsets)
+        feet = corners.reshape(2, 2, 4, 3).transpose(1, 0, 2, 3).reshape(2, 8, 3)  # SOLE_JOINTS = (7, 8, 10, 11)
+        return feet[np.arange(2), feet[..., 2].argmin(-1)]
+
 
 def _rotvec(r: np.ndarray) -> np.ndarray:
     """(3, 3) rotation -> axis-angle vector (radians)."""
@@ -199,11 +212,12 @@ def track(humanoid: Humanoid, ref: Reference, assist_hz: float | None = ASSIST_H
                       ref.angle_vel[0])
     joints = np.empty((frames, NUM_JOINTS, 3))
     world = np.empty((frames, NUM_JOINTS, 3, 3))
+    soles = np.empty((frames, 2, 3))
     force_log = np.zeros(frames)
     force_vec = np.zeros((frames, 3))
     torque_log = np.zeros(frames)
     falls: list[int] = []
-    joints[0], world[0] = sim.joints(), sim.world_rotations()
+    joints[0], world[0], soles[0] = sim.joints(), sim.world_rotations(), sim.soles()
     t0 = time.perf_counter()
     for t in range(1, frames):
         d.ctrl[sim.actuator_index] = ref.angles[t] + sim.lead * ref.angle_vel[t]
@@ -226,12 +240,12 @@ def track(humanoid: Humanoid, ref: Reference, assist_hz: float | None = ASSIST_H
                 tau_sum += float(np.linalg.norm(spring_t - kd_t * (r @ d.qvel[3:6])))
             mj.mj_step(m, d)
         force_log[t], torque_log[t] = f_sum / steps, tau_sum / steps
-        joints[t], world[t] = sim.joints(), sim.world_rotations()
+        joints[t], world[t], soles[t] = sim.joints(), sim.world_rotations(), sim.soles()
         if np.linalg.norm(joints[t] - ref.joints[t], axis=-1).mean() > FALL_DISTANCE_M or not np.isfinite(d.qpos).all():
             falls.append(t)
             sim.set_state(ref.root_pos[t], ref.root_rot[t], ref.angles[t], ref.root_vel[t], ref.root_angvel[t],
                           ref.angle_vel[t])
     d.xfrc_applied[:] = 0.0
-    return TrackResult(joints=joints, rotations=local_rotations(world), fps=ref.fps, falls=falls,
+    return TrackResult(joints=joints, rotations=local_rotations(world), soles=soles, fps=ref.fps, falls=falls,
                        assist_force=force_log, assist_vector=force_vec, assist_torque=torque_log, mass=humanoid.mass,
                        sim_seconds=time.perf_counter() - t0)

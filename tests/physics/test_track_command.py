@@ -26,8 +26,9 @@ def test_track_writes_a_motion_clip_and_a_report(sampled_walk, tmp_path, capsys)
     assert report["falls"] == 0 and report["fall_frames"] == []
     assert set(report["assist"]) >= {"force_Ns_per_s", "force_percent_body_weight", "torque_Nms_per_s"}
     assert report["assist"]["force_Ns_per_s"] > 0
-    for side in ("reference", "simulation"):
+    for side in ("reference", "simulation", "simulation_soles"):
         assert set(report[side]) == {"penetration_mm", "floating_mm", "skating_mm"}
+    assert report["simulation_soles"]["floating_mm"] < report["simulation"]["floating_mm"]  # soles are lower
     assert 0 < report["tracking"]["retarget_mpjpe_mm"] < 100
     assert report["tracking"]["mpjpe_mm"] < 300
     assert report["speed"]["real_time_factor"] > 0
