@@ -54,6 +54,79 @@ def check_device(device: str, what: str = "--device"):
     raise ConfigError(f"{what}: device type '{parsed.type}' is not supported; use 'cpu' or 'cuda[:<index>]'")
 
 
+# --------------------------------------------------------------------------- torch.compile
+def check_compile(device, what: str = "env.compile") -> None:
+    """Refuse ``torch.compile`` before any work when this machine cannot compile: one line naming ``what``.
+
+    Why: torch compiles lazily, at the first step, and then fails with a dynamo traceback. It needs a
+    writable cache folder (``TORCHINDUCTOR_CACHE_DIR``, default ``<tmp>/torchinductor_<user>``; and
+    ``TRITON_CACHE_DIR`` when set, on CUDA), a C++ compiler on the CPU (inductor runs each of
+    ``torch._inductor.config.cpp.cxx``, i.e. ``$CXX`` or ``g++``, with ``--version`` and takes the first
+    that works) and a C compiler on CUDA (Triton's rule: ``$CC``, else ``gcc``, else ``clang``).
+    """
+    import torch
+
+    kind = torch.device(device).type
+    folders = [("TORCHINDUCTOR_CACHE_DIR", _inductor_cache_dir())]
+    if kind == "cuda" and os.environ.get("TRITON_CACHE_DIR"):
+        folders.append(("TRITON_CACHE_DIR", os.environ["TRITON_CACHE_DIR"]))
+    for variable, folder in folders:
+        path = Path(folder)
+        base = _nearest_existing(path)
+        reason = (f"{base} is a file" if not base.is_dir() else
+                  f"{path} is not a directory" if path.exists() and not path.is_dir() else _write_problem(base))
+        if reason:
+            source = f"{variable}={os.environ[variable]}" if os.environ.get(variable) else f"default of {variable}"
+            raise ConfigError(f"{what}: torch.compile's cache folder {path} ({source}) is not writable ({reason}); "
+                              f"set {variable} to a writable folder, or set {what}=false")
+    if kind == "cpu":
+        tried = _cxx_candidates()
+        if not any(_runs(c) for c in tried):
+            raise ConfigError(f"{what}: torch.compile on the CPU needs a C++ compiler, and none runs here (tried "
+                              f"{', '.join(repr(c) for c in tried)}: $CXX, else g++ on PATH); install g++ or set CXX "
+                              f"to one, or set {what}=false")
+    elif kind == "cuda":
+        cc = os.environ.get("CC") or shutil.which("gcc") or shutil.which("clang")
+        if not cc or not _runs(cc):
+            tried = f"CC={os.environ['CC']!r}" if os.environ.get("CC") else "gcc or clang on PATH"
+            raise ConfigError(f"{what}: torch.compile on CUDA needs a C compiler for Triton, and none runs here "
+                              f"(tried {tried}); install gcc or set CC to one, or set {what}=false")
+
+
+def _inductor_cache_dir() -> str:
+    """Where inductor will keep its cache: torch's rule, restated because importing ``torch._inductor`` creates it."""
+    import getpass
+    import re
+
+    folder = os.environ.get("TORCHINDUCTOR_CACHE_DIR")
+    if not folder:
+        try:
+            user = getpass.getuser()
+        except (KeyError, ModuleNotFoundError, OSError):
+            user = f"uid_{os.getuid()}" if hasattr(os, "getuid") else "unknown_user"
+        folder = os.path.join(tempfile.gettempdir(), "torchinductor_" + re.sub(r'[\\/:*?"<>|]', "_", user))
+    return os.path.abspath(folder)
+
+
+def _cxx_candidates() -> list[str]:
+    """The C++ compilers inductor would try: ``config.cpp.cxx`` (``$CXX`` or ``g++`` when torch was imported)."""
+    from torch._inductor import config
+
+    found = config.cpp.cxx if isinstance(config.cpp.cxx, (list, tuple)) else (config.cpp.cxx,)
+    return [str(c) for c in found if c is not None] or ["g++"]
+
+
+def _runs(program: str) -> bool:
+    """Whether ``program --version`` runs and exits 0 (how inductor and Triton probe a compiler)."""
+    import subprocess
+
+    try:
+        return subprocess.run([program, "--version"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              timeout=60).returncode == 0
+    except (OSError, subprocess.SubprocessError):
+        return False
+
+
 # --------------------------------------------------------------------------- output folders
 def _nearest_existing(path: Path) -> Path:
     """``path`` itself or its closest ancestor that exists."""
@@ -76,6 +149,14 @@ def check_writable(folder: str | Path, what: str = "output folder") -> None:
     base = _nearest_existing(folder)
     if not base.is_dir():
         raise ConfigError(f"{what} {folder} cannot be created: {base} is a file, not a directory")
+    reason = _write_problem(base)
+    if reason:
+        raise ConfigError(f"{what} {folder} is not writable ({reason} in {base}); choose another path or fix "
+                          "its permissions")
+
+
+def _write_problem(base: Path) -> str | None:
+    """None if a probe file can be written in the existing folder ``base``, else why not."""
     try:
         fd, probe = tempfile.mkstemp(prefix=".latentrl-probe-", dir=base)
         try:
@@ -84,9 +165,8 @@ def check_writable(folder: str | Path, what: str = "output folder") -> None:
             os.close(fd)
             os.unlink(probe)
     except OSError as exc:
-        reason = exc.strerror or type(exc).__name__
-        raise ConfigError(f"{what} {folder} is not writable ({reason} in {base}); choose another path or fix "
-                          "its permissions") from None
+        return exc.strerror or type(exc).__name__
+    return None
 
 
 def check_free_space(folder: str | Path, need_bytes: int, what: str = "output folder") -> None:

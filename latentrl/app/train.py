@@ -32,7 +32,7 @@ from latentrl.envs.tasks import task_spec
 from latentrl.errors import ConfigError
 from latentrl.evaluation.config import EvalConfig
 from latentrl.ppo.config import PolicyConfig, PPOConfig
-from latentrl.preflight import check_device, check_writable
+from latentrl.preflight import check_compile, check_device, check_writable
 from latentrl.resources import config_file
 from latentrl.timing import busy_machine_warning
 
@@ -150,17 +150,32 @@ def launch(req: TrainRequest) -> int:
         raise ConfigError(SB3_SINGLE)
     if not req.resume and not req.config:
         raise ConfigError("give a CONFIG file (e.g. configs/quick.yaml) or --resume RUN_DIR")
+    from latentrl.ppo import distributed
+
+    distributed.timeout_s()  # a malformed LATENTRL_DIST_TIMEOUT fails here, not in every rank
     if not req.resume:  # config and one run directory for all ranks, checked before any rank starts
-        load_train_config(req.config, request_overrides(req)).validate()
+        cfg = load_train_config(req.config, request_overrides(req))
+        cfg.validate()
+        if cfg.env.compile:
+            check_compile(check_device(cfg.ppo.device, "ppo.device"), "env.compile")
         req = dataclasses.replace(req, run_dir=str(default_run_dir(req)))
         check_new_run(Path(req.run_dir))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
            "-m", "latentrl", *req.argv()]
     print(f"launching {req.nproc} ranks: {' '.join(cmd[1:])}", flush=True)
-    code = subprocess.call(cmd)
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1)
+    output = distributed.TorchrunOutput()  # the ranks' lines pass; torchrun's report becomes one line below
+    for line in proc.stderr:
+        sys.stderr.writelines(output.feed(line))
+        sys.stderr.flush()
+    sys.stderr.writelines(output.flush())
+    code = proc.wait()
     if code:
-        print(f"latentrl: error: a rank failed (torchrun exit {code}); every rank was stopped, see its message above",
-              file=sys.stderr)
+        run_dir = Path(req.resume or req.run_dir)
+        cause = output.cause() or f"a rank failed (torchrun exit {code})"
+        resume = (f"; continue the run with: latentrl train --resume {run_dir} --nproc {req.nproc}"
+                  if (run_dir / "config.yaml").is_file() else "")
+        print(f"latentrl: error: {cause}; torchrun stopped the other ranks{resume}", file=sys.stderr, flush=True)
     return code
 
 
@@ -193,6 +208,8 @@ def train(req: TrainRequest) -> int:
 
     if req.nproc and req.nproc > 1 and not distributed.launched():
         return launch(req)
+    if note := distributed.check_environment():  # stray RANK/WORLD_SIZE: one line, or ignored with this note
+        print(f"latentrl: note: {note}", flush=True)
     if distributed.launched() and req.trainer == "sb3":
         raise ConfigError(SB3_SINGLE)
     overrides = request_overrides(req)
@@ -244,6 +261,8 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     if trainer == "sb3" and distributed.launched():
         raise ConfigError(SB3_SINGLE)
     device = distributed.rank_device(str(check_device(cfg.ppo.device, "ppo.device")))  # cuda:LOCAL_RANK per rank
+    if cfg.env.compile:  # before the first step compiles (and fails deep inside torch)
+        check_compile(device, "env.compile")
     collective = distributed.init(device)
     if cfg.threads:
         torch.set_num_threads(cfg.threads)

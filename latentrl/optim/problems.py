@@ -102,6 +102,9 @@ class _Where:
 def _number(value, where: _Where, fld: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise where.error(fld, f"expected a number, got {value!r:.40}")
+    if isinstance(value, int) and abs(value) > MAX_COORD_M:  # compared as an integer: 400 digits overflow a float
+        raise where.error(fld, f"an integer of {len(str(abs(value)))} digits is more than {MAX_COORD_M:g} m "
+                                "from the origin")
     if not math.isfinite(value):
         raise where.error(fld, f"expected a finite number, got {value}")
     if abs(value) > MAX_COORD_M:

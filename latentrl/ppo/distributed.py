@@ -20,28 +20,115 @@ bounds every collective in case a rank hangs.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import os
-from collections.abc import Iterable
+import re
+import signal
+from collections.abc import Iterable, Iterator
 from typing import Any
 
 import torch
 from torch import nn
 
-from latentrl.errors import ConfigError
+from latentrl.errors import ConfigError, LatentRLError
+
+
+class RankLostError(LatentRLError):
+    """A collective failed because another rank died or hung: a fault of the run, not bad input (exit 1)."""
+
+    exit_code = 1
+
+
+def _first_line(exc: BaseException) -> str:
+    """The gist of a backend error: its first line without the ``[file.cc:123]`` prefix, at most 160 characters."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    text = re.sub(r"^\[[^\]]*\.(cc|cpp|h):\d+\]\s*", "", text)
+    return text if len(text) <= 160 else text[:157] + "..."
 
 TIMEOUT_VAR = "LATENTRL_DIST_TIMEOUT"
 DEFAULT_TIMEOUT_S = 1800.0
 
 
+MAX_TIMEOUT_S = 7 * 24 * 3600.0
+LAUNCH_VARS = ("RANK", "WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT")
+"""What torchrun sets for every rank; ``init_process_group`` needs all four."""
+
+
 def launched() -> bool:
-    """Whether this process was started by torchrun (``WORLD_SIZE`` and ``RANK`` set)."""
-    return "WORLD_SIZE" in os.environ and "RANK" in os.environ
+    """Whether this process was started by torchrun: ``RANK``, ``WORLD_SIZE``, ``MASTER_ADDR``, ``MASTER_PORT`` set.
+
+    Why all four: a stray ``RANK``/``WORLD_SIZE`` (left by a cluster job or a notebook) is not a launch,
+    and without ``MASTER_ADDR`` the rendezvous fails (see :func:`check_environment`).
+    """
+    return all(os.environ.get(name) for name in LAUNCH_VARS)
+
+
+def _env_int(name: str, low: int, default: int) -> int:
+    """Environment variable ``name`` as an integer >= ``low`` (``default`` when unset), or one line naming it."""
+    raw = os.environ.get(name)
+    if not raw:
+        return default
+    try:
+        value = int(raw.strip())
+    except ValueError:
+        value = low - 1
+    if value < low:
+        raise ConfigError(f"environment variable {name}={raw!r}: expected an integer >= {low} (torchrun sets it); "
+                          f"unset it, or start the ranks with torchrun or latentrl train --nproc N")
+    return value
+
+
+def check_environment() -> str | None:
+    """Check torchrun's variables before anything starts; a note when stray ones are ignored, else None.
+
+    A complete launch (:func:`launched`) must have integer ``RANK`` < ``WORLD_SIZE`` and ``LOCAL_RANK``
+    and a valid :func:`timeout_s`. A partial one is a leftover: with ``WORLD_SIZE`` above 1 it is
+    refused in one line (the other ranks would wait for a rendezvous that never comes), otherwise it is
+    ignored and the note says so (the run is one process).
+    """
+    present = [name for name in ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
+               if os.environ.get(name)]
+    if not present:
+        return None
+    world = _env_int("WORLD_SIZE", 1, 1)
+    rank = _env_int("RANK", 0, 0)
+    _env_int("LOCAL_RANK", 0, 0)
+    shown = " ".join(f"{name}={os.environ[name]}" for name in present)
+    if launched():
+        if rank >= world:
+            raise ConfigError(f"environment: RANK={rank} must be below WORLD_SIZE={world} ({shown})")
+        timeout_s()
+        return None
+    missing = [name for name in LAUNCH_VARS if not os.environ.get(name)]
+    if world > 1:
+        raise ConfigError(f"environment: {shown} is set but {' and '.join(missing)} not: not a complete torchrun "
+                          f"launch; unset {' '.join(n for n in present if n in ('RANK', 'WORLD_SIZE', 'LOCAL_RANK'))}"
+                          f" to train in one process, or start the ranks with torchrun or latentrl train --nproc N")
+    if any(name in present for name in ("RANK", "WORLD_SIZE", "LOCAL_RANK")):
+        return f"ignoring {shown} ({' and '.join(missing)} not set: not a torchrun launch); training in one process"
+    return None
+
+
+def timeout_s() -> float:
+    """Seconds each collective may wait: ``LATENTRL_DIST_TIMEOUT`` (default 1800), a number in (0, 7 days]."""
+    raw = os.environ.get(TIMEOUT_VAR)
+    if raw is None:
+        return DEFAULT_TIMEOUT_S
+    try:
+        value = float(raw)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value <= MAX_TIMEOUT_S:  # NaN fails both
+        raise ConfigError(f"environment variable {TIMEOUT_VAR}={raw!r}: expected the seconds each collective may "
+                          f"wait, a number in (0, {MAX_TIMEOUT_S:.0f}] (default {DEFAULT_TIMEOUT_S:.0f}); fix or "
+                          "unset it")
+    return value
 
 
 def local_rank() -> int:
     """This process's GPU index on its node (torchrun's ``LOCAL_RANK``; 0 outside torchrun)."""
-    return int(os.environ.get("LOCAL_RANK", "0"))
+    return _env_int("LOCAL_RANK", 0, 0)
 
 
 def rank_device(device: str) -> str:
@@ -65,6 +152,15 @@ class Collective:
     def __init__(self, rank: int = 0, world_size: int = 1):
         self.rank, self.world_size = rank, world_size
 
+    @contextlib.contextmanager
+    def guard(self, op: str) -> Iterator[None]:
+        """Turn a collective that fails because another rank is gone into one :class:`RankLostError` line."""
+        try:
+            yield
+        except RuntimeError as exc:  # gloo/nccl: a peer closed its connection, or the timeout passed
+            raise RankLostError(f"rank {self.rank}: {op} with the other ranks failed ({_first_line(exc)}); another "
+                                f"rank stopped or hung, so this one stops too") from None
+
     @property
     def enabled(self) -> bool:
         """More than one rank: only then do the collectives communicate."""
@@ -82,14 +178,16 @@ class Collective:
         if not self.enabled:
             return
         for tensor in list(module.parameters()) + list(module.buffers()):
-            torch.distributed.broadcast(tensor.data, src=0)
+            with self.guard("broadcast"):
+                torch.distributed.broadcast(tensor.data, src=0)
 
     def broadcast_object(self, value: Any) -> Any:
         """Rank 0's ``value`` on every rank (a run directory, a stop flag)."""
         if not self.enabled:
             return value
         box = [value]
-        torch.distributed.broadcast_object_list(box, src=0)
+        with self.guard("broadcast_object_list"):
+            torch.distributed.broadcast_object_list(box, src=0)
         return box[0]
 
     # ------------------------------------------------------------------ update
@@ -101,7 +199,8 @@ class Collective:
         if not grads:
             return
         flat = torch.cat([g.reshape(-1) for g in grads])
-        torch.distributed.all_reduce(flat)
+        with self.guard("all_reduce"):
+            torch.distributed.all_reduce(flat)
         flat /= self.world_size
         offset = 0
         for g in grads:
@@ -113,7 +212,8 @@ class Collective:
         if not self.enabled:
             return value
         value = value.detach().clone()
-        torch.distributed.all_reduce(value)
+        with self.guard("all_reduce"):
+            torch.distributed.all_reduce(value)
         return value / self.world_size
 
     @torch.no_grad()
@@ -132,11 +232,13 @@ class Collective:
         n_local = float(batch.shape[0])
         mean_local = batch.mean(0)
         head = torch.cat((torch.tensor([n_local], dtype=batch.dtype, device=batch.device), mean_local * n_local))
-        torch.distributed.all_reduce(head)
+        with self.guard("all_reduce"):
+            torch.distributed.all_reduce(head)
         n = head[0]
         mean = head[1:] / n
         m2 = (batch - mean).square().sum(0)  # this rank's squared deviations from the global mean
-        torch.distributed.all_reduce(m2)
+        with self.guard("all_reduce"):
+            torch.distributed.all_reduce(m2)
         normalizer.update_from_moments(mean, m2 / n, int(n.item()))
 
     # ------------------------------------------------------------------ logging
@@ -145,7 +247,8 @@ class Collective:
         if not self.enabled:
             return [value]
         out: list[Any] = [None] * self.world_size
-        torch.distributed.all_gather_object(out, value)
+        with self.guard("all_gather_object"):
+            torch.distributed.all_gather_object(out, value)
         return out
 
     @torch.no_grad()
@@ -165,7 +268,8 @@ class Collective:
     def barrier(self) -> None:
         """Wait until every rank gets here (nothing to wait for in one process)."""
         if self.enabled:
-            torch.distributed.barrier()
+            with self.guard("barrier"):
+                torch.distributed.barrier()
 
 
 SINGLE = Collective()
@@ -181,7 +285,7 @@ def init(device: str) -> Collective:
         return _current
     if torch.device(device).type == "cuda":
         torch.cuda.set_device(local_rank())
-    timeout = datetime.timedelta(seconds=float(os.environ.get(TIMEOUT_VAR, DEFAULT_TIMEOUT_S)))
+    timeout = datetime.timedelta(seconds=timeout_s())
     torch.distributed.init_process_group(backend_for(device), timeout=timeout)
     _current = Collective(torch.distributed.get_rank(), torch.distributed.get_world_size())
     return _current
@@ -198,3 +302,68 @@ def shutdown() -> None:
     if _current is not SINGLE and torch.distributed.is_initialized():
         torch.distributed.destroy_process_group()
     _current = SINGLE
+
+
+# --------------------------------------------------------------------------- torchrun's report
+_ELASTIC_LOG = re.compile(r"^[IWE]\d{4} [\d:.]+ +\d+ .*torch/distributed/")
+
+
+class TorchrunOutput:
+    """Filters torchrun's stderr for ``latentrl train --nproc``: the ranks' lines pass, torchrun's own go.
+
+    Why: when a rank dies, torchrun logs its agent's steps and raises ``ChildFailedError`` with a
+    traceback and a report block. :meth:`cause` reads the report's root cause (which rank, its exit
+    code or signal) so the launcher can say it in one line instead.
+    """
+
+    def __init__(self) -> None:
+        self.held: list[str] = []
+        self.report: list[str] | None = None
+        self.report_done = False
+
+    def feed(self, line: str) -> list[str]:
+        """The lines to show now, given the next line of torchrun's stderr."""
+        if _ELASTIC_LOG.match(line):
+            return []
+        if self.report is not None and not self.report_done:
+            self.report.append(line)
+            if line.startswith("====") and any(x.startswith("Root Cause") for x in self.report):
+                self.report_done = True
+            return []
+        if line.startswith("Traceback (most recent call last):"):
+            shown, self.held = self.held, [line]
+            return shown
+        if self.held:
+            if line[:1].isspace():
+                self.held.append(line)
+                return []
+            if "ChildFailedError" in line:  # torchrun's own traceback: keep only its report
+                self.held, self.report, self.report_done = [], [line], False
+                return []
+            shown, self.held = self.held + [line], []
+            return shown
+        return [line]
+
+    def flush(self) -> list[str]:
+        """Lines still held back (a traceback that did not end)."""
+        shown, self.held = self.held, []
+        return shown
+
+    def cause(self) -> str | None:
+        """``rank 1 was killed by SIGKILL`` / ``rank 0 exited with code 2``: the report's root cause, if any."""
+        if not self.report:
+            return None
+        text = "".join(self.report)
+        root = text.split("Root Cause", 1)[-1]
+        rank = re.search(r"rank\s*:\s*(\d+)", root)
+        code = re.search(r"exitcode\s*:\s*(-?\d+)", root)
+        if not rank or not code:
+            return None
+        value = int(code.group(1))
+        if value < 0:
+            try:
+                name = signal.Signals(-value).name
+            except ValueError:
+                name = f"signal {-value}"
+            return f"rank {rank.group(1)} was killed by {name}"
+        return f"rank {rank.group(1)} exited with code {value}"
