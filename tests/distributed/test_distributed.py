@@ -97,8 +97,8 @@ def test_a_failing_rank_stops_every_rank(tmp_path):
 def test_the_sb3_trainer_is_refused_under_torchrun(monkeypatch, capsys):
     from latentrl.app.cli import main
 
-    monkeypatch.setenv("RANK", "0")
-    monkeypatch.setenv("WORLD_SIZE", "2")
+    for name, value in {"RANK": "0", "WORLD_SIZE": "2", "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": "29999"}.items():
+        monkeypatch.setenv(name, value)  # what torchrun sets
     assert main(["train", "configs/tiny.yaml", "--trainer", "sb3"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "trainer 'sb3' runs in one process only" in err
@@ -111,3 +111,66 @@ def test_nproc_relaunches_the_same_command_on_every_rank():
                        progress=False)
     assert req.argv() == ["train", "configs/tiny.yaml", "--set", "ppo.seed=4", "--trainer", "native", "--seed", "2",
                           "--run-dir", "runs/x", "--no-progress"]
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(x) for x in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def _rank_pids(launcher: int) -> dict[int, int]:
+    """rank -> PID of the ranks under ``latentrl train --nproc`` (launcher -> torchrun -> ranks)."""
+    found = {}
+    for torchrun in _children(launcher):
+        for pid in _children(torchrun):
+            try:
+                env = Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            found.update({int(e[5:]): pid for e in env if e.startswith(b"RANK=")})
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="finds the ranks through /proc")
+@pytest.mark.parametrize("victim", [0, 1])
+def test_a_rank_killed_mid_run_stops_the_others_with_one_line_and_the_run_resumes(victim, tmp_path):
+    """SIGKILL of one rank of ``latentrl train --nproc 2``: the other stops at once, one line names the rank
+    and the signal and says how to resume; ``--resume RUN --nproc 2`` then finishes from the newest checkpoint."""
+    import signal
+    import time
+
+    run = tmp_path / "run"
+    total = 128 * 40  # 2 ranks x 8 envs x 8 steps = 128 env steps per iteration
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
+    cmd = [sys.executable, "-m", "latentrl", "train", str(ROOT / "configs" / "tiny.yaml"), "--nproc", "2",
+           "--total-steps", str(total), "--run-dir", str(run), "--no-progress"]
+    proc = subprocess.Popen(cmd, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + LAUNCH_TIMEOUT_S
+        while len(ckpt.iteration_checkpoints(run)) < 1 or len(_rank_pids(proc.pid)) < 2:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "training did not reach its first checkpoint"
+            time.sleep(0.05)
+        os.kill(_rank_pids(proc.pid)[victim], signal.SIGKILL)
+        _, err = proc.communicate(timeout=60)  # bounded: a hang fails here
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode != 0
+    assert "Traceback" not in err and "ChildFailedError" not in err, err[-3000:]
+    last = err.strip().splitlines()[-1]
+    assert last == (f"latentrl: error: rank {victim} was killed by SIGKILL; torchrun stopped the other ranks; "
+                    f"continue the run with: latentrl train --resume {run} --nproc 2"), err[-3000:]
+    newest = ckpt.read_checkpoint(ckpt.iteration_checkpoints(run)[-1])
+
+    resumed = subprocess.run([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--nproc", "2",
+                              "--no-progress"], env=env, cwd=tmp_path, capture_output=True, text=True,
+                             timeout=LAUNCH_TIMEOUT_S * 2)
+    ok(resumed)
+    log = (run / "train.log").read_text()
+    assert f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps" in log  # not from 0
+    assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
