@@ -62,14 +62,19 @@ def quality(joints: np.ndarray, floor: float = 0.0) -> dict[str, float]:
 
 
 def sole_quality(joints: np.ndarray, soles: np.ndarray, floor: float = 0.0) -> dict[str, float]:
-    """CLoSD's metrics measured at the humanoid's soles: each foot's lowest sole corner stands in for its foot joint.
+    """CLoSD's metrics at the humanoid's soles: (T, 22, 3) joints, (T, 4, 3) :meth:`Simulator.soles` rows.
 
     Why: the humanoid's toe-base joints sit 2 cm above a flat sole, so at the joints its contacts never come
-    within CLoSD's 5 mm.
+    within CLoSD's 5 mm. Here each foot box (rear foot, toes) stands in for a foot joint: its lowest corner
+    decides penetration, floating and contact, its sole centre's horizontal displacement is the skating.
     """
     pseudo = np.array(joints, dtype=np.float64, copy=True)
-    pseudo[:, list(FOOT_JOINTS)] = soles
-    return quality(pseudo, floor)
+    pseudo[:, [7, 8, 10, 11]] = soles
+    out = quality(pseudo, floor)
+    rear = pseudo.copy()
+    rear[:, list(FOOT_JOINTS)] = soles[:, :2]
+    out["skating_mm"] = (out["skating_mm"] + quality(rear, floor)["skating_mm"]) / 2  # all four boxes
+    return out
 
 
 def track_report(clip, result, kinematic: np.ndarray, humanoid, assist_hz: float, source: str) -> dict:

@@ -35,7 +35,7 @@ class ClosedLoopResult:
         planned: (2 + 8 S, 22, 3) the model's plans as it placed them (seed frames first), world metres.
         simulated: (2 + 8 S, 22, 3) what the humanoid did, world metres.
         features: (2 + 8 S, 276) world features of the simulated motion.
-        soles: (2 + 8 S, 2, 3) each foot's lowest sole corner (the seed frames: the first simulated pose's).
+        soles: (2 + 8 S, 4, 3) each foot box's sole (:meth:`Simulator.soles`; seed frames: the first simulated pose's).
         histories: S (2, 22, 3) world joints of the history each primitive was planned from (as the model got it).
         falls: frames at which the tracker counted a fall.
         assist_force: (2 + 8 S,) mean |assist force| per frame, N.

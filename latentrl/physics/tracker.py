@@ -52,7 +52,7 @@ class TrackResult:
     Attributes:
         joints: (T, 22, 3) simulated joint positions (body origins), metres.
         rotations: (T, 22, 3, 3) simulated local rotations (entry 0 = pelvis orientation).
-        soles: (T, 2, 3) the lowest sole corner of the left and the right foot, metres.
+        soles: (T, 4, 3) each foot box's sole centre x, y and lowest corner z (:meth:`Simulator.soles`), metres.
         fps: frames per second (the reference's).
         falls: frames at which a fall was counted.
         assist_force: (T,) mean |assist force| over each frame's physics steps, N (0 for frame 0).
@@ -162,12 +162,14 @@ class Simulator:
         return self.data.xmat[self.body_index].reshape(NUM_JOINTS, 3, 3).copy()
 
     def soles(self) -> np.ndarray:
-        """(2, 3) the lowest sole corner of the left and of the right foot (rear foot and toe boxes) now."""
+        """(4, 3) per foot box (left, right rear foot; left, right toes): its sole's centre x, y and lowest corner z.
+
+        The centre is what slides, the lowest corner what touches: CLoSD's metrics at the soles read both.
+        """
         ids = self.body_index[list(SOLE_JOINTS)]
         rot = self.data.xmat[ids].reshape(-1, 3, 3)
         corners = self.data.xpos[ids][:, None] + np.einsum("jab,jcb->jca", rot, self.sole_offsets)
-        feet = corners.reshape(2, 2, 4, 3).transpose(1, 0, 2, 3).reshape(2, 8, 3)  # SOLE_JOINTS = (7, 8, 10, 11)
-        return feet[np.arange(2), feet[..., 2].argmin(-1)]
+        return np.concatenate((corners[..., :2].mean(1), corners[..., 2].min(1)[:, None]), axis=-1)
 
 
 def _rotvec(r: np.ndarray) -> np.ndarray:
@@ -212,7 +214,7 @@ def track(humanoid: Humanoid, ref: Reference, assist_hz: float | None = ASSIST_H
                       ref.angle_vel[0])
     joints = np.empty((frames, NUM_JOINTS, 3))
     world = np.empty((frames, NUM_JOINTS, 3, 3))
-    soles = np.empty((frames, 2, 3))
+    soles = np.empty((frames, len(SOLE_JOINTS), 3))
     force_log = np.zeros(frames)
     force_vec = np.zeros((frames, 3))
     torque_log = np.zeros(frames)

@@ -53,7 +53,7 @@ def test_stands_ten_seconds_under_pd_at_rest_without_assist():
     joints = sim.joints()
     assert np.linalg.norm(joints - rest, axis=-1).max() < 0.03  # upright, feet where they were
     assert abs(joints[0, 2] - rest[0, 2]) < 0.02
-    assert np.abs(sim.soles()[:, 2]).max() < 0.005  # flat on the floor, neither sunk nor lifted
+    assert np.abs(sim.soles()[:, 2]).max() < 0.005  # all four foot boxes flat on the floor, neither sunk nor lifted
     assert np.abs(sim.data.xfrc_applied).max() == 0.0
 
 
