@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from latentrl.constants import GUIDANCE_SCALE
+from latentrl.constants import GUIDANCE_SCALE, MAX_GUIDANCE
 from latentrl.errors import DataError, LatentRLError
 from latentrl.motion.canonical import WorldTransform, features_to_world, world_to_canonical
 from latentrl.motion.clip import MotionClip, primitive_layout
@@ -66,6 +66,9 @@ class OptimizeSettings:
             raise LatentRLError(f"batch: expected 1-4096 problems, got {self.batch}")
         if not (0 <= self.init_scale <= 10):
             raise LatentRLError(f"init_scale: expected 0-10, got {self.init_scale}")
+        if not (np.isfinite(self.guidance) and abs(self.guidance) <= MAX_GUIDANCE):  # nan/1e30: a NaN motion
+            raise LatentRLError(f"guidance: expected a finite number in [-{MAX_GUIDANCE:g}, {MAX_GUIDANCE:g}], "
+                                f"got {self.guidance}")
         unknown = sorted(set(self.weights) - set(REGULARIZERS))
         if unknown:
             raise LatentRLError(f"weights: unknown regularizer {unknown[0]!r}; expected {', '.join(REGULARIZERS)}")
