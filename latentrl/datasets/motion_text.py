@@ -19,6 +19,8 @@ field                     dtype, shape       meaning
 ``stairs`` (optional)     float32 (J, 8)     stair flights: x, y of the bottom edge's midpoint, climbing
                                              direction (rad from +x), width, riser, tread (m), steps, base z
 ``foot_floor`` (optional) float32 (T, 2)     terrain height under the left and right foot joints (10, 11)
+``reaches`` (optional)    float32 (R, 6)     hand targets: x, y, z, hand (0 left, 1 right), first and last
+                                             frame of the hold with the wrist joint on the target
 ========================  =================  =========================================================
 
 Optional fields (``OPTIONAL_FIELDS``) are scene data: a file without them has none of that kind.
@@ -60,6 +62,7 @@ OPTIONAL_FIELDS: dict[str, tuple[str, tuple]] = {
     "seats": ("float32", ("K", 4)),
     "stairs": ("float32", ("J", 8)),
     "foot_floor": ("float32", ("T", 2)),
+    "reaches": ("float32", ("R", 6)),
 }
 
 #: Largest allowed distance (m) between stored ``joints`` and the forward kinematics of the stored pose.

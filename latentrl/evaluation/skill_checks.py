@@ -1,6 +1,6 @@
 """Checks of the scene skills on a decoded motion, each returning its measure as a tensor.
 
-Crouch depth, sitting on a seat and feet on stair treads; reaches join as the generator makes them.
+Crouch depth, sitting on a seat, feet on stair treads, a hand on its target, a wave.
 
 Inputs are world joints ``(..., T, 22, 3)`` in metres, z up, floor at z = 0, as the metrics of
 ``evaluation/metrics.py`` take them; scene parameters are the fields the procedural generator stores
@@ -12,6 +12,9 @@ with its sequences (``docs/datasets.md``), so the same function judges the data 
 - stairs: each foot joint's height above the tread under it while the foot is planted: its depth below
   the tread (penetration, target <= 1 cm) and its height above it (float, target <= 3 cm; a flat foot's
   toe joint sits 2 cm up).
+- reach (and pick up): the distance of the hand (wrist joint 20 left, 21 right) from its target at the
+  motion's closest frame (target: within ``REACH_TOL_M``).
+- wave: the hand above its shoulder, swinging side to side.
 """
 
 from __future__ import annotations
@@ -35,6 +38,10 @@ STAIR_FLOAT_TOL_M = 0.03
 """Largest mean height of a planted foot joint above its tread."""
 PLANTED_SPEED_M_S = 0.15
 """A foot joint slower than this is planted (for the stairs check)."""
+REACH_TOL_M = 0.10
+"""A reach succeeds when the hand comes this close to its target."""
+HANDS = (20, 21)
+"""Wrist joints of the left and right hand (SMPL-22 has no finger joints)."""
 
 __all__ = [
     "CROUCH_MIN_DROP_M",
@@ -43,7 +50,11 @@ __all__ = [
     "SEAT_XY_TOL_M",
     "STAIR_FLOAT_TOL_M",
     "STAIR_PENETRATION_TOL_M",
+    "REACH_TOL_M",
     "crouch_depth",
+    "hand_distance",
+    "reach_check",
+    "wave_check",
     "pelvis_drop",
     "seat_errors",
     "sit_check",
@@ -149,3 +160,41 @@ def stair_check(joints: torch.Tensor, stairs: torch.Tensor, fps: float = FPS) ->
     }
     out["ok"] = (out["penetration_m"] <= STAIR_PENETRATION_TOL_M) & (out["float_m"] <= STAIR_FLOAT_TOL_M)
     return out
+
+
+def hand_distance(joints: torch.Tensor, target: torch.Tensor, hand: int) -> torch.Tensor:
+    """(..., T) distance (m) of hand ``hand`` (0 left, 1 right: wrist joint 20 or 21) from ``target`` (..., 3)."""
+    joints = _as_tensor(joints)
+    target = _as_tensor(target, joints)
+    return torch.linalg.vector_norm(joints[..., HANDS[hand], :] - target[..., None, :], dim=-1)
+
+
+def reach_check(joints: torch.Tensor, target: torch.Tensor, hand: int) -> dict[str, torch.Tensor]:
+    """How close a hand comes to its target (the measure of reach and pick up).
+
+    Returns ``(...,)`` tensors: ``distance_m`` at the closest frame, that ``frame`` and ``reached`` (within
+    ``REACH_TOL_M``).
+    """
+    dist = hand_distance(joints, target, hand)
+    best, frame = dist.min(dim=-1)
+    return {"distance_m": best, "frame": frame, "reached": best <= REACH_TOL_M}
+
+
+def wave_check(joints: torch.Tensor, hand: int, fps: float = FPS) -> dict[str, torch.Tensor]:
+    """A wave: how long the hand is up, and how often it swings side to side meanwhile.
+
+    Returns ``(...,)`` tensors: ``raised`` (share of frames with the hand above its shoulder) and
+    ``swings_hz`` (sign changes of the hand's sideways speed relative to the shoulder while raised, halved,
+    per raised second).
+    """
+    joints = _as_tensor(joints)
+    wrist, shoulder = joints[..., HANDS[hand], :], joints[..., 16 + hand, :]
+    raised = wrist[..., 2] > shoulder[..., 2]
+    across = joints[..., 2, :2] - joints[..., 1, :2]  # the hips' left-to-right axis
+    across = across / torch.linalg.vector_norm(across, dim=-1, keepdim=True).clamp(min=1e-9)
+    side = ((wrist[..., :2] - shoulder[..., :2]) * across).sum(dim=-1)
+    vel = side[..., 1:] - side[..., :-1]
+    flips = (vel[..., 1:] * vel[..., :-1] < 0) & raised[..., 2:] & raised[..., 1:-1]
+    seconds = raised.sum(dim=-1).clamp(min=1).to(joints.dtype) / fps
+    swings = flips.sum(dim=-1).to(joints.dtype) / 2 / seconds
+    return {"raised": raised.to(joints.dtype).mean(dim=-1), "swings_hz": swings}

@@ -1,4 +1,5 @@
-"""The scene skills of the procedural generator (crouch, crouch walk, sit down, stand up, stairs): known answers
+"""The scene skills of the procedural generator (crouch, crouch walk, sit down, stand up, stairs,
+reach, wave, pick up): known answers
 on generated sequences, checked with the bench's own skill checks (latentrl/evaluation/skill_checks.py)."""
 
 import functools
@@ -28,11 +29,14 @@ from latentrl.errors import ConfigError
 from latentrl.evaluation.skill_checks import (
     CROUCH_MIN_DROP_M,
     crouch_depth,
+    hand_distance,
     pelvis_drop,
+    reach_check,
     seat_errors,
     sit_check,
     stair_check,
     tread_clearance,
+    wave_check,
 )
 from latentrl.motion.skeleton import FOOT_JOINTS
 
@@ -271,3 +275,83 @@ def test_stair_check_passes_the_data_and_fails_a_misplaced_flight(skill):
     moved = row.clone()
     moved[7] += 0.05  # 5 cm higher: the feet sink into the treads
     assert not bool(stair_check(joints, moved)["ok"])
+
+
+# --- hands: reach, wave, pick up --------------------------------------------------------------------------
+
+HAND_SET = ("stand", "walk", "reach_left", "reach_right", "wave", "pick_up")
+
+
+@functools.cache
+def hand_data(num=24, seconds=14.0, seed=5):
+    return generate_sequences(LocomotionConfig(num_sequences=num, seconds_per_sequence=seconds, seed=seed,
+                                               skills=HAND_SET))
+
+
+def heading_frame(joints, frame):
+    """(right, forward) unit vectors of the body at ``frame`` from the hip axis."""
+    right = joints[frame, 2, :2] - joints[frame, 1, :2]
+    right = right / np.linalg.norm(right)
+    return right, np.array([-right[1], right[0]])
+
+
+def test_reaches_put_the_hand_on_a_reachable_target_in_every_direction():
+    directions, texts, checked = set(), set(), 0
+    arm = None
+    for seq in hand_data():
+        validate_sequence(seq, "hands.npz", check_fk=True)
+        texts |= set(map(str, seq["seg_text"]))
+        joints = seq["joints"].astype(np.float64)
+        assert foot_skate(joints, horizontal=True).mean() * FPS * 100 < 0.1  # feet stay planted
+        rest = seq["rest_joints"].astype(np.float64)
+        arm = np.linalg.norm(rest[18] - rest[16]) + np.linalg.norm(rest[20] - rest[18])
+        segs = segments(seq)
+        for x, y, z, hand, first, last in seq.get("reaches", np.zeros((0, 6))):
+            hand, first, last = int(hand), int(first), int(last)
+            target = np.array([x, y, z])
+            dist = hand_distance(torch.from_numpy(joints), torch.from_numpy(target), hand).numpy()
+            assert dist[first:last + 1].max() < 0.02  # the hand holds its target at the apex
+            assert float(reach_check(torch.from_numpy(joints), torch.from_numpy(target), hand)["reached"])
+            shoulder = joints[(first + last) // 2, 16 + hand]
+            offset = target - shoulder
+            assert np.linalg.norm(offset) <= 0.96 * arm  # within the arm's length
+            owner = [s for a, b, s in segs if a <= first and last < b]
+            assert owner and owner[0] in ("reach_left", "reach_right", "pick_up")
+            assert hand == {"reach_left": 0, "reach_right": 1}.get(owner[0], hand)
+            if owner[0] == "pick_up":
+                assert z - 0.0 < 0.2  # the hand at the floor
+                continue
+            right, forward = heading_frame(joints, (first + last) // 2)
+            out = offset[:2] @ right * (1 if hand else -1)
+            up = offset[2] / np.linalg.norm(offset)
+            directions.add("up" if up > 0.6 else "down" if up < -0.6 else "side" if out > offset[:2] @ forward
+                           else "forward")
+            checked += 1
+        for k, (a, _, skill) in enumerate(segs):  # the arm hangs while the previous label (stand) lasts
+            if skill in ("reach_left", "reach_right", "wave", "pick_up") and k and segs[k - 1][2] == "stand":
+                hang = slice(a, segs[k - 1][1])
+                for hand in (0, 1):
+                    assert np.all(joints[hang, 20 + hand, 2] < joints[hang, 16 + hand, 2] - 0.3)
+    assert checked >= 6 and directions == {"forward", "up", "down", "side"}
+    for skill in ("reach_left", "reach_right", "wave", "pick_up"):
+        assert set(SYNONYMS[skill]) <= texts, skill
+
+
+def test_wave_raises_a_hand_and_swings_it():
+    waves = 0
+    for seq in hand_data():
+        joints = torch.from_numpy(seq["joints"].astype(np.float64))
+        segs = segments(seq)
+        for a, b, skill in segs:
+            if skill != "wave" or b - a < 2 * FPS:
+                continue
+            clip = joints[a:b]
+            result = [wave_check(clip, hand) for hand in (0, 1)]
+            hand = int(result[1]["raised"] > result[0]["raised"])
+            assert float(result[hand]["raised"]) > 0.2 and 1.0 <= float(result[hand]["swings_hz"]) <= 3.5
+            assert float(result[1 - hand]["raised"]) == 0.0
+            waves += 1
+    assert waves >= 2
+    seq = generate_sequences(LocomotionConfig(num_sequences=1, seconds_per_sequence=3.0, skills=("stand",)))[0]
+    still = [wave_check(torch.from_numpy(seq["joints"].astype(np.float64)), hand) for hand in (0, 1)]
+    assert all(float(r["raised"]) == 0.0 for r in still)

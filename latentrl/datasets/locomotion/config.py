@@ -29,7 +29,8 @@ LOCOMOTION_SKILLS: tuple[str, ...] = (
     "stand",
 )
 
-#: Skills that change posture or use the scene: crouching, sitting on a seat, getting up and stairs. A config
+#: Skills that change posture or use the scene: crouching, sitting on a seat, getting up, stairs, reaching,
+#: waving and picking up from the floor. A config
 #: selects them through ``LocomotionConfig.skills``; the default leaves them out, so older configs
 #: reproduce their data bit for bit.
 SCENE_SKILLS: tuple[str, ...] = (
@@ -39,6 +40,10 @@ SCENE_SKILLS: tuple[str, ...] = (
     "stand_up",
     "stairs_up",
     "stairs_down",
+    "reach_left",
+    "reach_right",
+    "wave",
+    "pick_up",
 )
 
 #: Every skill. Each has a synonym list in ``SYNONYMS``; the first synonym is the canonical text.
@@ -63,6 +68,10 @@ SYNONYMS: dict[str, tuple[str, ...]] = {
     "stand_up": ("stand up", "get up"),
     "stairs_up": ("walk up stairs", "climb the stairs"),
     "stairs_down": ("walk down stairs", "go down the stairs"),
+    "reach_left": ("reach with the left hand", "reach out with the left hand"),
+    "reach_right": ("reach with the right hand", "reach out with the right hand"),
+    "wave": ("wave", "wave a hand"),
+    "pick_up": ("pick up from the floor", "pick something up from the floor"),
 }
 
 #: Texts that only describe some speeds: text -> (min, max) speed in m/s; other texts fit any speed.
@@ -106,6 +115,10 @@ _TRANSITIONS: tuple[tuple[str, str], ...] = (
     ("walk", "stairs_up"),
     ("stand", "stairs_down"),
     ("walk", "stairs_down"),
+    ("stand", "reach_left"),
+    ("stand", "reach_right"),
+    ("stand", "wave"),
+    ("stand", "pick_up"),
 )
 # One-way transitions: a posture is left only the way it was entered (a crouch or a seat by standing up).
 _ONE_WAY: tuple[tuple[str, str], ...] = (

@@ -10,7 +10,10 @@ import numpy as np
 from latentrl.datasets.body import (
     TOE_HEIGHT_M,
     Body,
+    _segment_frame,
+    axis_angle_to_matrix_np,
     leg_rotations,
+    matrix_to_axis_angle_np,
     rot_x,
     rot_y,
     rot_z,
@@ -370,10 +373,64 @@ def stairs_height(row: np.ndarray, xy: np.ndarray, landings: bool = False) -> np
 # --- pose -------------------------------------------------------------------------------------------------
 
 
+def _rest_frame(direction: np.ndarray) -> np.ndarray:
+    """(3, 3) frame of a rest segment along ``direction`` with its hinge as close to +x as possible."""
+    d = direction / np.linalg.norm(direction)
+    hinge = np.array([1.0, 0.0, 0.0]) - d[0] * d
+    return _segment_frame(d, hinge / np.linalg.norm(hinge))
+
+
+def _slerp_to(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotations a fraction ``w`` (T,) of the way from ``a`` to ``b``."""
+    rel = matrix_to_axis_angle_np(np.swapaxes(a, -1, -2) @ b)
+    return a @ axis_angle_to_matrix_np(rel * w[:, None])
+
+
+def _arm_ik(body: Body, local: np.ndarray, pelvis: np.ndarray, heading: np.ndarray, ch: dict,
+            goals: dict | None) -> None:
+    """Put each hand (wrist joint) on its target where its ``reach_*`` weight is 1, easing from the channels' arm.
+
+    The target is ``reach_*{x,y,z}`` from the shoulder in the heading frame; the elbow points back, out and
+    down. ``goals`` (if given) receives each reaching hand's (T, 3) world target.
+    """
+    rest = body.rest_joints
+    world = {0: local[:, 0]}
+    pos = {0: pelvis}
+    for j, parent in ((3, 0), (6, 3), (9, 6), (13, 9), (14, 9), (16, 13), (17, 14)):
+        world[j] = world[parent] @ local[:, j]
+        pos[j] = pos[parent] + world[parent] @ (rest[j] - rest[parent])
+    heading_rot = rot_z(heading)
+    for side, (collar, shoulder, elbow, wrist), out in (("l", (13, 16, 18, 20), -1.0), ("r", (14, 17, 19, 21), 1.0)):
+        w = np.clip(ch[f"reach_{side}"], 0.0, 1.0)
+        active = w > 0
+        if not active.any():
+            continue
+        offset = np.stack([ch[f"reach_{side}{a}"] for a in "xyz"], axis=-1)
+        goal = pos[shoulder] + (heading_rot @ offset[..., None])[..., 0]
+        if goals is not None:
+            goals[side] = goal
+        upper, fore = rest[elbow] - rest[shoulder], rest[wrist] - rest[elbow]
+        pole = (heading_rot @ np.array([0.6 * out, -0.5, -0.6]))
+        u, f, hinge = two_bone_ik(pos[shoulder][active], goal[active], pole[active], float(np.linalg.norm(upper)),
+                                  float(np.linalg.norm(fore)))
+        h = -hinge  # the elbow flexes forward: a positive rotation about its hinge, as in the channels' pose
+        upper_world = _segment_frame(u, h) @ _rest_frame(upper).T
+        fore_world = _segment_frame(f, h) @ _rest_frame(fore).T
+        parent = world[collar][active]
+        ik_shoulder = np.swapaxes(parent, -1, -2) @ upper_world
+        ik_elbow = np.swapaxes(upper_world, -1, -2) @ fore_world
+        local[active, shoulder] = _slerp_to(local[active, shoulder], ik_shoulder, w[active])
+        local[active, elbow] = _slerp_to(local[active, elbow], ik_elbow, w[active])
+
+
 def _local_rotations(
-    body: Body, pelvis: np.ndarray, pelvis_rot: np.ndarray, ch: dict, feet: _Feet
+    body: Body, pelvis: np.ndarray, pelvis_rot: np.ndarray, ch: dict, feet: _Feet,
+    heading: np.ndarray | None = None, goals: dict | None = None,
 ) -> np.ndarray:
-    """(T, 22, 3, 3) local joint rotations: upper body from the channels, legs by IK to the foot targets."""
+    """(T, 22, 3, 3) local joint rotations: upper body from the channels, legs by IK to the foot targets.
+
+    Hands with a ``reach_*`` weight go to their targets (``_arm_ik``, which needs the ``heading``).
+    """
     total = len(pelvis)
     local = np.tile(np.eye(3), (total, 22, 1, 1))
     local[:, 0] = pelvis_rot
@@ -396,6 +453,8 @@ def _local_rotations(
         thigh, shank, hinge = two_bone_ik(hip, ankle, pole, body.thigh, body.shank)
         local[:, hip_j], local[:, knee_j], local[:, ankle_j] = leg_rotations(pelvis_rot, thigh, shank, hinge, foot_rot)
         local[:, toe_j] = rot_x(0.8 * np.clip(-feet.pitch[:, leg], 0.0, 0.6))  # toes stay flat as the heel rises
+    if heading is not None and (np.any(ch["reach_l"] > 0) or np.any(ch["reach_r"] > 0)):
+        _arm_ik(body, local, pelvis, heading, ch, goals)
     return local
 
 

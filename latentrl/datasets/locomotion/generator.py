@@ -39,7 +39,7 @@ from latentrl.datasets.locomotion.plan import (
     _plan_blocks,
     _weights,
 )
-from latentrl.datasets.locomotion.skills import _POSTURE_SKILLS, _block_speed
+from latentrl.datasets.locomotion.skills import _KEYFRAMED, _block_speed
 from latentrl.datasets.motion_text import make_sequence, write_meta, write_sequence
 from latentrl.motion.contacts import foot_positions, weighted_foot_slide
 from latentrl.motion.heading import hip_yaw_rad
@@ -56,7 +56,7 @@ def _schedule(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, count
     weights = _weights([(b.start, a.end) for a, b in zip(blocks[:-1], blocks[1:])], total)
     phase = rng.uniform() + np.cumsum(_cycle_rate(blocks, weights)) / FPS
     for b in blocks:
-        if b.skill in _POSTURE_SKILLS:  # the posture changes once the cross-fade into its block is over
+        if b.skill in _KEYFRAMED:  # the posture changes once the cross-fade into its block is over
             b.params["t0"] = (b.start + b.blend_in) / FPS
         if b.skill == "jump_forward":  # jump phase 0 (start of the standing lead-in) at the blend centre
             b.phase_offset = -phase[b.start + b.blend_in // 2] if b.blend_in else 0.9 - phase[pad]
@@ -64,7 +64,7 @@ def _schedule(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, count
     contact, switches = _compose_contacts(blocks, [c for _, c in evaluated])
     motion_ramps = _motion_ramps(blocks, switches, total)
     for a, b, (start, end) in zip(blocks[:-1], blocks[1:], motion_ramps):  # label the whole speed change
-        if b.skill in _POSTURE_SKILLS and _block_speed(a.skill, a.params) == 0.0:
+        if b.skill in _KEYFRAMED and _block_speed(a.skill, a.params) == 0.0:
             continue  # no speed change: the labels switch where the posture starts to change (at ``t0``)
         a.end, b.start = max(a.end, end), min(b.start, start)
     ch = _blend_channels(evaluated, weights, _weights(motion_ramps, total))
@@ -133,8 +133,10 @@ def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> di
     blocks, ch, contact = _schedule(cfg, rng, body, counts, frames + 2 * pad, pad)
     pelvis, pelvis_rot, feet, heading, terrain = _trajectories(cfg, rng, body, ch, contact, blocks)
     keep = slice(pad, pad + frames)  # step 5 on the visible frames only
+    goals: dict[str, np.ndarray] = {}
     local = _local_rotations(body, pelvis[keep], pelvis_rot[keep], {k: v[keep] for k, v in ch.items()},
-                             _Feet(feet.toe[keep], feet.yaw[keep], feet.pitch[keep], feet.grounded[keep]))
+                             _Feet(feet.toe[keep], feet.yaw[keep], feet.pitch[keep], feet.grounded[keep]),
+                             heading[keep], goals)
     segments = [(max(b.start, pad) - pad, min(b.end, pad + frames) - pad, b.text) for b in blocks
                 if min(b.end, pad + frames) > max(b.start, pad)]
     seq = make_sequence(body.rest_joints, matrix_to_axis_angle_np(local), pelvis[keep] - body.rest_joints[0],
@@ -142,10 +144,35 @@ def _simulate(cfg: LocomotionConfig, index: int, counts: dict[str, float]) -> di
     seats = _seats(blocks, pelvis, heading, terrain.ground, (pad, pad + frames))
     if len(seats):
         seq["seats"] = seats
+    reaches = _reaches(blocks, goals, pad, frames)
+    if len(reaches):
+        seq["reaches"] = reaches
     if len(terrain.flights):
         seq["stairs"] = terrain.flights.astype(np.float32)
         seq["foot_floor"] = terrain.ground[keep].astype(np.float32)
     return seq
+
+
+def _reaches(blocks: list[_Block], goals: dict[str, np.ndarray], pad: int, frames: int) -> np.ndarray:
+    """(R, 6) hand targets held in the visible frames: x, y, z, hand (0 left, 1 right), first and last frame.
+
+    One row per reach and pick-up block whose hold (the hand on its target) lies in the visible frames;
+    the target is the world point the hand is placed on (``feet._arm_ik``) in the middle of the hold.
+    """
+    rows = []
+    for b in blocks:
+        if b.skill not in ("reach_left", "reach_right", "pick_up"):
+            continue
+        p = b.params
+        first = round((p["t0"] + p["move"]) * FPS) - pad
+        last = round((p["t0"] + p["move"] + p["hold_s"]) * FPS) - pad
+        first, last = max(first, 0), min(last, frames - 1)
+        side = "r" if p["hand"] else "l"
+        if last - first < 2 or side not in goals:
+            continue
+        target = goals[side][(first + last) // 2]
+        rows.append((*target, p["hand"], first, last))
+    return np.array(rows, dtype=np.float32).reshape(-1, 6)
 
 
 # --- public API -------------------------------------------------------------------------------------------

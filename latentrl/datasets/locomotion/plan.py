@@ -22,7 +22,7 @@ from latentrl.datasets.locomotion.config import (
 )
 from latentrl.datasets.locomotion.skills import (
     _CHANNEL_DEFAULTS,
-    _POSTURE_SKILLS,
+    _KEYFRAMED,
     _SKILL_FNS,
     _block_speed,
     _runs,
@@ -84,7 +84,7 @@ def _plan_blocks(
             core = round((p["jumps"] - 0.04) / p["f"] * FPS) - (blend_in + blend_out) // 2
         else:
             core = round(rng.uniform(*cfg.block_seconds) * _HUB_SHARE.get(skill, 1.0) * FPS)
-        if skill in _POSTURE_SKILLS:  # the posture change and its shortest hold fit after the cross-fade
+        if skill in _KEYFRAMED:  # the posture change and its shortest hold fit after the cross-fade
             core = max(core, round((p["duration"] + p["hold"]) * FPS))
         text = _pick_text(rng, skill, _block_speed(skill, p))
         block = _Block(skill, p, text, core, blend_in, blend_out)
@@ -111,7 +111,7 @@ def _cycle_rate(blocks: Sequence[_Block], weights: np.ndarray) -> np.ndarray:
     stand keeps its cadence); across a pure stand the rate moves linearly to the next skill's, and a jump
     after a stand starts on its own rate, which the jump's cycle alignment relies on.
     """
-    stepping = np.array([b.skill != "stand" and b.skill not in _POSTURE_SKILLS for b in blocks])
+    stepping = np.array([b.skill != "stand" and b.skill not in _KEYFRAMED for b in blocks])
     if not stepping.any():
         return np.ones(weights.shape[1])
     rates = np.array([b.params["f"] for b in blocks])

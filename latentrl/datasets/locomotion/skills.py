@@ -165,6 +165,14 @@ _CHANNEL_DEFAULTS: dict[str, float] = {
     "tuck_hip": math.radians(30),  # hip and knee flexion of a leg held off the floor
     "tuck_knee": math.radians(100),
     "stair": 0.0,  # +1 climbing, -1 descending stairs: the swing rises early / descends late
+    "reach_l": 0.0,  # weight of the left hand's target (0: the arm follows the channels above)
+    "reach_r": 0.0,
+    "reach_lx": 0.0,  # left hand target from the left shoulder, heading frame (x right, y forward, z up; m)
+    "reach_ly": 0.0,
+    "reach_lz": 0.0,
+    "reach_rx": 0.0,
+    "reach_ry": 0.0,
+    "reach_rz": 0.0,
 }
 
 
@@ -198,6 +206,8 @@ def _sample_params(skill: str, rng: np.random.Generator, body: Body, steering: s
         return _posture_params(skill, rng, body, prev)
     if skill in STAIR_SKILLS:
         return _stair_params(skill, rng, body)
+    if skill in _GESTURE_SKILLS:
+        return _gesture_params(skill, rng, body)
     low = flights == "low"
     scale = _cadence_scale(body)
     if skill in ("walk", "turn_left", "turn_right"):
@@ -582,6 +592,88 @@ def _stairs_walk(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple
     return ch, contact
 
 
+# --- hands: reach, wave, pick up ---------------------------------------------------------------------------
+
+#: Skills that move a hand to a target (``feet._arm_ik`` places it); both feet stay planted.
+_GESTURE_SKILLS = ("reach_left", "reach_right", "wave", "pick_up")
+#: Skills keyframed from their block's ``t0`` (the end of the cross-fade into them).
+_KEYFRAMED = _POSTURE_SKILLS + _GESTURE_SKILLS
+#: Reach targets lie this fraction of the arm's length (shoulder to wrist) from the shoulder, at most.
+REACH_RANGE = (0.6, 0.95)
+#: Reach directions: forward, up, down and to the side (of the reaching hand).
+REACH_DIRECTIONS = ("forward", "up", "down", "side")
+
+
+def arm_length(body: Body) -> float:
+    """Shoulder to wrist with the arm straight (m)."""
+    r = body.rest_joints
+    return float(np.linalg.norm(r[18] - r[16]) + np.linalg.norm(r[20] - r[18]))
+
+
+def _gesture_params(skill: str, rng: np.random.Generator, body: Body) -> dict:
+    """A hand gesture from standing: lean (for low targets), move the hand in, hold, return.
+
+    ``offset`` is the hand target from its shoulder in the heading frame (m); ``duration`` covers the
+    move in (``move``), the hold (``hold_s``) and the move back; the body's ``to`` pose is held meanwhile.
+    """
+    deg = math.radians
+    arm = arm_length(body)
+    hand = {"reach_left": 0, "reach_right": 1, "pick_up": int(rng.random() < 0.7),
+            "wave": int(rng.random() < 0.75)}[skill]
+    out = 1.0 if hand else -1.0  # the hand's side: body right is +x
+    pose = _standing_pose()
+    direction = ""
+    if skill in ("reach_left", "reach_right"):
+        direction = REACH_DIRECTIONS[int(rng.integers(len(REACH_DIRECTIONS)))]
+        dist = rng.uniform(*REACH_RANGE) * arm
+        azimuth = {"forward": rng.uniform(-10, 25), "up": rng.uniform(-10, 30), "down": rng.uniform(-10, 25),
+                   "side": rng.uniform(60, 95)}[direction]  # degrees from forward towards the hand's side
+        elevation = {"forward": rng.uniform(-20, 20), "up": rng.uniform(45, 80), "down": rng.uniform(-75, -45),
+                     "side": rng.uniform(-20, 30)}[direction]
+        a, e = deg(azimuth), deg(elevation)
+        offset = dist * np.array([out * math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
+        if direction == "down":  # bend to reach low
+            pose.update(dz=-rng.uniform(0.05, 0.2), pelvis_pitch=-deg(rng.uniform(15, 30)),
+                        trunk_pitch=-deg(rng.uniform(10, 25)), surge=-0.04)
+        move, hold = rng.uniform(0.6, 1.0), rng.uniform(0.4, 0.9)
+    elif skill == "pick_up":
+        offset = np.array([out * rng.uniform(0.0, 0.1), rng.uniform(0.05, 0.2), -1.0])
+        offset *= rng.uniform(0.9, REACH_RANGE[1]) * arm / np.linalg.norm(offset)  # down, as far as it goes
+        pose.update(dz=-rng.uniform(0.42, 0.50), surge=-rng.uniform(0.10, 0.16),
+                    pelvis_pitch=-deg(rng.uniform(40, 50)), trunk_pitch=-deg(rng.uniform(35, 45)))
+        move, hold = rng.uniform(0.9, 1.3), rng.uniform(0.3, 0.6)
+    else:  # wave: the hand raised beside the head, swinging side to side
+        offset = np.array([out * rng.uniform(0.15, 0.3), rng.uniform(0.05, 0.2), rng.uniform(0.35, 0.45)])
+        move, hold = rng.uniform(0.5, 0.8), rng.uniform(1.2, 2.2)
+    return dict(f=0.0, width=rng.uniform(0.05, 0.065) * body.height, hand=hand, offset=offset, to=pose,
+                direction=direction, move=move, hold_s=hold, duration=2 * move + hold, hold=0.3,
+                wave_hz=rng.uniform(1.5, 2.5), wave_amp=rng.uniform(0.08, 0.14) * out * (skill == "wave"),
+                **_sway_params(rng, (0.002, 0.006)))
+
+
+def _gesture(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple[dict, np.ndarray]:
+    """Standing while one hand goes to ``offset`` from its shoulder (weight ``reach_*``) and back."""
+    ch = _neutral(len(t), body)
+    tau = t - p["t0"]
+    w = _smootherstep(tau / p["move"]) * (1.0 - _smootherstep((tau - p["move"] - p["hold_s"]) / p["move"]))
+    stand = _standing_pose()
+    for k in _POSE_KEYS:
+        if k not in _ARM_KEYS:
+            ch[k] = stand[k] + (p["to"][k] - stand[k]) * w
+    side = "r" if p["hand"] else "l"
+    ch[f"reach_{side}"] = w
+    offset = np.broadcast_to(p["offset"], (len(t), 3)).copy()
+    if p["wave_amp"]:  # a wave swings the hand sideways
+        offset[:, 0] += p["wave_amp"] * np.sin(2 * math.pi * p["wave_hz"] * np.maximum(tau - p["move"], 0.0))
+    for i, axis in enumerate("xyz"):
+        ch[f"reach_{side}{axis}"] = offset[:, i]
+    wsw = 2 * math.pi * p["sway_f"]
+    ch["sway"] = p["sway"] * np.sin(wsw * t + p["sway_ph"][0])
+    ch["stance_width"][:] = p["width"]
+    on = np.ones(len(t), dtype=bool)
+    return ch, np.stack((on, on), axis=-1)
+
+
 _SKILL_FNS: dict[str, _ChannelFn] = {
     "walk": _walk_like,
     "turn_left": _walk_like,
@@ -600,6 +692,10 @@ _SKILL_FNS: dict[str, _ChannelFn] = {
     "stand_up": _posture,
     "stairs_up": _stairs_walk,
     "stairs_down": _stairs_walk,
+    "reach_left": _gesture,
+    "reach_right": _gesture,
+    "wave": _gesture,
+    "pick_up": _gesture,
 }
 
 
