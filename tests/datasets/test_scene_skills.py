@@ -192,7 +192,7 @@ STAIR_SET = ("stand", "walk", "stairs_up", "stairs_down")
 
 
 @functools.cache
-def stair_data(num=12, seconds=14.0, seed=3):
+def stair_data(num=20, seconds=14.0, seed=3):
     return generate_sequences(LocomotionConfig(num_sequences=num, seconds_per_sequence=seconds, seed=seed,
                                                skills=STAIR_SET))
 
@@ -235,12 +235,11 @@ def test_stairs_put_planted_feet_flat_on_the_treads_of_the_stored_flights():
         assert ground.min() >= 0.0 and rows[:, 7].min() >= 0.0  # the lowest ground is the floor
         toe = seq["joints"][:, list(FOOT_JOINTS)].astype(np.float64)
         clear = toe[..., 2] - ground
-        down = planted(seq) & only[:, None]
+        down = planted(seq, speed_m_s=0.05) & only[:, None]  # still feet (a swing is faster)
         assert down.sum() > FPS
         assert clear[down].min() >= -0.01  # penetration <= 1 cm
         assert clear[down].mean() <= 0.03 and clear[down].max() <= 0.04  # float <= 3 cm (toe joint 2 cm up)
-        air = ~planted(seq) & only[:, None]
-        assert clear[air].min() >= -0.01  # swings clear the tread edges
+        assert clear.min() >= -0.01  # no foot joint inside a step, in any frame (swings clear the tread edges)
         # planted feet do not slide on the treads: no creep over a run of still frames (< 1 mm per frame)
         still = planted(seq, speed_m_s=0.03) & only[:, None]
         for leg in range(2):

@@ -149,12 +149,14 @@ def _air_spells(grounded: np.ndarray) -> list[tuple[int, int, bool, bool]]:
 
 
 def _swing_feet(feet: _Feet, held: np.ndarray, held_pitch: np.ndarray, heading: np.ndarray,
-                pelvis_z: np.ndarray, ch: dict) -> None:
+                pelvis_z: np.ndarray, ch: dict, level: np.ndarray | None = None) -> None:
     """Fill the air frames of ``feet``: arcs from lift-off to the next landing pose, or to / from a held pose.
 
     Horizontally the toe eases from footprint to footprint (zero speed at both ends, travel done before the
     final descent). Vertically it adds an early-peaking clearance arc (the heel kicks up) and the pelvis'
-    excursion from its straight line over the spell, so feet rise and fall with the body in flight.
+    excursion from its straight line over the spell, so feet rise and fall with the body in flight. A swing
+    between two ground ``level``s (T, 2) (stairs) lifts the foot before it moves forward when it steps up,
+    and moves it over the edge before it descends when it steps down.
     """
     span = round(_SWING_TO_HELD_S * FPS)
     for leg in range(2):
@@ -170,8 +172,10 @@ def _swing_feet(feet: _Feet, held: np.ndarray, held_pitch: np.ndarray, heading: 
             start = feet.toe[a - 1, leg] if prev else held[frames, leg]
             end = feet.toe[b, leg] if nxt else held[frames, leg]
             stair = ch["stair"][(a + b) // 2]
+            if level is not None and prev and nxt and abs(level[b, leg] - level[a - 1, leg]) > 0.01:
+                stair = float(np.sign(level[b, leg] - level[a - 1, leg]))  # a step between two levels
             if stair > 0:  # up a step: lift first, then forward over the tread edge
-                along = _smootherstep((tau - 0.15) / 0.7)[:, None]
+                along = _smootherstep((tau - 0.12) / 0.63)[:, None]
             elif stair < 0:  # down a step: forward over the edge first, then down
                 along = _smootherstep(tau / 0.7)[:, None]
             else:
@@ -239,8 +243,10 @@ def _stairs(blocks, feet: _Feet, contact: np.ndarray,
             heading: np.ndarray) -> tuple[list[list[float]], list[tuple[int, int]], np.ndarray]:
     """Build a flight under each stair block's footprints and lift every footprint to its ground level.
 
-    Each stance of a stair block moves (along the block's heading) onto the nearest tread, one tread per
-    step from the last footprint before the block: tread ``j`` is ``j`` risers up (or down) and holds the
+    Each stance of a stair block moves (along the block's heading) onto the nearest tread, at most one
+    tread further than the stance before it (the first onto tread 1; the last onto the tread of the other
+    foot, so the flight ends with both feet on its end level), counted from the last footprint before the
+    block: tread ``j`` is ``j`` risers up (or down) and holds the
     toe joint ``STAIR_TOE_BACK_M`` behind the next riser. The ground stays at the last tread's height
     after the flight. Every other stance stands on the level reached so far; all levels are then shifted so
     that the lowest is the floor (z = 0). Returns the flights as rows of ``latentrl.scenes.Stairs``
@@ -274,12 +280,18 @@ def _stairs(blocks, feet: _Feet, contact: np.ndarray,
         else:
             origin = feet.toe[first_a, first_leg, :2] - tread * d
         top = 0
-        for k in members:
+        for n, k in enumerate(members):  # one tread per step; a step-to (both feet on one tread) where short
             a, b, leg = stances[k]
             rel = feet.toe[a, leg, :2] - origin
             along = float(rel @ d)
-            j = max(1, round(along / tread))
-            feet.toe[a:b, leg, :2] = origin + d * (j * tread) + (rel - d * along)
+            j = int(np.clip(round(along / tread), top, top + 1)) if top else 1
+            if n == len(members) - 1 and n > 0:
+                j = top  # the last step joins the other foot: the flight ends with both feet on its end level
+            shift_xy = d * (j * tread - along)
+            g = a  # the stance and the heel-first roll before it (grounded, not yet in contact) move together
+            while g > 0 and feet.grounded[g - 1, leg] and not contact[g - 1, leg]:
+                g -= 1
+            feet.toe[g:b, leg, :2] += shift_xy
             height[k] = current + riser * j
             top = max(top, j)
         edge = origin + d * (STAIR_TOE_BACK_M - tread)  # the riser in front of tread 0

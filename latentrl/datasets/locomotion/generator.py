@@ -102,7 +102,7 @@ def _trajectories(cfg: LocomotionConfig, rng: np.random.Generator, body: Body, c
         pelvis[:, 2] += _support_level(level, contact)
     pelvis[:, 2] -= _reach_drop(pelvis, pelvis_rot, feet, body)
     held, held_pitch = _held_feet(pelvis, pelvis_rot, heading, ch, body)
-    _swing_feet(feet, held, held_pitch, heading, pelvis[:, 2], ch)
+    _swing_feet(feet, held, held_pitch, heading, pelvis[:, 2], ch, level if flights else None)
     ground = _ground_under_feet(flights, spans, level, feet.grounded, feet.toe) if flights else level
     return pelvis, pelvis_rot, feet, heading, _Terrain(np.array(flights, dtype=np.float64).reshape(-1, 8), ground)
 
@@ -261,7 +261,8 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
     Speeds and metrics use frames labelled with a single skill (not transitions): ``speed_m_s`` is the mean
     horizontal pelvis speed, ``skate_cm_s`` DART's contact-weighted skate (x fps, in cm/s), ``skate_xy_cm_s``
     the same on horizontal displacement only, and ``floor_cm`` the mean |lowest foot joint height| (DART's
-    floor distance, in cm).
+    floor distance, in cm); foot heights count from the ground under each foot (``foot_floor``) where a
+    sequence has stairs.
     """
     acc: dict[str, dict[str, float]] = {}
     steer: dict[str, list[float]] = {}
@@ -281,6 +282,9 @@ def dataset_statistics(seqs: Sequence[dict[str, np.ndarray]]) -> dict:
         total += num
         transitions += int(np.sum(labels > 1))
         joints = seq["joints"].astype(np.float64)
+        if "foot_floor" in seq:  # on stairs the feet's heights count from the ground under them
+            joints = joints.copy()
+            joints[:, list(FOOT_JOINTS), 2] -= seq["foot_floor"].astype(np.float64)
         pure = labels == 1
         pair = pure[1:] & pure[:-1] & (owner[1:] == owner[:-1])
         speed = np.linalg.norm(np.diff(joints[:, 0, :2], axis=0), axis=-1) * FPS

@@ -587,6 +587,7 @@ def _stairs_walk(phase: np.ndarray, t: np.ndarray, p: dict, body: Body) -> tuple
     ch["toe_land"][:] = 0.0
     ch["heel_rise"][:] = math.radians(15 if up else 8)
     ch["clearance"][:] = 0.05
+    ch["swing_peak"][:] = 0.45  # the toe stays up until it is over its tread
     ch["trunk_pitch"][:] = -math.radians(8 if up else 3)
     ch["stair"][:] = 1.0 if up else -1.0
     return ch, contact
