@@ -24,6 +24,12 @@ constant, so one foot always slides. Locking footprints and solving the legs mak
 (zero horizontal skate by construction) and keeps stance toes exactly at ``TOE_HEIGHT_M`` above the floor; the
 hip and knee curves then follow from the foot paths and pelvis motion.
 
+Scene skills (``SCENE_SKILLS``, opt-in through ``LocomotionConfig.skills``) reuse these steps: crouching,
+sitting and getting up keyframe the pelvis and trunk on planted feet from their block's start; stairs move
+each stance onto a tread and build the flight under the steps; reach, wave and pick up put a hand on a
+target by arm IK. Their scene data (seats, stair flights, the ground under each foot, hand targets) is
+stored with the sequence (``motion_text.OPTIONAL_FIELDS``).
+
 Everything is a pure function of ``LocomotionConfig`` (``numpy.random.Generator`` seeded per sequence with
 ``(seed, index)``; the skill balance carries over from earlier sequences in order).
 
