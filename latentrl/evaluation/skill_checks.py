@@ -19,11 +19,13 @@ with its sequences (``docs/datasets.md``), so the same function judges the data 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
-from latentrl.datasets.locomotion.feet import stairs_height
-from latentrl.datasets.locomotion.skills import SEATED_PELVIS_ABOVE_SEAT_M
+from latentrl.datasets.locomotion.feet import STAIR_TOE_BACK_M, STAIR_WIDTH_M, stairs_height
+from latentrl.datasets.locomotion.skills import REACH_DIRECTIONS, SEATED_PELVIS_ABOVE_SEAT_M
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS, PELVIS
 
 CROUCH_MIN_DROP_M = 0.25
@@ -54,6 +56,9 @@ __all__ = [
     "crouch_depth",
     "hand_distance",
     "reach_check",
+    "reach_target",
+    "seat_behind",
+    "stairs_ahead",
     "wave_check",
     "pelvis_drop",
     "seat_errors",
@@ -198,3 +203,70 @@ def wave_check(joints: torch.Tensor, hand: int, fps: float = FPS) -> dict[str, t
     seconds = raised.sum(dim=-1).clamp(min=1).to(joints.dtype) / fps
     swings = flips.sum(dim=-1).to(joints.dtype) / 2 / seconds
     return {"raised": raised.to(joints.dtype).mean(dim=-1), "swings_hz": swings}
+
+
+# --- scenes placed the way the data places them, for a rollout from a standing frame ---------------------
+
+
+def _facing(joints0: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(..., 2) forward and right unit vectors of a standing frame (..., 22, 3), from the hip axis."""
+    right = joints0[..., 2, :2] - joints0[..., 1, :2]
+    right = right / torch.linalg.vector_norm(right, dim=-1, keepdim=True).clamp(min=1e-9)
+    return torch.stack((-right[..., 1], right[..., 0]), dim=-1), right
+
+
+def seat_behind(joints0: torch.Tensor, height: float = 0.45, back_thighs: float = 0.85) -> torch.Tensor:
+    """(..., 4) the seat the data would put behind a standing frame (..., 22, 3): x, y, height, facing.
+
+    ``sit_down`` moves the pelvis back from the planted feet by 0.75-0.95 of a thigh (``back_thighs``)
+    onto a seat 0.2-0.6 m high (``height``); the thigh is the left hip-to-knee distance of the frame.
+    """
+    joints0 = _as_tensor(joints0)
+    forward, _ = _facing(joints0)
+    thigh = torch.linalg.vector_norm(joints0[..., 4, :] - joints0[..., 1, :], dim=-1, keepdim=True)
+    xy = joints0[..., PELVIS, :2] - back_thighs * thigh * forward
+    facing = torch.atan2(forward[..., 1], forward[..., 0])[..., None]
+    return torch.cat((xy, torch.full_like(facing, height), facing), dim=-1)
+
+
+def stairs_ahead(joints0: torch.Tensor, riser: float = 0.15, tread: float = 0.3, count: int = 6,
+                 up: bool = True) -> torch.Tensor:
+    """(..., 8) a flight in front of a standing frame (..., 22, 3), as the data builds one (``stairs`` row).
+
+    Its first edge lies ``STAIR_TOE_BACK_M`` ahead of the leading toe joint, centred on the pelvis. Going
+    up it climbs from the floor under the feet; going down the feet stand on its top step (the flight's
+    base is ``count * riser`` below them) and it descends ahead.
+    """
+    joints0 = _as_tensor(joints0)
+    forward, _ = _facing(joints0)
+    toes = joints0[..., list(FOOT_JOINTS), :]
+    lead = ((toes[..., :2] - joints0[..., None, PELVIS, :2]) * forward[..., None, :]).sum(dim=-1).amax(dim=-1)
+    ground = (toes[..., 2].amin(dim=-1) - 0.02)[..., None]  # a flat foot's toe joint is 2 cm up
+    edge = joints0[..., PELVIS, :2] + (lead + STAIR_TOE_BACK_M)[..., None] * forward
+    angle = torch.atan2(forward[..., 1], forward[..., 0])[..., None]
+    if up:
+        start, direction, base = edge, angle, ground
+    else:
+        start, direction, base = edge + (count - 1) * tread * forward, angle + math.pi, ground - count * riser
+    full = torch.ones_like(angle)
+    return torch.cat((start, direction, STAIR_WIDTH_M * full, riser * full, tread * full, count * full, base), -1)
+
+
+def reach_target(joints0: torch.Tensor, hand: int, direction: str, fraction: float = 0.8) -> torch.Tensor:
+    """(..., 3) a target ``fraction`` of the arm's length from a standing frame's shoulder (..., 22, 3).
+
+    ``direction`` is one of ``REACH_DIRECTIONS``: forward, up (60 degrees above forward), down (60 below;
+    the data bends to reach it) or to the hand's side, as the generator draws them (middle of its ranges).
+    """
+    if direction not in REACH_DIRECTIONS:
+        raise ValueError(f"direction '{direction}', expected one of {', '.join(REACH_DIRECTIONS)}")
+    joints0 = _as_tensor(joints0)
+    forward, right = _facing(joints0)
+    shoulder, elbow, wrist = (joints0[..., j + hand, :] for j in (16, 18, 20))
+    arm = (torch.linalg.vector_norm(elbow - shoulder, dim=-1) + torch.linalg.vector_norm(wrist - elbow, dim=-1))
+    elevation = {"forward": 0.0, "up": 60.0, "down": -60.0, "side": 0.0}[direction]
+    out = right * (1.0 if hand else -1.0)
+    flat = out if direction == "side" else forward
+    e = math.radians(elevation)
+    offset = torch.cat((flat * math.cos(e), torch.full_like(flat[..., :1], math.sin(e))), dim=-1)
+    return shoulder + (fraction * arm)[..., None] * offset

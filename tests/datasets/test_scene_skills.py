@@ -3,6 +3,7 @@ reach, wave, pick up): known answers
 on generated sequences, checked with the bench's own skill checks (latentrl/evaluation/skill_checks.py)."""
 
 import functools
+import math
 
 import numpy as np
 import pytest
@@ -32,9 +33,12 @@ from latentrl.evaluation.skill_checks import (
     hand_distance,
     pelvis_drop,
     reach_check,
+    reach_target,
+    seat_behind,
     seat_errors,
     sit_check,
     stair_check,
+    stairs_ahead,
     tread_clearance,
     wave_check,
 )
@@ -354,3 +358,66 @@ def test_wave_raises_a_hand_and_swings_it():
     seq = generate_sequences(LocomotionConfig(num_sequences=1, seconds_per_sequence=3.0, skills=("stand",)))[0]
     still = [wave_check(torch.from_numpy(seq["joints"].astype(np.float64)), hand) for hand in (0, 1)]
     assert all(float(r["raised"]) == 0.0 for r in still)
+
+
+# --- scenes placed for a rollout the way the data places them ---------------------------------------------
+
+
+def test_seat_and_stairs_placed_from_a_standing_frame_match_the_data():
+    seats = 0
+    for seq in posture_data():
+        segs = segments(seq)
+        joints = torch.from_numpy(seq["joints"].astype(np.float64))
+        for k, (_, _, skill) in enumerate(segs):
+            if skill != "sit_down" or not k or segs[k - 1][2] != "stand" or "seats" not in seq:
+                continue
+            stored = torch.from_numpy(seq["seats"][[i for i, s in enumerate(segs) if s[2] == "sit_down"].index(k)])
+            standing = joints[segs[k - 1][1] - 1]  # the last frame before the descent
+            placed = seat_behind(standing, height=float(stored[2]))
+            assert torch.linalg.vector_norm(placed[:2] - stored[:2]) < 0.06
+            assert abs(math.remainder(float(placed[3] - stored[3]), 2 * math.pi)) < math.radians(5)
+            settled = slice(segs[k - 1][1] + round(1.4 * FPS), segs[k + 1][0] if k + 1 < len(segs) else len(joints))
+            if settled.stop - settled.start >= 15:
+                assert bool(sit_check(joints[settled], placed)["seated"])
+            seats += 1
+    assert seats >= 2
+    flights = 0
+    for seq in stair_data():
+        segs = segments(seq)
+        joints = torch.from_numpy(seq["joints"].astype(np.float64))
+        only, _ = stair_frames(seq)
+        for k, (a, b, skill) in enumerate(segs):
+            if skill != "stairs_up" or not k or segs[k - 1][2] != "stand":
+                continue
+            standing = joints[a]  # still standing: the first step starts after the cross-fade's middle
+            placed = stairs_ahead(standing, up=True)
+            rows = [torch.from_numpy(r.astype(np.float64)) for r in seq["stairs"] if r[7] == seq["foot_floor"][a].min()
+                    and abs(math.remainder(float(r[2] - placed[2]), 2 * math.pi)) < math.radians(3)]
+            assert len(rows) == 1  # the flight this block climbs: from the ground it stands on, straight ahead
+            row = rows[0]
+            placed = stairs_ahead(standing, float(row[4]), float(row[5]), int(row[6]), up=True)
+            direction = torch.stack((torch.cos(row[2]), torch.sin(row[2])))
+            assert abs(float((placed[:2] - row[:2]) @ direction)) < 0.03  # the same first edge
+            down = planted(seq, 0.05)[a:b] & only[a:b, None]
+            clear = tread_clearance(joints[a:b], placed)
+            assert (clear[torch.from_numpy(down)] - 0.02).abs().max() < 0.005  # the flight the feet stand on
+            flights += 1
+    assert flights >= 2
+
+
+def test_reach_targets_placed_from_a_standing_frame():
+    seq = generate_sequences(LocomotionConfig(num_sequences=1, seconds_per_sequence=2.0, skills=("stand",)))[0]
+    standing = torch.from_numpy(seq["joints"][0].astype(np.float64))
+    rest = seq["rest_joints"].astype(np.float64)
+    arm = np.linalg.norm(rest[18] - rest[16]) + np.linalg.norm(rest[20] - rest[18])
+    for hand in (0, 1):
+        shoulder = standing[16 + hand]
+        targets = {d: reach_target(standing, hand, d, fraction=0.8) for d in ("forward", "up", "down", "side")}
+        for target in targets.values():
+            assert float(torch.linalg.vector_norm(target - shoulder)) == pytest.approx(0.8 * arm, abs=1e-6)
+        assert targets["up"][2] > shoulder[2] + 0.3 and targets["down"][2] < shoulder[2] - 0.3
+        assert float(targets["forward"][2]) == pytest.approx(float(shoulder[2]))
+        outward = (targets["side"][0] - shoulder[0]) * (standing[2, 0] - standing[1, 0])  # along the hip axis
+        assert float(outward) * (1 if hand else -1) > 0
+    with pytest.raises(ValueError, match="direction 'behind'"):
+        reach_target(standing, 0, "behind")
