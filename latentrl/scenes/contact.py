@@ -32,9 +32,20 @@ The feet's is small so that a foot standing on a step or a seat (its joint 2-5 c
 not collision."""
 
 
+_SKIN_CACHE: dict[tuple[torch.device, torch.dtype], torch.Tensor] = {}
+
+
 def skin_radii(like: torch.Tensor) -> torch.Tensor:
-    """(22,) :data:`SKIN_RADIUS_M` in joint order, on ``like``'s device and dtype."""
-    return torch.tensor([SKIN_RADIUS_M[name] for name in JOINT_NAMES], dtype=like.dtype, device=like.device)
+    """(22,) :data:`SKIN_RADIUS_M` in joint order, on ``like``'s device and dtype.
+
+    Cached per device and dtype, so an env step builds no tensor from host data (a CUDA graph could not
+    capture that copy).
+    """
+    key = (like.device, like.dtype)
+    if key not in _SKIN_CACHE:
+        _SKIN_CACHE[key] = torch.tensor([SKIN_RADIUS_M[name] for name in JOINT_NAMES], dtype=like.dtype,
+                                        device=like.device)
+    return _SKIN_CACHE[key]
 
 
 def penetration(joints: torch.Tensor, scene: SceneBatch, skin: torch.Tensor | None = None) -> torch.Tensor:

@@ -230,7 +230,7 @@ class SceneBatch:
         """(N, ...) terrain z under (N, ..., 2) points: the floor, or the top of the highest object over it."""
         flat, s, shape = self._flat(xy[..., :2])
         best = s.floor_height[:, None].to(flat.dtype).expand(flat.shape[:2])
-        low = torch.tensor(-FAR_M, dtype=flat.dtype, device=flat.device)
+        low = -FAR_M
         if s.box_mask.shape[1]:
             inside = box_footprint_contains(flat, s.box_center, s.box_half, s.box_yaw) & s.box_mask[:, None, :]
             top = (s.box_center[..., 2] + s.box_half[..., 2])[:, None, :]
