@@ -239,6 +239,7 @@ def test_stairs_put_planted_feet_flat_on_the_treads_of_the_stored_flights():
         assert ground.min() >= 0.0 and rows[:, 7].min() >= 0.0  # the lowest ground is the floor
         toe = seq["joints"][:, list(FOOT_JOINTS)].astype(np.float64)
         clear = toe[..., 2] - ground
+        assert np.linalg.norm(np.diff(seq["joints"], axis=0), axis=-1).max() * FPS < 10.0  # no pops (m/s)
         down = planted(seq, speed_m_s=0.05) & only[:, None]  # still feet (a swing is faster)
         assert down.sum() > FPS
         assert clear[down].min() >= -0.01  # penetration <= 1 cm
@@ -306,6 +307,7 @@ def test_reaches_put_the_hand_on_a_reachable_target_in_every_direction():
         texts |= set(map(str, seq["seg_text"]))
         joints = seq["joints"].astype(np.float64)
         assert foot_skate(joints, horizontal=True).mean() * FPS * 100 < 0.1  # feet stay planted
+        assert np.linalg.norm(np.diff(joints, axis=0), axis=-1).max() * FPS < 8.0  # no pops (m/s)
         rest = seq["rest_joints"].astype(np.float64)
         arm = np.linalg.norm(rest[18] - rest[16]) + np.linalg.norm(rest[20] - rest[18])
         segs = segments(seq)
