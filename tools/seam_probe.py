@@ -11,10 +11,12 @@ decoded frame) with the frames inside a primitive:
   lowest foot joint of the window), boundary / inside, after chaining primitives as the rollout does.
 
 Rows: ``data`` (windows of 8 consecutive data primitives chained with the rollout's re-canonicalization,
-which must reproduce the data: ``chain_error_mm``), ``vae`` (each data primitive decoded from its posterior
-mean with its true history), ``vae_chain`` (decoded primitives feeding their own last frames back as the
-next history, latents encoded with that history), and ``sampled`` (the model's own rollout of ``walk``
-from its seed histories, floor snap off, guidance 5).
+whose hand-off must reproduce the data: ``history_feature_max_err``), ``vae`` (each data primitive decoded from
+its posterior mean with its true history; canonical figures and the first / later frames' foot error against the
+data), ``vae_chain`` (decoded primitives feeding their own last frames back as the next history, latents
+encoded with that history), and ``sampled`` / ``sampled_snap`` / ``sampled_snap_ramp`` (the model's own rollout
+of ``--text`` from its seed histories, 16 x 9 primitives, guidance 5: floor snap off / on / on and ramped, with
+the pelvis acceleration at boundaries against the rest, ``seam_ratios``; ``--vae-only`` leaves them out).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import json
 import torch
 
 from latentrl.datasets.primitives import PrimitiveDataset
+from latentrl.evaluation import metrics as M
 from latentrl.motion import load_motion_model
 from latentrl.motion.canonical import WorldTransform, canonicalize
 from latentrl.motion.representation import HISTORY_LENGTH, joints_of
@@ -113,7 +116,8 @@ def main() -> None:
     rec = torch.stack([vae_decode(model, prims[:, k, :HISTORY_LENGTH], prims[:, k, HISTORY_LENGTH:])
                        for k in range(n)], dim=1)
     rec_prims = torch.cat((prims[:, :, :HISTORY_LENGTH], rec), dim=2)
-    res["vae"] = {"canon_feet_cm": canon_feet(rec_prims), "planted_cm": planted(chain(rec_prims, pd)),
+    # no planted_cm here: each primitive is decoded from the data's history, not from what the previous one showed
+    res["vae"] = {"canon_feet_cm": canon_feet(rec_prims),
                   "first_frame_feet_err_cm": float((joints_of(rec[:, :, 0])[..., FEET, :]
                                                     - joints_of(prims[:, :, HISTORY_LENGTH])[..., FEET, :])
                                                    .norm(dim=-1).mean() * 100),
@@ -133,8 +137,9 @@ def main() -> None:
     res["vae_chain"] = {"canon_feet_cm": canon_feet(chained), "planted_cm": planted(chain(chained, pd))}
 
     # (c) the model's own rollout
-    for snap in () if args.vae_only else (None, 0.05):
-        model.floor_snap = snap
+    variants = {"sampled": (None, False), "sampled_snap": (0.05, False), "sampled_snap_ramp": (0.05, True)}
+    for key, (snap, ramp) in ({} if args.vae_only else variants).items():
+        model.floor_snap, model.floor_snap_ramp = snap, ramp
         g = torch.Generator().manual_seed(0)
         steps = 9
         state = model.initial_state(16, g)
@@ -148,8 +153,12 @@ def main() -> None:
             joints.append(out.joints_world)
             state = out.state
         sp = torch.cat((torch.stack(hists, 1), torch.stack(futs, 1)), dim=2)
-        key = "sampled" if snap is None else "sampled_snap"
-        res[key] = {"canon_feet_cm": canon_feet(sp), "planted_cm": planted(torch.cat(joints, dim=1))}
+        world = torch.cat(joints, dim=1)
+        seams = M.seam_ratios(world)
+        res[key] = {"canon_feet_cm": canon_feet(sp), "planted_cm": planted(world),
+                    "pelvis_acc": {"boundary": seams["pelvis_acc_boundary"], "rest": seams["pelvis_acc_rest"],
+                                   "ratio": seams["pelvis_acc_ratio"]},
+                    "penetration_cm": float(M.lowest_joint_penetration_cm(world[:, HISTORY_LENGTH:]).mean())}
     print(json.dumps(res, indent=1))
     if args.json:
         with open(args.json, "w") as f:

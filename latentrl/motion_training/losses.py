@@ -197,9 +197,10 @@ def seam_loss(
     boundary is always this one. The planted-foot and consistency losses weigh it as one transition among
     nine or not at all, and a decoder trained without this term places its whole future a few centimetres off
     the history: a planted foot jumps 3.3 cm at the seam against 0.2 cm inside a reconstructed primitive
-    (docs/motion.md, "Seam loss"). The target step is the data's, from its own history (in the rollout stages
-    the input history is the model's, ``history``, and the data's is ``target_history``). Inputs unnormalized:
-    histories (B, H, 276), futures (B, F, 276); squared norms over xyz, mean over joints and batch.
+    (docs/motion.md, "Pops at primitive boundaries"). The target step is the data's, from its own history (in
+    the rollout stages the input history is the model's, ``history``, and the data's is ``target_history``).
+    Inputs unnormalized: histories (B, H, 276), futures (B, F, 276); squared norms over xyz, mean over joints
+    and batch.
     """
     step = joints_of(future[:, 0]) - joints_of(history[:, -1])
     true_step = joints_of(target[:, 0]) - joints_of(target_history[:, -1])
