@@ -5,6 +5,7 @@ from an empty working directory; afterwards the working directory must still be 
 folder (which holds the policy, so ``eval``'s default output folder would appear there) unchanged.
 """
 
+import copy
 import json
 import re
 from pathlib import Path
@@ -67,6 +68,7 @@ def fx(tmp_path_factory) -> Path:
     (root / "huge.json").write_text(json.dumps([{"goal_location": [[0.0, 0.3 * i, 0.0] for i in range(n)],
                                                  "goal_text": ["walk"] * n}]))
     _round2_files(root, state)
+    _round3_files(root)
     return root
 
 
@@ -171,7 +173,7 @@ ROWS = [
     ("train-override-syntax", [*TRAIN, "--set", "ppo.learning_rate"],
      r"override 'ppo\.learning_rate': expected key=value"),
     ("train-bad-choice", [*TRAIN, "--set", "env.task=dance"],
-     r"env\.task: expected one of \('reach', 'path', 'joystick', 'timed'\), got 'dance'"),
+     r"env\.task: expected one of \('reach', 'path', 'joystick', 'timed'.*\), got 'dance'"),
     ("train-out-of-range", [*TRAIN, "--set", "ppo.gamma=1.5"], r"ppo\.gamma: must lie in \[0, 1\], got 1\.5"),
     ("train-no-prompts", [*TRAIN, "--set", "env.texts=[]"], r"env\.texts: give at least one prompt"),
     ("train-empty-prompt", [*TRAIN, "--set", "env.texts=['']"], r"env\.texts: prompt '' is empty"),
@@ -459,6 +461,312 @@ ROUND2 += [
     ("bench-rollout-dart-src", ["bench", "rollout", "--dart-src", "/nonexistent/DART"], r"--dart-src .*: not found"),
 ]
 ROWS += ROUND2
+
+
+# ============================================================================ round 3 (issue 46)
+# The environment a row runs in (row id -> variables; {fx} is the fixture folder) and each round-3 row's kind.
+ENV: dict[str, dict[str, str]] = {}
+KIND: dict[str, str] = {}
+TORCHRUN = {"RANK": "0", "WORLD_SIZE": "2", "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": "29500"}
+OPT = ["optimize", "inbetween", "--no-progress", "--steps", "1"]
+NPROC = [*TRAIN, "--nproc", "2"]
+COMPILE = ["--set", "env.compile=true"]
+
+
+def _suite_cases() -> dict[str, tuple[str | bytes, str]]:
+    """Malformed, huge and hostile constraint suites: name -> (file content, what the line must say)."""
+    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
+    prob = {"name": "p", "start": {"seed": 1}, "text": "walk", "primitives": 2, "constraints": [joint]}
+    base = {"format": "latentrl.constraints/1", "problems": [prob]}
+
+    def change(path: tuple, value=None, delete: bool = False) -> str:
+        suite = copy.deepcopy(base)
+        obj = suite
+        for key in path[:-1]:
+            obj = obj[key]
+        if delete:
+            del obj[path[-1]]
+        else:
+            obj[path[-1]] = value
+        return json.dumps(suite)
+
+    p, c = ("problems", 0), ("problems", 0, "constraints", 0)
+    q = r"problem 'p' "
+    cases = {
+        "format-missing": (change(("format",), delete=True), r"format: expected 'latentrl\.constraints/1', got None"),
+        "format-wrong": (change(("format",), "latentrl.constraints/9"), r"format: expected .*constraints/9'"),
+        "format-number": (change(("format",), 1), r"format: expected .*got 1"),
+        "problems-missing": (change(("problems",), delete=True), r"problems: expected a non-empty list"),
+        "problems-dict": (change(("problems",), {"p": prob}), r"problems: expected a non-empty list"),
+        "problems-empty": (change(("problems",), []), r"problems: expected a non-empty list"),
+        "problems-1001": (change(("problems",), [dict(prob, name=f"p{i}") for i in range(1001)]),
+                          r"1001 problems, more than the 1000 allowed"),
+        "problem-string": (change(p, "p"), r"problem 0 problem: expected an object"),
+        "name-empty": (change((*p, "name"), ""), r"problem 0 name: expected 1-80 letters"),
+        "name-number": (change((*p, "name"), 7), r"problem 0 name: expected 1-80 letters.*got 7"),
+        "name-path": (change((*p, "name"), "../../etc/x"), r"problem 0 name: expected 1-80 letters"),
+        "name-duplicate": (change(("problems",), [prob, prob]), r"the name 'p' is used twice"),
+        "unknown-field": (change((*p, "constrains"), []), r"problem 0 constrains: unknown field"),
+        "seed-negative": (change((*p, "start", "seed"), -1), q + r"start\.seed: -1 is outside"),
+        "seed-huge": (change((*p, "start", "seed"), 10**30), q + r"start\.seed: 10+ is outside"),
+        "seed-string": (change((*p, "start", "seed"), "one"), q + r"start\.seed: expected an integer, got 'one'"),
+        "seed-float": (change((*p, "start", "seed"), 1.5), q + r"start\.seed: expected an integer, got 1\.5"),
+        "start-both": (change((*p, "start"), {"seed": 1, "motion": "x.npz"}), q + r"start: expected"),
+        "text-empty": (change((*p, "text"), ""), q + r"text: prompt '' is empty"),
+        "text-long": (change((*p, "text"), "x" * 1001), q + r"text: .*has 1001 characters"),
+        "text-number": (change((*p, "text"), 3), q + r"text: expected one prompt or a list of 2"),
+        "primitives-zero": (change((*p, "primitives"), 0), q + r"primitives: 0 is outside \[1, 64\]"),
+        "primitives-negative": (change((*p, "primitives"), -2), q + r"primitives: -2 is outside"),
+        "primitives-65": (change((*p, "primitives"), 65), q + r"primitives: 65 is outside"),
+        "primitives-1e9": (change((*p, "primitives"), 10**9), q + r"primitives: 1000000000 is outside"),
+        "primitives-string": (change((*p, "primitives"), "8"), q + r"primitives: expected an integer, got '8'"),
+        "primitives-float": (change((*p, "primitives"), 2.5), q + r"primitives: expected an integer, got 2\.5"),
+        "primitives-bool": (change((*p, "primitives"), True), q + r"primitives: expected an integer, got True"),
+        "constraints-missing": (change((*p, "constraints"), delete=True), q + r"constraints: expected a non-empty"),
+        "constraints-dict": (change((*p, "constraints"), {"a": joint}), q + r"constraints: expected a non-empty"),
+        "constraints-empty": (change((*p, "constraints"), []), q + r"constraints: expected a non-empty"),
+        "type-unknown": (change((*c, "type"), "teleport"), q + r"constraints\[0\]\.type: expected one of keyframe"),
+        "type-typo": (change((*c, "type"), "joints"), q + r"constraints\[0\]\.type: .*got 'joints'"),
+        "frame-negative": (change((*c, "frame"), -1), q + r"constraints\[0\]\.frame: -1 is outside \[0, 15\]"),
+        "frame-beyond": (change((*c, "frame"), 16), q + r"constraints\[0\]\.frame: 16 is outside \[0, 15\]"),
+        "frame-float": (change((*c, "frame"), 3.5), q + r"constraints\[0\]\.frame: expected an integer"),
+        "frame-string": (change((*c, "frame"), "10"), q + r"constraints\[0\]\.frame: expected an integer"),
+        "frame-huge": (change((*c, "frame"), 10**20), q + r"constraints\[0\]\.frame: 10+ is outside"),
+        "joint-unknown": (change((*c, "joint"), "tail"), q + r"constraints\[0\]\.joint: unknown joint 'tail'"),
+        "joint-typo": (change((*c, "joint"), "pelvs"), q + r"constraints\[0\]\.joint: unknown joint 'pelvs' \(did you mean 'pelvis'\?\)"),
+        "joint-number": (change((*c, "joint"), 0), q + r"constraints\[0\]\.joint: unknown joint 0"),
+        "position-2": (change((*c, "position"), [0.0, 1.0]), q + r"constraints\[0\]\.position: expected \[x, y, z\]"),
+        "position-string": (change((*c, "position"), ["a", 1.0, 0.9]), q + r"constraints\[0\]\.position\[0\]: expected a number"),
+        "position-bool": (change((*c, "position"), [True, 1.0, 0.9]), q + r"constraints\[0\]\.position\[0\]: expected a number"),
+        "position-nested": (change((*c, "position"), [[0.0], 1.0, 0.9]), q + r"constraints\[0\]\.position\[0\]: expected a number"),
+        "position-1001m": (change((*c, "position"), [0.0, 1001.0, 0.9]), q + r"constraints\[0\]\.position\[1\]: 1001\.0 is more"),
+        "position-nan": (change((*c, "position"), [0.0, float("nan"), 0.9]), q + r"constraints\[0\]\.position\[1\]: .*finite.*nan"),
+        "position-inf": (change((*c, "position"), [0.0, float("inf"), 0.9]), q + r"constraints\[0\]\.position\[1\]: .*finite.*inf"),
+        "weight-nan": (change((*c, "weight"), float("nan")), q + r"constraints\[0\]\.weight: .*finite.*nan"),
+        "keyframe-21-rows": (change(("problems", 0, "constraints"), [{"type": "keyframe", "frame": 10,
+                                                                       "joints": [[0, 0, 0]] * 21}]),
+                             q + r"constraints\[0\]\.joints: expected 22 rows"),
+        "keyframe-no-joints": (change(("problems", 0, "constraints"), [{"type": "keyframe", "frame": 10}]),
+                               q + r"constraints\[0\]\.joints: expected 22 rows"),
+        "scene-weights-negative": (change((*p, "scene_weights"), {"collision": -1}),
+                                   q + r"scene_weights\.collision: must be >= 0"),
+        "scene-weights-unknown": (change((*p, "scene_weights"), {"colision": 1}),
+                                  q + r"scene_weights: expected an object with some of collision, contact"),
+        "scene-weights-nan": (change((*p, "scene_weights"), {"collision": float("nan")}),
+                              q + r"scene_weights\.collision: .*finite.*nan"),
+        "scene-number": (change((*p, "scene"), 5), q + r"scene: expected a scene file name or a latentrl\.scene/1"),
+        "not-object": ("[1, 2, 3]", r"suite: expected a JSON object with 'format' and 'problems'"),
+        "truncated": (json.dumps(base)[:40], r"invalid JSON: Unterminated string"),
+        "empty": ("", r"invalid JSON: Expecting value"),
+        "deep": ("[" * 200_000 + "]" * 200_000, r"JSON nested too deeply"),
+        "digits": (json.dumps(base).replace("0.9]", "9" * 400 + "]"),
+                   q + r"constraints\[0\]\.position\[2\]: an integer of 400 digits is more than 1000 m"),
+        "far": (json.dumps(base).replace("0.9]", "1e308]"), q + r"constraints\[0\]\.position\[2\]: 1e\+308 is more than 1000 m"),
+        "utf16": (json.dumps(base).encode("utf-16"), r"not a UTF-8 text file"),
+        "binary": (bytes(range(256)), r"not a UTF-8 text file"),
+        "oversized": (b" " * (16 * 1024 * 1024 + 1), r"larger than the 16 MiB a constraint suite may have"),
+    }
+    return cases
+
+
+SUITES = _suite_cases()
+HOSTILE_SUITES = {"problems-1001", "name-path", "deep", "digits", "far", "oversized", "binary", "utf16"}
+
+
+def _round3_files(root: Path) -> None:
+    """Suites, an empty folder for PATH (no compiler on it), motions and folders for the viewer's rows."""
+    suites = root / "suites"
+    suites.mkdir()
+    for name, (data, _) in SUITES.items():
+        (suites / f"{name}.json").write_bytes(data if isinstance(data, bytes) else data.encode())
+    (root / "emptybin").mkdir()
+    np.savez(root / "ok.npz", joints=np.zeros((5, 22, 3), np.float32), fps=30.0)
+    for name, report in {"evalbad": "{not json", "evallist": '{"format": "latentrl.eval/1", "suites": [1]}'}.items():
+        (root / name).mkdir()
+        (root / name / "report.json").write_text(report)
+    (root / "runnoeval").mkdir()
+    (root / "runnoeval" / "config.yaml").write_text("env: {}\n")
+
+
+def _r3(kind: str, rid: str, argv: list[str], pattern: str, env: dict[str, str] | None = None) -> tuple:
+    KIND[rid] = kind
+    if env:
+        ENV[rid] = env
+    return rid, argv, pattern
+
+
+NO_CXX = {"PATH": "{fx}/emptybin"}
+ROUND3 = [
+    # ------------------------------------------------ env.compile where torch cannot compile (no compiler, cache)
+    _r3("fault", "train-compile-no-compiler", [*TRAIN, *COMPILE],
+        r"env\.compile: torch\.compile on the CPU needs a C\+\+ compiler, and none runs here .*set env\.compile=false",
+        NO_CXX),
+    _r3("fault", "quickstart-compile-no-compiler", ["quickstart", "--set", "env.motion={fx}/motion.pt", *COMPILE],
+        r"env\.compile: torch\.compile on the CPU needs a C\+\+ compiler", NO_CXX),
+    _r3("fault", "train-nproc-compile-no-compiler", [*NPROC, *COMPILE], r"env\.compile: .*needs a C\+\+ compiler",
+        NO_CXX),
+    _r3("fault", "train-compile-cache-proc", [*TRAIN, *COMPILE],
+        r"env\.compile: torch\.compile's cache folder /proc/inductor \(TORCHINDUCTOR_CACHE_DIR=/proc/inductor\) is "
+        r"not writable \(.*\); set TORCHINDUCTOR_CACHE_DIR to a writable folder, or set env\.compile=false",
+        {"TORCHINDUCTOR_CACHE_DIR": "/proc/inductor"}),
+    _r3("fault", "train-compile-cache-is-file", [*TRAIN, *COMPILE], r"cache folder .*afile .*afile is a file",
+        {"TORCHINDUCTOR_CACHE_DIR": "{fx}/afile"}),
+    _r3("fault", "train-compile-cache-under-file", [*TRAIN, *COMPILE], r"cache folder .*afile/cache .*afile is a file",
+        {"TORCHINDUCTOR_CACHE_DIR": "{fx}/afile/cache"}),
+    _r3("fault", "train-compile-cache-dev-null", [*TRAIN, *COMPILE], r"cache folder /dev/null/x .*is not writable",
+        {"TORCHINDUCTOR_CACHE_DIR": "/dev/null/x"}),
+    _r3("fault", "quickstart-compile-cache-proc", ["quickstart", "--set", "env.motion={fx}/motion.pt", *COMPILE],
+        r"TORCHINDUCTOR_CACHE_DIR=/proc/inductor", {"TORCHINDUCTOR_CACHE_DIR": "/proc/inductor"}),
+    _r3("fault", "train-nproc-compile-cache-proc", [*NPROC, *COMPILE], r"TORCHINDUCTOR_CACHE_DIR=/proc/inductor",
+        {"TORCHINDUCTOR_CACHE_DIR": "/proc/inductor"}),
+    # ------------------------------------------------ stray or malformed torchrun variables
+    _r3("bad value", "train-stray-rank-world", TRAIN,
+        r"environment: RANK=1 WORLD_SIZE=2 is set but MASTER_ADDR and MASTER_PORT not: not a complete torchrun "
+        r"launch; unset RANK WORLD_SIZE to train in one process", {"RANK": "1", "WORLD_SIZE": "2"}),
+    _r3("bad value", "train-stray-world-only", TRAIN, r"environment: WORLD_SIZE=8 is set but RANK and MASTER_ADDR",
+        {"WORLD_SIZE": "8"}),
+    _r3("bad value", "train-stray-no-port", TRAIN, r"is set but MASTER_PORT not",
+        {"RANK": "0", "WORLD_SIZE": "2", "MASTER_ADDR": "127.0.0.1"}),
+    _r3("bad value", "quickstart-stray-rank-world", ["quickstart", "--set", "env.motion={fx}/motion.pt"],
+        r"not a complete torchrun launch", {"RANK": "1", "WORLD_SIZE": "2"}),
+    _r3("bad value", "train-rank-not-integer", TRAIN, r"environment variable RANK='abc': expected an integer >= 0",
+        {"RANK": "abc", "WORLD_SIZE": "2"}),
+    _r3("bad value", "train-world-size-zero", TRAIN, r"environment variable WORLD_SIZE='0': expected an integer >= 1",
+        {"RANK": "0", "WORLD_SIZE": "0"}),
+    _r3("bad value", "train-world-size-negative", TRAIN, r"WORLD_SIZE='-3': expected an integer >= 1",
+        {"WORLD_SIZE": "-3"}),
+    _r3("bad value", "train-world-size-float", TRAIN, r"WORLD_SIZE='2\.5': expected an integer", {"WORLD_SIZE": "2.5"}),
+    _r3("bad value", "train-local-rank-negative", TRAIN, r"LOCAL_RANK='-1': expected an integer >= 0",
+        {"LOCAL_RANK": "-1"}),
+    _r3("bad value", "train-local-rank-name", TRAIN, r"LOCAL_RANK='gpu0': expected an integer", {"LOCAL_RANK": "gpu0"}),
+    _r3("bad value", "train-launch-rank-too-big", TRAIN, r"environment: RANK=2 must be below WORLD_SIZE=2",
+        {**TORCHRUN, "RANK": "2"}),
+    _r3("bad value", "train-launch-timeout-word", TRAIN, r"LATENTRL_DIST_TIMEOUT='soon': expected the seconds",
+        {**TORCHRUN, "LATENTRL_DIST_TIMEOUT": "soon"}),
+    _r3("bad value", "train-stray-note-then-bad-config", [*TRAIN, "--set", "ppo.learning_rate=-1"],
+        r"ppo\.learning_rate: must be > 0", {"RANK": "0", "WORLD_SIZE": "1"}),
+]
+for _value in ("abc", "nan", "NaN", "inf", "-inf", "-1", "0", "1e300", "", "30s", "1e6"):
+    ROUND3.append(_r3("bad value", f"train-nproc-timeout-{_value or 'empty'}", NPROC,
+                      rf"environment variable LATENTRL_DIST_TIMEOUT={re.escape(repr(_value))}: expected the seconds "
+                      r"each collective may wait, a number in \(0, 604800\]", {"LATENTRL_DIST_TIMEOUT": _value}))
+ROUND3 += [
+    _r3("bad value", "train-resume-nproc-timeout-nan", ["train", "--resume", "{fx}/badrun", "--nproc", "2"],
+        r"LATENTRL_DIST_TIMEOUT='nan'", {"LATENTRL_DIST_TIMEOUT": "nan"}),
+    _r3("bad value", "train-nproc-sb3", [*NPROC, "--trainer", "sb3"], r"trainer 'sb3' runs in one process only"),
+    # ------------------------------------------------ export onnx: tasks without a controller, unreadable policies
+    _r3("bad value", "export-onnx-joystick", ["export", "onnx", "joystick_walk_default", "--out", "c.onnx"],
+        r"reach and path policies.*this policy's task is 'joystick'"),
+    _r3("bad value", "export-onnx-timed", ["export", "onnx", "timed_walk_default", "--out", "c.onnx"],
+        r"this policy's task is 'timed'"),
+    _r3("bad file", "export-onnx-missing", ["export", "onnx", "nowhere.pt", "--out", "c.onnx"],
+        r"policy checkpoint not found: nowhere\.pt"),
+    _r3("bad file", "export-onnx-etc-passwd", ["export", "onnx", "/etc/passwd", "--out", "c.onnx"],
+        r"/etc/passwd: not a readable torch file"),
+    _r3("bad file", "export-onnx-truncated", ["export", "onnx", "{fx}/truncated.pt", "--out", "c.onnx"],
+        r"truncated\.pt: not a readable torch file"),
+    _r3("hostile file", "export-onnx-evil", ["export", "onnx", "{fx}/evil.pt", "--out", "c.onnx"],
+        r"evil\.pt: refused to load"),
+    _r3("hostile file", "export-onnx-bit-flip", ["export", "onnx", "{fx}/flipped.pt", "--out", "c.onnx"],
+        r"flipped\.pt: policy weights do not match their recorded sha256"),
+    _r3("bad file", "export-onnx-motion-as-policy", ["export", "onnx", "{fx}/motion.pt", "--out", "c.onnx"],
+        r"motion\.pt: not a latentrl PPO checkpoint"),
+    _r3("bad value", "export-onnx-out-is-folder", ["export", "onnx", "reach_walk_default", "--out", "{fx}"],
+        r"--out .* is a directory; give a file name"),
+    _r3("bad value", "export-onnx-out-under-file", ["export", "onnx", "reach_walk_default", "--out",
+                                                    "{fx}/afile/c.onnx"], r"--out folder .*afile exists and is not a"),
+    _r3("bad value", "export-onnx-no-out", ["export", "onnx", "reach_walk_default"],
+        r"the following arguments are required: --out"),
+    # ------------------------------------------------ optimize: flags
+    _r3("bad value", "optimize-steps-0", [*OPT[:3], "--steps", "0"], r"argument --steps: must be > 0, got 0"),
+    _r3("bad value", "optimize-steps-negative", [*OPT[:3], "--steps", "-5"], r"argument --steps: must be > 0"),
+    _r3("bad value", "optimize-steps-1e10", [*OPT[:3], "--steps", "10000000000"], r"steps: expected 1-100000"),
+    _r3("bad value", "optimize-steps-word", [*OPT[:3], "--steps", "many"], r"--steps: expected an integer"),
+    _r3("bad value", "optimize-lr-0", [*OPT, "--lr", "0"], r"argument --lr: must be > 0, got 0"),
+    _r3("bad value", "optimize-lr-nan", [*OPT, "--lr", "nan"], r"argument --lr: must be > 0, got nan"),
+    _r3("bad value", "optimize-lr-inf", [*OPT, "--lr", "inf"], r"argument --lr: must be > 0, got inf"),
+    _r3("bad value", "optimize-lr-negative", [*OPT, "--lr", "-1"], r"argument --lr: must be > 0"),
+    _r3("bad value", "optimize-batch-0", [*OPT, "--batch", "0"], r"argument --batch: must be > 0"),
+    _r3("bad value", "optimize-batch-1e8", [*OPT, "--batch", "100000000"], r"batch: expected 1-4096 problems"),
+    _r3("bad value", "optimize-samples-0", [*OPT, "--samples", "0"], r"argument --samples: must be > 0"),
+    _r3("bad value", "optimize-samples-1e8", [*OPT, "--samples", "100000000"], r"samples: expected 1-256"),
+    _r3("bad value", "optimize-init-word", [*OPT, "--init", "gaussian"], r"--init gaussian: expected 'zeros', 'randn'"),
+    _r3("bad file", "optimize-init-missing", [*OPT, "--init", "nowhere.pt"], r"--init nowhere\.pt: expected .*no such file"),
+    _r3("bad value", "optimize-init-scale-nan", [*OPT, "--init-scale", "nan"], r"init_scale: expected 0-10, got nan"),
+    _r3("bad value", "optimize-init-scale-negative", [*OPT, "--init-scale", "-1"], r"init_scale: expected 0-10"),
+    _r3("bad value", "optimize-guidance-nan", [*OPT, "--guidance", "nan"],
+        r"guidance: expected a finite number in \[-100, 100\], got nan"),
+    _r3("bad value", "optimize-guidance-inf", [*OPT, "--guidance", "inf"], r"guidance: expected a finite number"),
+    _r3("bad value", "optimize-guidance-1e30", [*OPT, "--guidance", "1e30"], r"guidance: expected a finite number"),
+    _r3("bad value", "optimize-stop-cm-nan", [*OPT, "--stop-cm", "nan"], r"argument --stop-cm: must be > 0, got nan"),
+    _r3("bad value", "optimize-stop-cm-negative", [*OPT, "--stop-cm", "-1"], r"argument --stop-cm: must be > 0"),
+    _r3("bad value", "optimize-floor-nan", [*OPT, "--floor", "nan"], r"weights\.floor: expected a finite number >= 0"),
+    _r3("bad value", "optimize-floor-negative", [*OPT, "--floor", "-1"], r"weights\.floor: expected a finite number"),
+    _r3("bad value", "optimize-skate-inf", [*OPT, "--skate", "inf"], r"weights\.skate: expected a finite number"),
+    _r3("bad value", "optimize-jerk-nan", [*OPT, "--jerk", "nan"], r"weights\.jerk: expected a finite number"),
+    _r3("bad value", "optimize-prior-negative", [*OPT, "--prior", "-0.5"], r"weights\.prior: expected a finite"),
+    _r3("bad value", "optimize-prior-nan", [*OPT, "--prior", "nan"], r"weights\.prior: expected a finite number"),
+    _r3("bad value", "optimize-problem-unknown", [*OPT, "--problem", "nope"], r"--problem 'nope': not in .*inbetween"),
+    _r3("bad value", "optimize-device-tpu", [*OPT, "--device", "tpu"], r"argument --device: unknown device 'tpu'"),
+    _r3("bad value", "optimize-device-cpu9", [*OPT, "--device", "cpu:9"], r"argument --device: 'cpu:9' does not"),
+    _r3("bad value", "optimize-seed-negative", [*OPT, "--seed", "-1"], r"argument --seed: must lie in"),
+    _r3("bad value", "optimize-seed-2-64", [*OPT, "--seed", str(2**64)], r"argument --seed: must lie in"),
+    _r3("bad value", "optimize-out-is-file", [*OPT, "--out", "{fx}/afile"], r"--out .*afile exists and is not a dir"),
+    _r3("bad value", "optimize-out-under-file", [*OPT, "--out", "{fx}/afile/x"], r"--out .*afile is a file"),
+    _r3("bad file", "optimize-missing-suite", ["optimize", "nowhere.json"], r"nowhere\.json: no such suite file"),
+    _r3("bad value", "optimize-unknown-suite", ["optimize", "inbetweeen"], r"inbetweeen: no such suite file"),
+    _r3("bad file", "optimize-suite-is-folder", ["optimize", "{fx}/suites"], r"suites: no such suite file"),
+    _r3("bad file", "optimize-motion-missing", [*OPT, "--motion", "nowhere.pt"], r"motion model not found: nowhere"),
+    _r3("bad file", "optimize-motion-etc-passwd", [*OPT, "--motion", "/etc/passwd"], r"/etc/passwd: not a readable"),
+    _r3("hostile file", "optimize-motion-evil", [*OPT, "--motion", "{fx}/evil.pt"], r"evil\.pt: refused to load"),
+    _r3("hostile file", "optimize-init-evil", [*OPT, "--init", "{fx}/evil.pt"], r"evil\.pt: refused to load"),
+]
+ROUND3 += [_r3("hostile file" if name in HOSTILE_SUITES else "bad file", f"optimize-suite-{name}",
+               ["optimize", f"{{fx}}/suites/{name}.json", "--no-progress"], rf"{re.escape(name)}\.json: .*{pattern}")
+           for name, (_, pattern) in SUITES.items()]
+ROUND3 += [
+    # ------------------------------------------------ view and play: what they are asked to serve, their flags
+    *[_r3("bad file", f"view-{name}", ["view", f"{{fx}}/{name}.npz"], rf"{name}\.npz: .*{pattern}")
+      for name, pattern in {"fps0": r"field 'fps' must lie in", "fpsnan": r"field 'fps' must lie in .*nan",
+                            "jstr": r"must hold real floating-point", "jcomplex": r"must hold real floating-point",
+                            "jhuge": r"reaches 3e\+40 m", "jnan": r"holds NaN or inf", "jempty": r"with T > 0",
+                            "nojoints": r"no field 'joints'", "junk": r"not a readable motion \.npz",
+                            "badshape": r"must be \(T, 22, 3\)"}.items()],
+    _r3("bad file", "view-missing", ["view", "nowhere.npz"], r"nowhere\.npz: no such file or folder"),
+    _r3("bad file", "view-empty-folder", ["view", "{fx}/emptybin"], r"emptybin: holds no report\.json"),
+    _r3("bad file", "view-report-invalid-json", ["view", "{fx}/evalbad"], r"report\.json: invalid JSON"),
+    _r3("bad file", "view-report-wrong-types", ["view", "{fx}/evallist"], r"report\.json: report lacks field"),
+    _r3("bad file", "view-run-without-eval", ["view", "{fx}/runnoeval"], r"the run has no evaluation yet"),
+    _r3("bad value", "view-port-negative", ["view", "{fx}/ok.npz", "--port", "-1"], r"expected a port in 0\.\.65535"),
+    _r3("bad value", "view-port-70000", ["view", "{fx}/ok.npz", "--port", "70000"], r"expected a port in 0\.\.65535"),
+    _r3("bad value", "view-port-word", ["view", "{fx}/ok.npz", "--port", "http"], r"expected a port in 0\.\.65535"),
+    _r3("bad value", "view-record-suffix", ["view", "{fx}/ok.npz", "--record", "x.txt"],
+        r"--record must name a \.gif or \.mp4 file"),
+    _r3("bad value", "view-record-under-file", ["view", "{fx}/ok.npz", "--record", "{fx}/afile/x.gif"],
+        r"--record folder .*afile exists and is not a directory"),
+    _r3("bad value", "view-host-unresolvable", ["view", "{fx}/ok.npz", "--host", "999.1.1.1", "--port", "0"],
+        r"--host 999\.1\.1\.1: cannot be resolved"),
+    _r3("bad value", "view-host-not-here", ["view", "{fx}/ok.npz", "--host", "192.0.2.1", "--port", "0"],
+        r"--host 192\.0\.2\.1 --port 0: cannot listen there"),
+    _r3("bad file", "play-missing", ["play", "nowhere.pt"], r"nowhere\.pt: no such policy checkpoint"),
+    _r3("bad value", "play-joystick", ["play", "joystick_walk_default"], r"this policy's task is 'joystick'"),
+    _r3("bad value", "play-timed", ["play", "timed_walk_default"], r"this policy's task is 'timed'"),
+    _r3("bad file", "play-etc-passwd", ["play", "/etc/passwd"], r"/etc/passwd: not a readable torch file"),
+    _r3("hostile file", "play-evil", ["play", "{fx}/evil.pt"], r"evil\.pt: refused to load"),
+    _r3("hostile file", "play-bit-flip", ["play", "{fx}/flipped.pt", "--motion", "{fx}/motion.pt"],
+        r"flipped\.pt: policy weights do not match"),
+    _r3("bad value", "play-long-text", ["play", "reach_walk_default", "--text", "{LONG}"], r"has 1001 characters"),
+    _r3("bad value", "play-device", ["play", "reach_walk_default", "--device", "tpu"], r"unknown device 'tpu'"),
+    _r3("bad value", "play-seed", ["play", "reach_walk_default", "--seed", "-1"], r"argument --seed: must lie in"),
+    _r3("bad value", "play-record-suffix", ["play", "reach_walk_default", "--record", "x.txt"],
+        r"--record must name a \.gif or \.mp4"),
+    _r3("bad file", "play-motion-missing", ["play", "reach_walk_default", "--motion", "nowhere.pt"],
+        r"motion model not found: nowhere\.pt"),
+    _r3("bad file", "play-motion-etc-passwd", ["play", "reach_walk_default", "--motion", "/etc/passwd"],
+        r"/etc/passwd: not a readable torch file"),
+    _r3("bad value", "play-port-word", ["play", "reach_walk_default", "--port", "x"], r"expected a port in 0\.\.65535"),
+]
+ROWS += ROUND3
 SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS}
 
 
@@ -476,6 +784,8 @@ def test_bad_input_gets_one_clear_line_exit_2_and_leaves_nothing(argv, pattern, 
     monkeypatch.chdir(work)
     before = tree(fx)
     values = {"fx": fx, "TINY": TINY, "MTINY": MTINY, "LONG": LONG}
+    for name, value in ENV.get(request.node.callspec.id, {}).items():
+        monkeypatch.setenv(name, value.format(**values))
     code = main([a.format(**values) for a in argv])
     out = capsys.readouterr()
     assert code == 2, out.err
@@ -488,7 +798,7 @@ def test_bad_input_gets_one_clear_line_exit_2_and_leaves_nothing(argv, pattern, 
 
 def test_every_command_is_covered_and_rows_are_distinct():
     assert len(ROWS) >= 40 and len({i for i, _, _ in ROWS}) == len(ROWS)
-    assert len({tuple(a) for _, a, _ in ROWS}) == len(ROWS)
+    assert len({(tuple(a), tuple(ENV.get(i, {}).items())) for i, a, _ in ROWS}) == len(ROWS)  # argv + environment
     commands = {" ".join(a[:2]) if a and a[0] in ("motion", "bench") else (a[0] if a else "") for _, a, _ in ROWS}
     assert {"train", "quickstart", "eval", "compare", "motion info", "motion sample", "motion train",
             "motion export-bvh", "bench motion", "bench env", "bench rollout", "bench train"} <= commands
@@ -518,3 +828,78 @@ def test_sample_never_writes_a_diverged_rollout(fx, tmp_path, monkeypatch, capsy
     err = capsys.readouterr().err
     assert code == 3 and "the rollout diverged" in err and "nothing written" in err
     assert not (tmp_path / "m.npz").exists()
+
+
+HOSTILE = re.compile(r"evil|bomb|aliases|deep|20000|400-digits|1e308|bit-flip|python-tag|etc-passwd|huge-path")
+
+
+def command_of(argv: list[str]) -> str:
+    """The command a row drives: ``train``, ``motion sample``, ``export onnx``, ``bench env``, ..."""
+    if not argv or argv[0] not in ("train", "quickstart", "eval", "compare", "optimize", "view", "play", "motion",
+                                   "bench", "export"):
+        return "top level"
+    if argv[0] == "bench" and (len(argv) < 2 or argv[1] not in ("motion", "env", "rollout", "train")):
+        return "bench"
+    return " ".join(argv[:2]) if argv[0] in ("motion", "bench", "export") and len(argv) > 1 else argv[0]
+
+
+def kind_of(rid: str, argv: list[str]) -> str:
+    """bad value, bad file, hostile file or fault: round 3 rows say theirs, earlier rows are told by their input."""
+    if rid in KIND:
+        return KIND[rid]
+    if HOSTILE.search(rid):
+        return "hostile file"
+    inputs = [a for a in argv if "{fx}/" in a and not a.endswith(("/motion.pt", "/policy.pt", "/ok.npz"))
+              and "afile" not in a]  # the good fixtures, and a file standing where an output goes (a bad value)
+    if inputs or any("missing" in a or "nowhere" in a for a in argv) or "missing" in rid:
+        return "bad file"
+    return "bad value"
+
+
+def table_counts() -> tuple[dict[str, int], dict[str, int]]:
+    """Rows by command and by kind (docs/robustness.md prints both)."""
+    by_command: dict[str, int] = {}
+    by_kind: dict[str, int] = {}
+    for rid, argv, _ in ROWS:
+        by_command[command_of(argv)] = by_command.get(command_of(argv), 0) + 1
+        by_kind[kind_of(rid, argv)] = by_kind.get(kind_of(rid, argv), 0) + 1
+    return by_command, by_kind
+
+
+def test_the_table_has_300_distinct_rows_and_the_docs_count_them():
+    by_command, by_kind = table_counts()
+    assert len(ROWS) >= 300 and len({tuple(a) + tuple(ENV.get(i, {}).items()) for i, a, _ in ROWS}) == len(ROWS)
+    doc = (ROOT / "docs" / "robustness.md").read_text()
+    assert f"| all | {len(ROWS)} |" in doc, f"docs/robustness.md does not count {len(ROWS)} rows"
+    for name, count in {**by_command, **by_kind}.items():
+        assert f"| {name} | {count} |" in doc, f"docs/robustness.md lacks the row '| {name} | {count} |'"
+
+
+def test_a_stray_single_rank_environment_is_ignored_with_a_note(fx, tmp_path, monkeypatch, capsys):
+    """RANK=0 WORLD_SIZE=1 without MASTER_ADDR (a notebook's leftover): one process trains, and says why."""
+    monkeypatch.setenv("RANK", "0")
+    monkeypatch.setenv("WORLD_SIZE", "1")
+    monkeypatch.chdir(tmp_path)
+    code = main(["train", TINY, "--set", f"env.motion={fx}/motion.pt", "--total-steps", "64", "--run-dir", "run",
+                 "--no-progress"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert ("latentrl: note: ignoring RANK=0 WORLD_SIZE=1 (MASTER_ADDR and MASTER_PORT not set: not a torchrun "
+            "launch); training in one process") in out.out
+    assert (tmp_path / "run" / "final.pt").is_file() and out.err == ""
+
+
+def test_a_compiler_named_by_cxx_that_does_not_exist_is_refused_before_training(fx, tmp_path):
+    """``CXX=/nonexistent/g++`` read by torch at start-up, as in a user's shell: one line, exit 2, no run folder."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "CXX": "/nonexistent/g++", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-m", "latentrl", "train", TINY, "--set", f"env.motion={fx}/motion.pt",
+                           "--set", "env.compile=true", "--run-dir", "run"], env=env, cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert ("env.compile: torch.compile on the CPU needs a C++ compiler, and none runs here (tried "
+            "'/nonexistent/g++'") in proc.stderr
+    assert not (tmp_path / "run").exists()

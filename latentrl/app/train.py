@@ -289,6 +289,10 @@ def quickstart(req: QuickstartRequest) -> int:
     """Body of ``latentrl quickstart``: train ``configs/quick.yaml`` on the default model, then evaluate."""
     from latentrl.app.evaluate import EvalRequest, check_eval_request, evaluate
 
+    from latentrl.ppo import distributed
+
+    if note := distributed.check_environment():
+        print(f"latentrl: note: {note}", flush=True)
     cfg = load_train_config(QUICK_CONFIG, req.overrides)
     run_dir = Path(req.run_dir) if req.run_dir else Path("runs") / f"quickstart-{time.strftime('%Y%m%d-%H%M%S')}"
     check_new_run(run_dir)

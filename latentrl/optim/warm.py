@@ -43,7 +43,15 @@ def pelvis_goal(problem: Problem) -> tuple[float, float]:
 
 def policy_warm_start(spec: str, guidance: float | None = None) -> Callable[[object, list[Problem]], torch.Tensor]:
     """A ``warm_start(model, problems) -> (S, B, 1, D)`` that rolls the policy ``spec`` (file or shipped name)."""
+    from pathlib import Path
+
+    from latentrl.ppo.checkpoint import read_checkpoint
+
     path = policy_file(spec)
+    if not Path(path).is_file():
+        raise ConfigError(f"--init {spec}: expected 'zeros', 'randn' or a reach/path policy file (or shipped name); "
+                          "no such file")
+    read_checkpoint(path)  # an unreadable or hostile file is its own one line, not "its task: None"
     env_cfg = stored_env(path)
     if env_cfg is None or env_cfg.task not in POLICY_TASKS:
         task = None if env_cfg is None else env_cfg.task

@@ -23,6 +23,9 @@ from urllib.parse import urlsplit
 
 MAX_CLIENTS = 16
 """WebSockets served at once (browser tabs); more are refused with HTTP 503 so a flood cannot starve playback."""
+MAX_MESSAGE_BYTES = 1 << 20
+"""Largest WebSocket message a client may send (Viser allows 50 MiB): the viewer's camera, GUI and click messages
+are under 1 KiB, so a bigger frame only costs memory (times :data:`MAX_CLIENTS`); it closes that connection (1009)."""
 MAX_COMPLAINTS, COMPLAINT_WINDOW_S = 50, 10.0
 """At most 50 stderr lines about refused connections and ignored messages per 10 s (a hostile page may loop)."""
 _window = {"start": -math.inf, "lines": 0}
@@ -125,7 +128,8 @@ _serve_lock = threading.Lock()
 
 @contextlib.contextmanager
 def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
-    """While open, every websockets server started gets ``guard`` in front of its HTTP handler.
+    """While open, every websockets server started gets ``guard`` in front of its HTTP handler (and
+    :data:`MAX_MESSAGE_BYTES` as its message limit).
 
     Viser (1.1) starts its server with ``websockets.asyncio.server.serve`` and offers no hook for the
     handshake, so :func:`~latentrl.viewer.server.start_server` opens this around building the
@@ -137,6 +141,7 @@ def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
         original = ws_server.serve
 
         def serve(*args: Any, process_request: Any = None, **kwargs: Any) -> Any:
+            kwargs["max_size"] = MAX_MESSAGE_BYTES
             return original(*args, process_request=guard.wrap(process_request), **kwargs)
 
         ws_server.serve = serve
