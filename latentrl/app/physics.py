@@ -38,6 +38,8 @@ def load_tracked_motion(path: str):
     from latentrl.motion.clip import MotionClip
 
     clip = MotionClip.load(path)
+    if clip.frames < 2:
+        raise DataError(f"{path}: a motion of {clip.frames} frame cannot be tracked (need at least 2)")
     if clip.features is None:
         return clip
     features = np.asarray(clip.features)
@@ -47,8 +49,6 @@ def load_tracked_motion(path: str):
     if not np.isfinite(features).all():
         bad = int((~np.isfinite(features)).any(axis=1).sum())
         raise DataError(f"{path}: field 'features' holds NaN or inf in {bad} of {clip.frames} frames")
-    if clip.frames < 2:
-        raise DataError(f"{path}: a motion of {clip.frames} frame cannot be tracked (need at least 2)")
     return clip
 
 

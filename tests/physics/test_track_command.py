@@ -53,7 +53,8 @@ def test_a_motion_without_features_is_tracked_from_its_joints(sampled_walk, tmp_
     assert MotionClip.load(out / "motion.npz").features.shape == (len(clip["joints"]), 276)
 
 
-@pytest.mark.parametrize("case", ["missing", "not_npz", "bad_features", "nan_features", "nan_joints", "height"])
+@pytest.mark.parametrize("case", ["missing", "not_npz", "bad_features", "nan_features", "nan_joints", "one_frame",
+                                  "height"])
 def test_bad_input_is_one_line_and_exit_2(case, sampled_walk, tmp_path, capsys):
     clip = dict(np.load(sampled_walk))
     args = []
@@ -73,6 +74,8 @@ def test_bad_input_is_one_line_and_exit_2(case, sampled_walk, tmp_path, capsys):
         joints = clip["joints"].copy()
         joints[2, 4, 1] = np.nan
         path = bad_motion(tmp_path, "nanjoints.npz", joints=joints, fps=clip["fps"], features=clip["features"])
+    elif case == "one_frame":
+        path = bad_motion(tmp_path, "one.npz", joints=clip["joints"][:1], fps=clip["fps"])
     else:
         path, args = sampled_walk, ["--height", "7"]
     out = tmp_path / f"out_{case}"
