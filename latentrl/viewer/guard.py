@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import ipaddress
+import logging
 import math
 import socket
 import sys
@@ -123,13 +124,36 @@ class ConnectionGuard:
         return guarded
 
 
+class _OneLine(logging.Handler):
+    """The websockets server's warnings and errors (a message Viser could not decode) as one :func:`complain` line."""
+
+    def __init__(self, command: str):
+        super().__init__(logging.WARNING)
+        self.command = command
+
+    def emit(self, record: logging.LogRecord) -> None:
+        exc = record.exc_info[1] if record.exc_info else None
+        text = f"{type(exc).__name__}: {(str(exc).splitlines() or [''])[0]}" if exc else record.getMessage()
+        complain(self.command, f"closed a browser connection after an error ({text[:160]})")
+
+
+def server_logger(command: str) -> logging.Logger:
+    """The logger given to the viewer's websockets server: one stderr line per problem, never a traceback."""
+    logger = logging.getLogger(f"latentrl.viewer.{command}.websockets")
+    logger.propagate = False
+    logger.setLevel(logging.WARNING)
+    if not logger.handlers:
+        logger.addHandler(_OneLine(command))
+    return logger
+
+
 _serve_lock = threading.Lock()
 
 
 @contextlib.contextmanager
 def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
     """While open, every websockets server started gets ``guard`` in front of its HTTP handler (and
-    :data:`MAX_MESSAGE_BYTES` as its message limit).
+    :data:`MAX_MESSAGE_BYTES` as its message limit and :func:`server_logger` as its logger).
 
     Viser (1.1) starts its server with ``websockets.asyncio.server.serve`` and offers no hook for the
     handshake, so :func:`~latentrl.viewer.server.start_server` opens this around building the
@@ -142,6 +166,7 @@ def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
 
         def serve(*args: Any, process_request: Any = None, **kwargs: Any) -> Any:
             kwargs["max_size"] = MAX_MESSAGE_BYTES
+            kwargs["logger"] = server_logger(guard.command)
             return original(*args, process_request=guard.wrap(process_request), **kwargs)
 
         ws_server.serve = serve
