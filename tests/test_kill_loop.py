@@ -182,3 +182,60 @@ def test_sigkill_motion_training_resumes_from_its_last_state(tmp_path):
         progress = now
     assert progress == (1, steps) and (run / "motion_model.pt").is_file()
     print(json.dumps({"motion_kills": kills, "during_write": during_write}))
+
+
+def _train_stderr_until(proc: subprocess.Popen, text: str, lines: list[str]) -> bool:
+    """Read the process's stderr into ``lines`` until a line holds ``text`` (True) or the stream ends (False)."""
+    for line in proc.stderr:
+        lines.append(line)
+        if text in line:
+            return True
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("second", ["at-once", "while-exiting"])
+def test_ctrl_c_twice_on_the_sb3_trainer_exits_130_cleanly_and_the_run_resumes(second, motion_file, tmp_path):
+    """Two real SIGINTs to ``latentrl train --trainer sb3``: the second at once (stop without saving) or just after
+    the save line (while the process exits). Either way: exit 130, no traceback, no half-written file, and a
+    ``--resume`` starts at the newest checkpoint."""
+    run = tmp_path / "run"
+    argv = [sys.executable, "-m", "latentrl", "train", str(TINY), "--trainer", "sb3", "--set",
+            f"env.motion={motion_file}", "--set", "ppo.checkpoint_every=2", "--total-steps", str(64 * 100_000),
+            "--run-dir", str(run), "--no-progress"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    lines: list[str] = []
+    try:
+        wait_for(lambda: len(iteration_checkpoints(run)) >= 1, proc)
+        proc.send_signal(signal.SIGINT)
+        if second == "at-once":
+            time.sleep(0.05)
+        else:
+            assert _train_stderr_until(proc, "interrupted: saved iteration", lines), "".join(lines)
+            time.sleep(0.02)  # the process is on its way out (this used to end it by SIGINT, exit -2)
+        proc.send_signal(signal.SIGINT)
+        lines += proc.stderr.readlines()
+        assert proc.wait(timeout=120) == 130, "".join(lines)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    err = "".join(lines)
+    assert "Traceback" not in err and err.rstrip().endswith("latentrl: interrupted"), err
+    assert not temporaries(run), "a temporary file was left"
+    newest = max(read_checkpoint(p)["iteration"] for p in iteration_checkpoints(run))  # every one loads
+    if second == "while-exiting":
+        assert f"interrupted: saved iteration {newest} " in err, err
+    resumed = subprocess.Popen([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--trainer", "sb3",
+                                "--no-progress"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+    try:
+        wait_for(lambda: len(start_lines(run)) >= 2, resumed)
+        assert start_lines(run)[-1] == (newest, 64 * newest), start_lines(run)
+        resumed.send_signal(signal.SIGINT)
+        assert resumed.wait(timeout=120) == 130, resumed.stderr.read()
+    finally:
+        if resumed.poll() is None:
+            resumed.kill()
+            resumed.wait()
