@@ -259,6 +259,9 @@ def _bench_commands(sub) -> None:
     roll.add_argument("--device", nargs="+", type=_device, default=None,
                       help="devices (default: cpu, plus cuda when present)")
     roll.add_argument("--repeats", type=_pos_int, default=5, help="timed runs per figure (median reported)")
+    roll.add_argument("--rounds", type=_pos_int, default=None,
+                      help="with --dart-src: time ours, then DART's, this many times over (default 5); ratios are "
+                           "the median over rounds with their min-max and IQR")
     roll.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads (default: torch's)")
     roll.add_argument("--amp", nargs="+", choices=["bf16", "fp16"],
                       help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16); with --compile also "

@@ -78,3 +78,62 @@ def test_dart_runs_pair_each_cuda_device_with_fp32_and_dart_s_own_fp16():
 
     assert _dart_runs(["cpu"]) == [("cpu", "fp32")]
     assert _dart_runs(["cpu", "cuda"]) == [("cpu", "fp32"), ("cuda", "fp32"), ("cuda", "fp16")]
+
+
+def test_interleave_alternates_ours_and_the_peer_round_by_round():
+    from latentrl.app.bench.rollout import interleave
+
+    calls = []
+    order = interleave(3, lambda r: calls.append(("ours", r)), lambda r: calls.append(("peer", r)) or True)
+    assert calls == [("ours", 0), ("peer", 0), ("ours", 1), ("peer", 1), ("ours", 2), ("peer", 2)]
+    assert order == ["ours 0", "peer 0", "ours 1", "peer 1", "ours 2", "peer 2"]
+    # no peer: one round of ours, nothing more
+    calls.clear()
+    assert interleave(5, lambda r: calls.append(("ours", r)), lambda r: False) == ["ours 0"]
+    assert calls == [("ours", 0)]
+
+
+def test_ratio_spread_is_the_median_of_same_round_ratios_with_min_max_and_quartiles():
+    import pytest
+
+    from latentrl.app.bench.rollout import ratio_spread
+
+    # the peer's time swings 2.0-5.8 s with the load while ours follows it: same-round ratios stay near 4
+    stats = ratio_spread([2000.0, 5800.0, 4000.0, 3000.0, 2400.0], [500.0, 1450.0, 800.0, 750.0, 600.0])
+    assert stats["rounds"] == pytest.approx([4.0, 4.0, 5.0, 4.0, 4.0])
+    assert stats["median"] == 4.0 and stats["min"] == 4.0 and stats["max"] == 5.0
+    assert (stats["q1"], stats["q3"]) == (4.0, 4.0)
+    stats = ratio_spread([100.0, 300.0, 200.0, 400.0], [100.0, 100.0, 100.0, 100.0])
+    assert stats["median"] == 2.5 and (stats["min"], stats["max"]) == (1.0, 4.0)
+    assert stats["q1"] == pytest.approx(1.75) and stats["q3"] == pytest.approx(3.25)
+    assert ratio_spread([30.0], [10.0])["median"] == pytest.approx(3.0)
+    with pytest.raises(ValueError):
+        ratio_spread([1.0, 2.0], [1.0])
+
+
+def test_rounds_interleave_our_sampler_with_the_peer_and_report_the_median_ratio(tmp_path):
+    """End to end at the official size, batch 1, two rounds; the peer is a stand-in script speaking DART's JSON."""
+    import sys
+
+    log = tmp_path / "peer_calls.txt"
+    peer = tmp_path / "peer.py"
+    peer.write_text(
+        "import json, sys\n"
+        f"open({str(log)!r}, 'a').write(' '.join(sys.argv[1:]) + '\\n')\n"
+        "print('not json')\n"
+        "print(json.dumps({'results': [{'batch': 1, 'ms_per_batch_median': 5000.0}]}))\n")
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[1], models=["official"], device=["cpu"], repeats=1, rounds=2,
+                              dart_src=str(tmp_path), dart_python=sys.executable, dart_bench=str(peer), json=str(out))
+    assert bench_rollout(req) == 0
+    data = json.loads(out.read_text())
+    assert data["order"] == ["ours 0", "peer 0", "ours 1", "peer 1"] and data["rounds"] == 2
+    calls = log.read_text().splitlines()
+    assert len(calls) == 2 and "--reps 1" in calls[0]
+    assert "--matmul-n" not in calls[0] and "--matmul-n 256" in calls[1]
+    row = data["models"]["official"]["results"][0]
+    assert len(row["ms_per_batch_rounds"]) == 2
+    spread = data["speedup_vs_dart_official_cpu_spread"]["1"]
+    assert spread["rounds"] == [5000.0 / ms for ms in row["ms_per_batch_rounds"]]
+    assert spread["min"] <= data["speedup_vs_dart_official_cpu"]["1"] == spread["median"] <= spread["max"]
+    assert data["dart_peer"]["ms_per_batch_rounds"] == {"1": [5000.0, 5000.0]}
