@@ -239,3 +239,55 @@ def test_ctrl_c_twice_on_the_sb3_trainer_exits_130_cleanly_and_the_run_resumes(s
         if resumed.poll() is None:
             resumed.kill()
             resumed.wait()
+
+
+OPTIMIZE_KILLS_CI, OPTIMIZE_KILLS_FULL = 3, 10
+
+
+@pytest.mark.slow
+def test_optimize_killed_or_interrupted_then_run_again_leaves_only_whole_files(motion_file, tmp_path):
+    """SIGKILL (and one SIGINT) of ``latentrl optimize`` at random moments; every file it left is whole, and the
+    same command run again into the same ``--out`` finishes (the lock died with the process)."""
+    from latentrl.motion.clip import load_motion_npz
+
+    kills = OPTIMIZE_KILLS_FULL if FULL else OPTIMIZE_KILLS_CI
+    rng = random.Random(5)
+    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
+    suite = tmp_path / "suite.json"
+    suite.write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
+        {"name": f"p{i}", "start": {"seed": 0}, "text": "walk", "primitives": 2, "constraints": [joint]}
+        for i in range(6)]}))
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "latentrl", "optimize", str(suite), "--motion", str(motion_file), "--batch", "2",
+            "--out", str(out), "--no-progress"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+
+    def whole() -> None:
+        if (out / "report.json").is_file():
+            json.loads((out / "report.json").read_text())
+        for motion in (out / "motions").glob("*.npz") if (out / "motions").is_dir() else []:
+            load_motion_npz(motion)
+        assert not [p for p in out.rglob(".*.tmp")], "a temporary file was left"
+
+    landed = 0
+    for i in range(kills):
+        proc = subprocess.Popen([*argv, "--steps", "400"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                env=env, cwd=tmp_path)
+        wait_for(lambda: (out / ".lock").is_file(), proc)
+        time.sleep(rng.uniform(0.5, 4.0))
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT if i == 0 else signal.SIGKILL)
+            landed += 1
+        code = proc.wait(timeout=120)
+        err = proc.stderr.read().decode()
+        assert "Traceback" not in err, err
+        if i == 0 and code != 0:
+            assert code == 130 and err.strip().splitlines()[-1] == "latentrl: interrupted", err
+        whole()
+    done = subprocess.run([*argv, "--steps", "3"], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr
+    whole()
+    report = json.loads((out / "report.json").read_text())
+    assert sorted(p.stem for p in (out / "motions").glob("*.npz")) == [f"p{i}" for i in range(6)], report.keys()
+    print(json.dumps({"optimize_signals": kills, "while_running": landed}))
+    assert landed >= 1, "no signal reached a running optimize"
