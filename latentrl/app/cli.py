@@ -349,6 +349,9 @@ def _bench_optimize_command(bsub) -> None:
     opt.add_argument("--warm", metavar="POLICY", help="also run every suite warm-started from this policy's noises")
     opt.add_argument("--cost-steps", type=_pos_int, default=5, help="timed steps of the cost rows")
     opt.add_argument("--models", nargs="+", default=["default", "official"], help="models of the cost rows")
+    opt.add_argument("--batches", type=_pos_int, nargs="+", default=None,
+                     help="problems solved together in the rate rows: problems per minute at 100 steps on the "
+                          "default model (default: 1 8 64)")
     opt.add_argument("--device", action="append", type=_device, help="repeat for several (default: cpu and cuda)")
     opt.add_argument("--threads", type=_pos_int)
     opt.add_argument("--skip-suites", action="store_true", help="only the cost rows")

@@ -274,7 +274,8 @@ def test_bench_optimize_writes_rows_curves_and_plot(tmp_path, capsys):
     """``latentrl bench optimize`` on one shipped suite, 2 steps: a row with its figures, a curve, the plot."""
     out = tmp_path / "b.json"
     assert main(["bench", "optimize", "--suites", "joint_targets", "--steps", "2", "--cost-steps", "1",
-                 "--models", "default", "--device", "cpu", "--json", str(out), "--plot", str(tmp_path / "b.png")]) == 0
+                 "--models", "default", "--batches", "1", "--device", "cpu", "--json", str(out),
+                 "--plot", str(tmp_path / "b.png")]) == 0
     data = json.loads(out.read_text())
     (row,) = data["suites"]
     assert row["suite"] == "joint_targets" and row["problems"] == 7 and row["goal_error_cm"] > 0

@@ -4,12 +4,15 @@ Rows: per suite, the mean goal error, history error, skate, floor, jerk against 
 starts and prompts, the share of problems within 1 cm and the wall time to 1 cm (cold start; and warm, from
 a policy's noises, with ``--warm``); then the cost of 100 steps over 64 frames (8 primitives) on the embedded
 default model and on DART's released architecture (random weights), per device, beside DART's figure (74 s for
-100 steps over 60 frames on an RTX 4090, its App. F).
+100 steps over 60 frames on an RTX 4090, its App. F); then problems per minute of the solver itself at each
+``--batches`` size (problems solved together), with each size's same-run ratio to batch 1.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
+import statistics
 import time
 from dataclasses import dataclass, field
 
@@ -19,7 +22,7 @@ from latentrl.app.bench.common import default_devices, official_size_model, writ
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.optim import OptimizeSettings, load_suite, optimize
 from latentrl.optim.report import summary
-from latentrl.optim.solver import add_unconstrained_jerk, rollout
+from latentrl.optim.solver import add_unconstrained_jerk, rollout, solve_batch
 from latentrl.optim.warm import policy_warm_start
 from latentrl.resources import task_file
 from latentrl.safe_io import atomic_write_bytes
@@ -42,6 +45,8 @@ class OptimizeBenchRequest:
     cost_steps: int = 5
     """Timed steps of the cost rows (the figure is scaled to 100 steps)."""
     models: list[str] = field(default_factory=lambda: ["default", "official"])
+    batches: list[int] = field(default_factory=lambda: [1, 8, 64])
+    """Problems solved together in the rate rows (problems per minute at 100 steps, default model)."""
     device: list[str] | None = None
     threads: int | None = None
     skip_suites: bool = False
@@ -136,6 +141,63 @@ def _cost_row(name: str, device: str, steps: int) -> dict:
     return row
 
 
+RATE_SUITE = "inbetween"
+"""The rate rows solve copies of this suite's first 64-frame problem."""
+
+
+def _rate_problem():
+    """The first 8-primitive (64-frame) problem of :data:`RATE_SUITE`."""
+    return next(p for p in load_suite(task_file(RATE_SUITE, "constraints")) if p.primitives == 8)
+
+
+def rate_from_trace(step_ends: list[float], wall: float, batch: int, steps: int = 100) -> dict:
+    """Problems per minute at ``steps`` steps from one timed batch: the median step and the fixed cost.
+
+    ``step_ends``: seconds since the batch's first step began, at the end of each step (a result's trace);
+    the first step is a warm-up, left out of the median. ``wall``: the whole call (set-up and the final
+    rollout included); what it holds beyond the steps is counted once per batch.
+    """
+    if len(step_ends) < 2:
+        raise ValueError(f"need at least 2 timed steps (the first is a warm-up), got {len(step_ends)}")
+    per_step = statistics.median(b - a for a, b in zip(step_ends, step_ends[1:]))
+    fixed = max(wall - step_ends[-1], 0.0)
+    seconds = fixed + steps * per_step
+    return {"batch": batch, "seconds_per_step": per_step, "fixed_seconds": fixed,
+            f"seconds_per_batch_{steps}_steps": seconds, f"seconds_per_problem_{steps}_steps": seconds / batch,
+            "problems_per_minute": 60.0 * batch / seconds}
+
+
+def _rate_row(model, device: str, batch: int, timed_steps: int) -> dict:
+    """Solve ``batch`` copies of one 64-frame problem together for ``timed_steps`` + 1 steps; the rate at 100."""
+    problem = _rate_problem()
+    problems = [dataclasses.replace(problem, name=f"{problem.name}#{k}") for k in range(batch)]
+    settings = OptimizeSettings(steps=timed_steps + 1, batch=batch)
+    t0 = time.perf_counter()
+    results = solve_batch(model, problems, settings)
+    wall = time.perf_counter() - t0
+    row = {"model": "default", "device": device, "frames": problem.num_frames, "timed_steps": timed_steps,
+           **rate_from_trace([t for t, _, _ in results[0].trace], wall, batch)}
+    row["seconds_per_problem_100_steps_60_frames"] = row["seconds_per_problem_100_steps"] * 60 / problem.num_frames
+    row["dart_ratio"] = DART_SECONDS_PER_100_STEPS_60_FRAMES / row["seconds_per_problem_100_steps_60_frames"]
+    return row
+
+
+def _rate_rows(req: OptimizeBenchRequest, device: str) -> list[dict]:
+    """One rate row per ``--batches`` size, each with its ratio to batch 1 of the same run (when timed)."""
+    model = load_motion_model("default", device=device)
+    rows = [_rate_row(model, device, b, req.cost_steps) for b in req.batches]
+    one = next((r for r in rows if r["batch"] == 1), None)
+    for r in rows:
+        if one is not None:
+            r["vs_batch_1"] = r["problems_per_minute"] / one["problems_per_minute"]
+        versus = f", {r['vs_batch_1']:.2f}x batch 1 (same run)" if one is not None and r is not one else ""
+        print(f"rate default {device} batch {r['batch']:>3}: {r['seconds_per_step'] * 1000:.0f} ms per step, "
+              f"{r['seconds_per_batch_100_steps']:.1f} s per 100 steps for {r['batch']} problems of 64 frames, "
+              f"{r['problems_per_minute']:.2f} problems/min{versus}; x{r['dart_ratio']:.1f} DART's 74 s per problem "
+              f"(100 steps x 60 frames, RTX 4090, published)")
+    return rows
+
+
 def bench_optimize(req: OptimizeBenchRequest) -> int:
     """Run the rows and print them; all figures go to ``--json`` with the hardware label."""
     if req.threads:
@@ -146,12 +208,15 @@ def bench_optimize(req: OptimizeBenchRequest) -> int:
     warm_fn = None
     if req.warm:
         warm_fn = policy_warm_start(req.warm)
-    out = {"hardware": hw, "steps": req.steps, "batch": req.batch, "suites": [], "cost": [], "curves": {}}
+    out = {"hardware": hw, "steps": req.steps, "batch": req.batch, "suites": [], "cost": [], "rate": [],
+           "curves": {}}
     for device in devices:
         if not req.skip_suites:
             out["suites"] += _suite_rows(req, device, warm_fn, out["curves"])
         for name in req.models:
             out["cost"].append(_cost_row(name, device, req.cost_steps))
+        if req.batches:
+            out["rate"] += _rate_rows(req, device)
     if req.plot and out["curves"]:
         plot_curves(out["curves"], req.plot)
     write_json(req.json, out)
