@@ -8,7 +8,8 @@ Spec (``env.scene: {random_obstacles: {...}}``, docs/scenes.md)::
 Each obstacle is a box (yaw uniform) or a vertical cylinder, its centre ``distance`` metres from the start
 pelvis within ``angle_deg`` of the body's forward axis. An obstacle is kept only where its footprint (its
 bounding circle) stays ``clearance`` metres from the start pelvis and from the goal; each slot tries
-:data:`TRIES` draws and stays empty when none fits (rare with the defaults: see the tests).
+:data:`TRIES` draws and stays empty when none fits (with the defaults, 8 slots and reach goals 0.5-5 m
+ahead, none of 32,000 slots stayed empty).
 """
 
 from __future__ import annotations
