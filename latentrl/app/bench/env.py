@@ -217,7 +217,8 @@ def bench_env(args: EnvBenchRequest) -> int:
         "models": {},
         "notes": [],
     }
-    print(f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads)")
+    gpu = f"; {out['hardware']['gpu']}" if "gpu" in out["hardware"] else ""
+    print(f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads){gpu}")
     loaded = {name: bench_model(name) for name in args.models}  # a bad name fails before any timing
     for name, model in loaded.items():
         rows, last = [], {}

@@ -103,6 +103,8 @@ def bench_train(req: TrainBenchRequest) -> int:
         torch.set_num_threads(req.threads)
     base = config_file(req.config or QUICK_CONFIG)
     out = {"benchmark": "train", "hardware": hardware(), "config": str(base)}
+    gpu = f"; {out['hardware']['gpu']}" if "gpu" in out["hardware"] else ""
+    print(f"hardware: {out['hardware']['cpu']} ({out['hardware']['torch_threads']} threads){gpu}")
     work = Path(req.run_dir) if req.run_dir else Path(tempfile.mkdtemp(prefix="latentrl-bench-train-"))
     if req.nproc:
         out["ranks"] = bench_ranks(req, base, work)
