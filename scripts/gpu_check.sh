@@ -52,7 +52,7 @@ LR=("$PY" -m latentrl)
 
 part machine 60 bash -c "nvidia-smi -L; $PY -c 'import torch; print(torch.__version__, torch.version.cuda, \
 torch.cuda.get_device_name(0), torch.cuda.get_device_properties(0).multi_processor_count, \"SMs\")'; nproc"
-part optimize_cost 70 "${LR[@]}" bench optimize --device cuda --skip-suites --models default official \
+part optimize_cost 100 "${LR[@]}" bench optimize --device cuda --skip-suites --models default official \
     --cost-steps 10 --json "$OUT/optimize_cost.json"
 part optimize_suites 110 "${LR[@]}" bench optimize --device cuda --models default --cost-steps 3 \
     --suites inbetween joint_targets --json "$OUT/optimize_suites.json"
@@ -60,8 +60,8 @@ part train_to_success 220 "${LR[@]}" bench train --config configs/policies/reach
     --eval-every 4 --no-side-by-side --no-progress --set ppo.device=cuda --set env.num_envs=1024 \
     --set env.compile=true --set ppo.num_minibatches=16 --set ppo.total_steps=3000000 --json "$OUT/train_gpu.json"
 part tests 110 "$PY" -m pytest -q -p no:cacheprovider -rA tests/gpu
-part rollout 150 "${LR[@]}" bench rollout --models official default --device cuda --batches 1 16 256 1024 4096 \
-    --amp bf16 fp16 --repeats 10 "${DART[@]}" --json "$OUT/rollout.json"
+part rollout 240 "${LR[@]}" bench rollout --models official default --device cuda --batches 1 16 256 1024 4096 \
+    --amp bf16 fp16 --repeats 10 --rounds 3 "${DART[@]}" --json "$OUT/rollout.json"
 part env 110 "${LR[@]}" bench env --models default official --device cuda --num-envs 1 256 4096 --amp bf16 \
     --steps 5 --max-seconds 40 --json "$OUT/env.json"
 part env_compiled_default 120 "${LR[@]}" bench env --models default --device cuda --num-envs 1 256 --compile \
