@@ -204,3 +204,28 @@ def test_vae_step_adds_the_weighted_seam_term():
         load_config(MotionTrainConfig, TINY, ["vae_train.seam_weight=-1"])
     with pytest.raises(ConfigError, match=r"denoiser_train.seam_weight: must be >= 0"):
         load_config(MotionTrainConfig, TINY, ["denoiser_train.seam_weight=-1"])
+
+
+def test_denoiser_step_adds_the_weighted_seam_term_against_the_data_history(tiny_model):
+    from latentrl.motion.representation import compute_features
+    from latentrl.motion_training.losses import DenoiserTrainConfig, denoiser_step
+    from tests.helpers import walking_clip
+
+    clips = [walking_clip(11, seed=s) for s in range(3)]
+    motion = torch.stack([compute_features(c["transl"], c["rotations"], c["joints"]) for c in clips])
+    norm = tiny_model.normalizer
+    hist, fut = norm.normalize(motion[:, :2]), norm.normalize(motion[:, 2:])
+    text = torch.zeros(3, tiny_model.text_dim)
+    den, vae, diff = tiny_model.denoiser, tiny_model.vae, tiny_model.diffusion
+
+    def run(weight, gt_history):
+        return denoiser_step(den, vae, diff, hist, gt_history, fut, text, norm,
+                             DenoiserTrainConfig(seam_weight=weight), torch.Generator().manual_seed(2))
+
+    base, terms0 = run(0.0, hist)
+    loss, terms = run(5.0, hist)
+    assert "seam" not in terms0 and float(terms["seam"]) > 0.0
+    assert float(loss) == pytest.approx(float(base) + 5.0 * float(terms["seam"]), rel=1e-5)
+    moved = hist.clone()
+    moved[..., 144:210] += 0.1 / norm.std[144:210]  # the data's history 10 cm off: another target step
+    assert float(run(5.0, moved)[1]["seam"]) != pytest.approx(float(terms["seam"]))
