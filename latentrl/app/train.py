@@ -288,7 +288,6 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
 def quickstart(req: QuickstartRequest) -> int:
     """Body of ``latentrl quickstart``: train ``configs/quick.yaml`` on the default model, then evaluate."""
     from latentrl.app.evaluate import EvalRequest, check_eval_request, evaluate
-
     from latentrl.ppo import distributed
 
     if note := distributed.check_environment():

@@ -152,8 +152,9 @@ _serve_lock = threading.Lock()
 
 @contextlib.contextmanager
 def guarded_websockets(guard: ConnectionGuard) -> Iterator[None]:
-    """While open, every websockets server started gets ``guard`` in front of its HTTP handler (and
-    :data:`MAX_MESSAGE_BYTES` as its message limit and :func:`server_logger` as its logger).
+    """While open, every websockets server started gets ``guard`` in front of its HTTP handler.
+
+    It also gets :data:`MAX_MESSAGE_BYTES` as its message limit and :func:`server_logger` as its logger.
 
     Viser (1.1) starts its server with ``websockets.asyncio.server.serve`` and offers no hook for the
     handshake, so :func:`~latentrl.viewer.server.start_server` opens this around building the

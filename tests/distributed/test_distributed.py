@@ -174,3 +174,57 @@ def test_a_rank_killed_mid_run_stops_the_others_with_one_line_and_the_run_resume
     log = (run / "train.log").read_text()
     assert f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps" in log  # not from 0
     assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
+
+
+TORCHRUN_STDERR = """\
+latentrl: error: rank 1: all_gather_object with the other ranks failed (Connection reset by peer); another rank \
+stopped or hung, so this one stops too
+W1127 23:53:21.479000 8367 torch/distributed/elastic/multiprocessing/api.py:1028] Sending process 8465 closing signal \
+SIGTERM
+E1127 23:53:21.543000 8367 torch/distributed/elastic/multiprocessing/api.py:1002] failed (exitcode: -9) local_rank: \
+1 (pid: 8469) of binary: /usr/bin/python
+Traceback (most recent call last):
+  File "<frozen runpy>", line 198, in _run_module_as_main
+  File "/x/torch/distributed/launcher/api.py", line 383, in launch_agent
+    raise ChildFailedError(
+torch.distributed.elastic.multiprocessing.errors.ChildFailedError:
+======================================================
+latentrl FAILED
+------------------------------------------------------
+Failures:
+[1]:
+  rank      : 0 (local_rank: 0)
+  exitcode  : -15 (pid: 8465)  (SIGTERM)
+------------------------------------------------------
+Root Cause (first observed failure):
+[0]:
+  rank      : 1 (local_rank: 1)
+  exitcode  : -9 (pid: 8469)  (SIGKILL)
+  traceback : Signal 9 (SIGKILL) received by PID 8469
+======================================================
+[rank0]: a line a rank printed after torchrun's report
+"""
+
+
+def test_torchruns_report_becomes_its_root_cause_and_the_ranks_lines_pass():
+    from latentrl.ppo.distributed import TorchrunOutput
+
+    out = TorchrunOutput()
+    shown = [line for raw in TORCHRUN_STDERR.splitlines(keepends=True) for line in out.feed(raw)] + out.flush()
+    assert shown == [TORCHRUN_STDERR.splitlines(keepends=True)[0], "[rank0]: a line a rank printed after torchrun's "
+                     "report\n"]
+    assert out.cause() == "rank 1 was killed by SIGKILL"
+
+
+def test_a_rank_traceback_is_shown_and_an_exit_code_is_named():
+    from latentrl.ppo.distributed import TorchrunOutput
+
+    rank_traceback = ["Traceback (most recent call last):\n", '  File "x.py", line 1, in <module>\n',
+                      "ValueError: a rank's own error\n"]
+    report = ["Traceback (most recent call last):\n", "  File \"run.py\", line 9\n",
+              "torch.distributed.elastic.multiprocessing.errors.ChildFailedError:\n", "=====\n", "Root Cause:\n",
+              "  rank      : 0 (local_rank: 0)\n", "  exitcode  : 2 (pid: 7)\n", "=====\n"]
+    out = TorchrunOutput()
+    shown = [line for raw in rank_traceback + report for line in out.feed(raw)] + out.flush()
+    assert shown == rank_traceback  # under --debug a rank's traceback is its message; torchrun's is not shown
+    assert out.cause() == "rank 0 exited with code 2"

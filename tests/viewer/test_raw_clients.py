@@ -77,7 +77,8 @@ def still_serving(server, loop) -> None:
 
 
 TRAVERSALS = [
-    "/../../../../../../etc/passwd", "/..%2f..%2f..%2f..%2f..%2fetc%2fpasswd", "/%2e%2e/%2e%2e/%2e%2e/%2e%2e/etc/passwd",
+    "/../../../../../../etc/passwd", "/..%2f..%2f..%2f..%2f..%2fetc%2fpasswd",
+    "/%2e%2e/%2e%2e/%2e%2e/%2e%2e/etc/passwd",
     "/%2E%2E/%2E%2E/%2E%2E/etc/passwd", "/..\\..\\..\\..\\etc\\passwd", "/..%5c..%5c..%5c..%5cetc%5cpasswd",
     "//etc/passwd", "/%2fetc%2fpasswd", "/assets/../../../../../etc/passwd", "/%252e%252e/%252e%252e/etc/passwd",
     "/etc/passwd%00.html", "/..;/..;/..;/etc/passwd", "/%c0%ae%c0%ae/%c0%ae%c0%ae/etc/passwd",
