@@ -3,6 +3,7 @@
 After every kill: every checkpoint file on disk loads (a write is never visible half-done), and the next
 ``--resume`` starts exactly at the newest of them, so env-step counters never go backwards; the run then
 finishes. CI runs ``KILLS_CI`` kills; ``LATENTRL_FULL_KILL_LOOP=1`` runs ``KILLS_FULL`` (docs/robustness.md).
+``motion train`` and ``optimize`` get the same treatment, and the SB3 trainer two real Ctrl-Cs.
 """
 
 import json
