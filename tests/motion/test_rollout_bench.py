@@ -137,3 +137,31 @@ def test_rounds_interleave_our_sampler_with_the_peer_and_report_the_median_ratio
     assert spread["rounds"] == [5000.0 / ms for ms in row["ms_per_batch_rounds"]]
     assert spread["min"] <= data["speedup_vs_dart_official_cpu"]["1"] == spread["median"] <= spread["max"]
     assert data["dart_peer"]["ms_per_batch_rounds"] == {"1": [5000.0, 5000.0]}
+
+
+def test_compiled_rows_keep_their_graph_across_rounds(tmp_path, monkeypatch):
+    """Each compiled variant compiles once, in the first round; later rounds replay it (no recompilation)."""
+    import sys
+
+    graphs = []
+
+    def counting_backend(gm, example_inputs):
+        graphs.append(gm)
+        return gm.forward
+
+    real = torch.compile
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: real(fn, **{**kw, "backend": counting_backend,
+                                                                        "mode": None}))
+    peer = tmp_path / "peer.py"
+    peer.write_text("import json\nprint(json.dumps({'results': [{'batch': 2, 'ms_per_batch_median': 50.0}]}))\n")
+    out = tmp_path / "rollout.json"
+    req = RolloutBenchRequest(batches=[2], models=["default"], device=["cpu"], repeats=1, rounds=3, compile=True,
+                              packed=True, dart_src=str(tmp_path), dart_python=sys.executable, dart_bench=str(peer),
+                              json=str(out))
+    assert bench_rollout(req) == 0
+    data = json.loads(out.read_text())
+    rows = data["models"]["default"]["results"]
+    assert data["rounds"] == 3 and all(len(r["ms_per_batch_rounds"]) == 3 for r in rows)
+    assert len(graphs) == 2  # compiled and compiled + packed, each once
+    assert rows[1]["max_abs_diff_vs_eager"] < 1e-4 and rows[3]["max_abs_diff_vs_eager"] < 1e-4
+    assert rows[2]["speedup_vs_eager"] > 0
