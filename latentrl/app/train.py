@@ -165,11 +165,22 @@ def launch(req: TrainRequest) -> int:
     print(f"launching {req.nproc} ranks: {' '.join(cmd[1:])}", flush=True)
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1)
     output = distributed.TorchrunOutput()  # the ranks' lines pass; torchrun's report becomes one line below
-    for line in proc.stderr:
-        sys.stderr.writelines(output.feed(line))
-        sys.stderr.flush()
+    interrupted = False
+    while True:
+        try:
+            for line in proc.stderr:
+                sys.stderr.writelines(output.feed(line))
+                sys.stderr.flush()
+            break
+        except KeyboardInterrupt:
+            if interrupted:  # a second Ctrl-C: stop waiting for the ranks
+                proc.terminate()
+                raise
+            interrupted = True  # Ctrl-C reached every rank too: each saves and stops; keep showing what they say
     sys.stderr.writelines(output.flush())
     code = proc.wait()
+    if interrupted:
+        raise KeyboardInterrupt
     if code:
         run_dir = Path(req.resume or req.run_dir)
         cause = output.cause() or f"a rank failed (torchrun exit {code})"

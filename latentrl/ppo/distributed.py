@@ -340,6 +340,9 @@ class TorchrunOutput:
             if "ChildFailedError" in line:  # torchrun's own traceback: keep only its report
                 self.held, self.report, self.report_done = [], [line], False
                 return []
+            if line.startswith("torch.distributed.elastic."):  # torchrun's own (SignalException on Ctrl-C)
+                self.held = []
+                return []
             shown, self.held = self.held + [line], []
             return shown
         return [line]

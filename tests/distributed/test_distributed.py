@@ -228,3 +228,46 @@ def test_a_rank_traceback_is_shown_and_an_exit_code_is_named():
     shown = [line for raw in rank_traceback + report for line in out.feed(raw)] + out.flush()
     assert shown == rank_traceback  # under --debug a rank's traceback is its message; torchrun's is not shown
     assert out.cause() == "rank 0 exited with code 2"
+
+
+@pytest.mark.slow
+def test_ctrl_c_under_nproc_saves_once_shows_the_ranks_lines_and_the_run_resumes(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) of ``latentrl train --nproc 2``: the ranks
+    save the iteration they are in and say so, torchrun's own traceback is not shown, exit 130; ``--resume``
+    then starts there and finishes."""
+    import signal
+    import time
+
+    run = tmp_path / "run"
+    total = 128 * 40
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
+    cmd = [sys.executable, "-m", "latentrl", "train", str(ROOT / "configs" / "tiny.yaml"), "--nproc", "2",
+           "--set", "ppo.checkpoint_every=0", "--total-steps", str(total), "--run-dir", str(run), "--no-progress"]
+    proc = subprocess.Popen(cmd, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + LAUNCH_TIMEOUT_S
+        log = run / "train.log"
+        while not (log.is_file() and "iter 2 " in log.read_text()):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "training did not reach its second iteration"
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and err.strip().splitlines()[-1] == "latentrl: interrupted", err[-3000:]
+    saved = ckpt.iteration_checkpoints(run)
+    assert len(saved) == 1, saved  # checkpoint_every=0: the Ctrl-C wrote it
+    newest = ckpt.read_checkpoint(saved[0])
+    assert f"interrupted: saved iteration {newest['iteration']} " in err, err[-3000:]
+    resumed = subprocess.run([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--nproc", "2",
+                              "--no-progress"], env=env, cwd=tmp_path, capture_output=True, text=True,
+                             timeout=LAUNCH_TIMEOUT_S * 2)
+    ok(resumed)
+    start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
+    assert start in (run / "train.log").read_text()
+    assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
