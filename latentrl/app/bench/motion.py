@@ -68,8 +68,9 @@ def _data_reference(model) -> dict | None:
 def _data_transitions(seqs: list[dict]) -> dict:
     """The data's transition figures: mean jerk (AUJ's reference), PJ/AUJ at its text splits, seam ratios.
 
-    The seam ratios cut each sequence on the rollout's grid (2 frames, then 8 per primitive): the data has no
-    primitives, so it scores about 1 -- what a model without pops scores.
+    The seam ratios cut each sequence on the rollout's grid (2 frames, then 8 per primitive). The data has no
+    primitives: its pelvis scores about 1, what a model without pops scores; its planted feet hardly move at all
+    (hundredths of a millimetre a frame), so its step ratio is the noise of two near-zero means.
     """
     from latentrl.evaluation import metrics as M
 
@@ -80,6 +81,7 @@ def _data_transitions(seqs: list[dict]) -> dict:
     seams = M.seam_ratios(torch.stack([torch.as_tensor(s["joints"][:frames], dtype=torch.float32) for s in seqs]))
     return {"jerk_reference": reference, "text_pj": M.peak_jerk(clips),
             "text_auj": M.area_under_jerk(clips, reference), "text_splits": int(clips.shape[0]),
+            "step_boundary_cm": seams["step_boundary_cm"], "step_inside_cm": seams["step_inside_cm"],
             "step_ratio": seams["step_ratio"], "pelvis_acc_ratio": seams["pelvis_acc_ratio"]}
 
 
@@ -244,7 +246,8 @@ def _print_seams(probes: dict, ref: dict | None) -> None:
               f"{s['pelvis_acc_ratio']:10.2f} {_fmt(t['pj']):>6} {_fmt(t['auj']):>6}")
     if ref:
         d = ref["transitions"]
-        print(f"{'data':>18} {'':13} {d['step_ratio']:5.2f} {d['pelvis_acc_ratio']:10.2f} {d['text_pj']:6.3f} "
+        steps = f"{d['step_boundary_cm']:.3f}/{d['step_inside_cm']:.3f}"
+        print(f"{'data':>18} {steps:>13} {d['step_ratio']:5.2f} {d['pelvis_acc_ratio']:10.2f} {d['text_pj']:6.3f} "
               f"{d['text_auj']:6.3f}  (text splits; mean jerk {d['jerk_reference']:.4f} m/frame^3)", flush=True)
 
 
