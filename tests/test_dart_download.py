@@ -81,7 +81,7 @@ def test_train_eval_render_export_on_a_dart_download(download, tmp_path, monkeyp
     assert "trained 2 iterations" in capsys.readouterr().out
     out = tmp_path / "eval"
     assert main(["eval", str(run / "final.pt"), "--motion", str(download), "--paths", "dart_demo_walk",
-                 "--episodes", "1", "--max-steps", "3", "--out", str(out)]) == 0
+                 "--episodes", "1", "--max-steps", "3", "--out", str(out), "--render", "gif"]) == 0
     assert (out / "report.md").is_file() and (out / "paths.png").is_file()
     assert list((out / "renders").glob("*.gif")) and list((out / "renders").glob("*.bvh"))
     motion = sorted((out / "motions").glob("*.npz"))[0]

@@ -107,6 +107,14 @@ def _device(text: str) -> str:
     return text
 
 
+def _render(text: str) -> str | int:
+    """Argument type of ``eval --render``: none, gif or mp4; an integer is the former form (the first N as GIF)."""
+    try:
+        return int(text)
+    except ValueError:
+        return text.lower()
+
+
 def _trainer(name: str) -> str:
     """Argument type of ``--trainer``: a name in the trainer registry (``ppo.run.TRAINERS``)."""
     from latentrl.ppo.run import TRAINERS
@@ -391,9 +399,12 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--device", type=_device, help="torch device (default: cuda when available, else cpu)")
     ev.add_argument("--seed", type=_seed, default=0, help="base random seed (seed histories and action noise)")
     ev.add_argument("--out", help="output folder (default: eval-<policy name> beside the policy)")
-    ev.add_argument("--render", type=int, default=1, metavar="N",
-                    help="render the first N episodes of every path as GIF and BVH (default 1)")
-    ev.add_argument("--no-render", dest="render", action="store_const", const=0, help="render nothing")
+    ev.add_argument("--render", type=_render, default="none", metavar="{none,gif,mp4}",
+                    help="draw episodes as GIF or MP4 (MP4 needs latentrl[video]) plus BVH, into <out>/renders "
+                         "(default none)")
+    ev.add_argument("--render-episodes", type=int, default=1, metavar="N",
+                    help="with --render: draw the first N episodes of every path (default 1)")
+    ev.add_argument("--no-render", dest="render", action="store_const", const="none", help="draw nothing (default)")
     ev.add_argument("--no-motions", dest="motions", action="store_false", help="skip the per-episode .npz files")
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar (paths x episodes)")
     ev.add_argument("--scene", metavar="SCENE",

@@ -6,8 +6,11 @@
     report.md       the tables a person reads
     paths.png       top-down pelvis tracks, one panel per path
     motions/<suite>_path<i>_ep<e>.npz    every episode in the shared motion format
-    renders/<suite>_path<i>_ep<e>.gif    skeleton animations of the first --render episodes of each path
+    renders/<suite>_path<i>_ep<e>.gif    with --render gif (or .mp4 with --render mp4): the first
+                                         --render-episodes episodes of each path drawn as a body
     renders/<suite>_path<i>_ep<e>.bvh    the same motions as BVH (SMPL-22, Y-up, centimetres)
+
+Nothing is drawn unless ``--render`` asks (drawing costs more than simulating); ``latentrl quickstart`` draws GIFs.
 
 The policy's task (its checkpoint's ``env.task``; the path task when it stores none) decides how it is
 judged: its :class:`~latentrl.envs.tasks.TaskSpec` names the evaluator, the folder of ``tasks/`` in which
@@ -28,7 +31,6 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-import latentrl.evaluation.tasks  # noqa: F401  (attaches the shipped tasks' evaluators)
 from latentrl.envs.config import stored_env_config
 from latentrl.envs.path import load_paths
 from latentrl.envs.scene import resolve_scene
@@ -37,11 +39,13 @@ from latentrl.errors import ConfigError, DataError, LatentRLError
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.report import compare_reports
 from latentrl.evaluation.runner import policy_fn
+from latentrl.evaluation.tasks import RENDER_FORMATS  # (importing it attaches the shipped tasks' evaluators)
 from latentrl.evaluation.trained import motion_of, stored_env
 from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
 from latentrl.motion.rollout import lock_min_weight_problem
 from latentrl.ppo import load_policy
 from latentrl.preflight import check_device, check_output_file, check_writable, locked_output
+from latentrl.render import video_problem
 from latentrl.resources import is_packaged, policy_file, suites_folder
 from latentrl.safe_io import atomic_write_text
 from latentrl.timing import hardware
@@ -70,7 +74,10 @@ class EvalRequest:
     device: str | None = None
     seed: int = 0
     out: str | None = None
-    render: int = 1
+    render: str | int = "none"
+    """``none``, ``gif`` or ``mp4`` (an integer is the former form: 0 draws nothing, N the first N episodes as GIF)."""
+    render_episodes: int = 1
+    """With ``render``: how many episodes of every path are drawn."""
     motions: bool = True
     progress: bool = True
     """Show a progress bar over paths x episodes."""
@@ -84,7 +91,9 @@ class EvalRequest:
         options = (("--paths", self.paths), ("--episodes", self.episodes), ("--max-steps", self.max_steps),
                    ("--motion", self.motion), ("--foot-lock-min-weight", self.foot_lock_min_weight),
                    ("--device", self.device), ("--out", self.out),
-                   ("--render", self.render), ("--scene", self.scene))
+                   ("--render", self.render), ("--render-episodes", self.render_episodes if self.render not in
+                                                                   ("none", 0) and self.render_episodes != 1 else None),
+                   ("--scene", self.scene))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -129,8 +138,16 @@ def _settings(req: EvalRequest, device: str | None = None) -> EvalSettings:
     except ConfigError as exc:  # name the flag: "max_steps: ..." -> "--max-steps: ..."
         field_name, _, message = str(exc).partition(": ")
         raise ConfigError(f"--{field_name.replace('_', '-')}: {message}") from None
-    if req.render < 0:
-        raise ConfigError(f"--render must be >= 0, got {req.render}")
+    if not isinstance(req.render, str):  # the former --render N: the first N episodes as GIF
+        if req.render < 0:
+            raise ConfigError(f"--render must be >= 0, got {req.render}")
+        req.render, req.render_episodes = ("gif", req.render) if req.render else ("none", req.render_episodes)
+    if req.render not in ("none", *RENDER_FORMATS):
+        raise ConfigError(f"--render must be one of none, {', '.join(RENDER_FORMATS)}, got '{req.render}'")
+    if req.render_episodes < 1:
+        raise ConfigError(f"--render-episodes must be >= 1, got {req.render_episodes}")
+    if req.render != "none" and (problem := video_problem(f"episode.{req.render}")):
+        raise ConfigError(f"--render {req.render}: {problem.removeprefix(f'episode.{req.render}: ')}")
     if req.foot_lock_min_weight is not None and (problem := lock_min_weight_problem(req.foot_lock_min_weight)):
         raise ConfigError(f"--foot-lock-min-weight {problem}")
     return settings
@@ -206,7 +223,12 @@ def evaluate(req: EvalRequest) -> int:
     act = policy_fn(policy, settings.deterministic)
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
     # an evaluator written before ``after_entry`` existed still runs, without the bar and the reports in between
-    stepwise = "after_entry" in inspect.signature(evaluator.run).parameters
+    accepts = inspect.signature(evaluator.run).parameters
+    stepwise = "after_entry" in accepts
+    draw = 0 if req.render == "none" else req.render_episodes
+    if draw and req.render != "gif" and "render_format" not in accepts:
+        raise ConfigError(f"--render {req.render}: the {spec.name} task's evaluator draws GIFs only (--render gif)")
+    extra = {"render_format": req.render} if draw and "render_format" in accepts else {}
     with locked_output(out_dir) as output:  # one eval per folder; a failure before the first report removes it
         # the bar starts once the folder is ours: a refused eval prints its one line and nothing else
         bar = tqdm(total=entries * settings.episodes, unit="episode", desc="eval", dynamic_ncols=True,
@@ -220,11 +242,14 @@ def evaluate(req: EvalRequest) -> int:
 
         try:
             results = evaluator.run(act, model, files, settings, observe_next=observe_next, out_dir=out_dir,
-                                    render=req.render, motions=req.motions,
-                                    **({"after_entry": after_entry} if stepwise else {}))
+                                    render=draw, motions=req.motions,
+                                    **({"after_entry": after_entry} if stepwise else {}), **extra)
         finally:
             bar.close()
         lines = evaluator.report(results, settings, out_dir, **info)
+    if draw:
+        lines.append(f"renders: {out_dir / 'renders'} (the first {draw} episode(s) of every path as "
+                     f"{req.render.upper()} and BVH)")
     print("\n".join(lines))
     return 0
 

@@ -308,7 +308,7 @@ def quickstart(req: QuickstartRequest) -> int:
     check_new_run(run_dir)
     suites = trained_suites(QUICK_EVAL_PATHS, cfg.env.texts) or list(QUICK_EVAL_PATHS[:1])
     eval_req = EvalRequest(policy="", paths=suites, episodes=req.episodes, max_steps=req.max_steps,
-                           motion=cfg.env.motion, device=cfg.ppo.device, out=str(run_dir / "eval"), render=1,
+                           motion=cfg.env.motion, device=cfg.ppo.device, out=str(run_dir / "eval"), render="gif",
                            progress=req.progress)
     check_eval_request(eval_req)  # before training, not after
     print(f"[quickstart] training configs/quick.yaml on the '{cfg.env.motion}' motion model in {run_dir}")

@@ -7,7 +7,8 @@ trainer's periodic evaluation only call the protocol's methods, so a task regist
 brings its own evaluator instead.
 
 Every episode's motion goes to ``motions/<suite>_<entry>_ep<e>.npz``; the first ``render`` episodes of an
-entry are also drawn as ``renders/*.gif`` (every :data:`GIF_STRIDE` th frame) and written as BVH.
+entry are also drawn as ``renders/*.gif`` (every :data:`GIF_STRIDE` th frame) or ``renders/*.mp4`` (every frame,
+``render_format``) and written as BVH.
 """
 
 from __future__ import annotations
@@ -29,22 +30,27 @@ from latentrl.evaluation.runner import fit_policy, measure_speed, run_suites
 from latentrl.evaluation.skills import match_share
 from latentrl.evaluation.task_eval import aggregate, build_task_report, results_table, write_task_report
 from latentrl.motion.clip import MotionClip
-from latentrl.render import render_gif, save_bvh
+from latentrl.render import render_video, save_bvh
 
 GIF_STRIDE = 3
 """Rendered GIFs keep every 3rd frame (10 fps): a 60 s episode is 600 frames, about a minute to draw on CPU."""
 
 
+RENDER_FORMATS = ("gif", "mp4")
+"""What ``latentrl eval --render`` draws episodes as (MP4 needs ``latentrl[video]``)."""
+
+
 def write_episode(out_dir: Path, name: str, clip: MotionClip, title: str, write_motion: bool,
-                  render: bool) -> str | None:
-    """Save one episode's motion (``motions/<name>.npz``) and, if ``render``, its GIF and BVH; the motion file."""
+                  render: bool, render_format: str = "gif") -> str | None:
+    """Save one episode's motion (``motions/<name>.npz``) and, if ``render``, its GIF or MP4 and BVH; the motion."""
     written = None
     if write_motion:
         clip.save(out_dir / "motions" / f"{name}.npz")
         written = f"motions/{name}.npz"
     if render:
-        render_gif(out_dir / "renders" / f"{name}.gif", clip.joints, texts=clip.texts, title=title,
-                   stride=GIF_STRIDE, goals=clip.waypoints)
+        gif = render_format == "gif"
+        render_video(out_dir / "renders" / f"{name}.{render_format}", clip.joints, fps=clip.fps, texts=clip.texts,
+                     title=title, stride=GIF_STRIDE if gif else 1, goals=clip.waypoints)
         save_bvh(out_dir / "renders" / f"{name}.bvh", clip.joints, clip.fps)
     return written
 
@@ -57,6 +63,7 @@ class PathRun:
     speed: dict
     motions: bool
     render: int
+    render_format: str = "gif"
 
 
 class PathEvaluator:
@@ -86,7 +93,7 @@ class PathEvaluator:
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
             out_dir: Path | None = None, render: int = 0, motions: bool = False,
-            after_entry: Callable[[PathRun], None] | None = None) -> PathRun:
+            after_entry: Callable[[PathRun], None] | None = None, render_format: str = "gif") -> PathRun:
         """Every path of every file, then the controller's speed at batch 1 and at ``settings.episodes``.
 
         ``after_entry`` gets the paths done so far (no speed yet) after each path.
@@ -98,7 +105,7 @@ class PathEvaluator:
                                  end=ep.end, reach_time_s=ep.reach_time_s)
             return write_episode(out_dir, f"{ep.suite}_path{ep.path_index}_ep{ep.episode:03d}", clip,
                                  f"{ep.suite} path {ep.path_index} ep {ep.episode} ({ep.end})", motions,
-                                 ep.episode < render)
+                                 ep.episode < render, render_format)
 
         done: list[SuiteResult] = []
         file_of = {Path(f).stem: str(Path(f)) for f in files}
@@ -109,19 +116,19 @@ class PathEvaluator:
                 done.append(SuiteResult(result.suite, file_of[result.suite], []))
             done[-1].paths.append(result)
             if after_entry is not None:
-                after_entry(PathRun(done, {}, motions, render))
+                after_entry(PathRun(done, {}, motions, render, render_format))
 
         suites = run_suites(act, motion, files, settings, observe_next=observe_next,
                             sink=sink if out_dir is not None else None, progress=progress)
         first = load_paths(files[0])[0]
         speed = measure_speed(act, motion, first, settings, [1, settings.episodes], observe_next)
-        return PathRun(suites, speed, motions, render)
+        return PathRun(suites, speed, motions, render, render_format)
 
     def report(self, results: PathRun, settings: Any, out_dir: Path, **info: Any) -> list[str]:
         """report.json, report.md and paths.png; the results (and skills) tables."""
         png = plots.save_paths_png(out_dir / report.PATHS_PNG, results.suites)
         outputs = {"paths_png": png.name, "motions": "motions/" if results.motions else None,
-                   "renders": "renders/" if results.render else None}
+                   "renders": f"renders/*.{results.render_format}" if results.render else None}
         data = report.build_report(results.suites, settings, speed=results.speed, files=outputs, **info)
         js, md = report.write_report(out_dir, data)
         lines = report.results_table(data)
@@ -211,13 +218,14 @@ class SuiteEvaluator:
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
             out_dir: Path | None = None, render: int = 0, motions: bool = False,
-            after_entry: Callable[[TaskRun], None] | None = None) -> TaskRun:
+            after_entry: Callable[[TaskRun], None] | None = None, render_format: str = "gif") -> TaskRun:
         """Every entry of every suite file with the default criteria; ``after_entry`` gets those done so far."""
         def sink(ep, clip: MotionClip) -> str | None:
             if motions:
                 clip.meta.update(suite=ep.suite, index=ep.index, episode=ep.episode, end=ep.end)
             return write_episode(out_dir, f"{ep.suite}_{ep.index}_ep{ep.episode:03d}", clip,
-                                 f"{ep.suite} {ep.index} ep {ep.episode} ({ep.end})", motions, ep.episode < render)
+                                 f"{ep.suite} {ep.index} ep {ep.episode} ({ep.end})", motions, ep.episode < render,
+                                 render_format)
 
         criteria = self.criteria()
         done: list[tuple[str, str, list]] = []

@@ -21,8 +21,38 @@ def run_eval(eval_files, paths, out, *extra) -> int:
 def evaluated(eval_files, tmp_path_factory):
     root = tmp_path_factory.mktemp("eval_cli")
     paths = write_paths(root, [NEAR, FAR], "mini.json")
-    assert run_eval(eval_files, paths, root / "out", "--render", "1") == 0
+    assert run_eval(eval_files, paths, root / "out", "--render", "gif") == 0
     return root / "out"
+
+
+def _frames(path) -> int:
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    next(reader)  # the header
+    return sum(1 for _ in reader)
+
+
+def test_eval_draws_nothing_by_default(eval_files, tmp_path, capsys):
+    paths = write_paths(tmp_path, [NEAR], "mini.json")
+    assert run_eval(eval_files, paths, tmp_path / "out", "--no-progress") == 0
+    assert not (tmp_path / "out" / "renders").exists()
+    assert json.loads((tmp_path / "out" / "report.json").read_text())["files"]["renders"] is None
+    assert "renders:" not in capsys.readouterr().out
+
+
+def test_eval_render_mp4_writes_decodable_videos(eval_files, tmp_path, capsys):
+    pytest.importorskip("imageio_ffmpeg")
+    paths = write_paths(tmp_path, [NEAR, FAR], "mini.json")
+    out = tmp_path / "out"
+    assert run_eval(eval_files, paths, out, "--render", "mp4", "--render-episodes", "2", "--no-progress") == 0
+    videos = sorted(p.name for p in (out / "renders").glob("*.mp4"))
+    assert videos == [f"mini_path{p}_ep00{e}.mp4" for p in (0, 1) for e in (0, 1)]
+    assert not list((out / "renders").glob("*.gif"))
+    far = load_motion_npz(out / "motions" / "mini_path1_ep000.npz")
+    assert _frames(out / "renders" / "mini_path1_ep000.mp4") == far["joints"].shape[0]  # every frame, 26
+    assert json.loads((out / "report.json").read_text())["files"]["renders"] == "renders/*.mp4"
+    assert f"renders: {out / 'renders'}" in capsys.readouterr().out
 
 
 def test_eval_writes_report_plot_motions_and_renders(evaluated):
