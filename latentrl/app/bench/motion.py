@@ -321,8 +321,9 @@ def bench_motion(args: MotionBenchRequest) -> int:
             f"{row['rightward_m_s']:5.2f}", flush=True
         )
     _print_seams(out["probes"], ref)
+    jerk_reference = ref["transitions"]["jerk_reference"] if ref else None
     out["skill_switch"] = sw = skill_switch_seconds(model, batch=args.batch, seed=args.seed, guidance=args.guidance,
-                                                    jerk_reference=ref["transitions"]["jerk_reference"] if ref else None)
+                                                    jerk_reference=jerk_reference)
     tt = sw["text_transitions"]
     print("skill switch:", ", ".join(f"->{x['to']} {x['median_s']:.2f}s ({x['within_1s']:.0%} <= 1 s)"
                                      for x in sw["switches"]),
