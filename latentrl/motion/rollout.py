@@ -473,7 +473,8 @@ def ramp_snap(
     part of the pelvis's boundary acceleration with the snap on (docs/motion.md, "Pops at primitive
     boundaries"). Here frame ``i`` of ``F`` keeps ``(i + 1) / F`` of ``lift``: the last frame, and so the next
     primitive's placement, is where the snap put it, and each frame takes ``lift / F`` of the step. Earlier
-    frames sit up to ``lift (F - 1) / F`` short of the snapped height.
+    frames sit up to ``lift (F - 1) / F`` short of the snapped height, but a lifted primitive's frames never
+    below the floor (each goes down at most until its lowest joint touches it).
 
     Args:
         future: (B, F, 276) canonical features of the primitive; the canonical frame keeps z up, so its z
@@ -486,6 +487,9 @@ def ramp_snap(
     f = future.shape[1]
     frac = torch.arange(1, f + 1, device=future.device, dtype=future.dtype) / f
     off = lift[:, None] * (frac - 1.0)  # (B, F): 0 at the last frame
+    # a lifted (sunk) primitive's early frames never go below the floor: each goes down at most until it touches it
+    lowest = joints_world[..., 2].amin(dim=-1)  # (B, F) each frame's lowest joint, snapped as a whole
+    off = torch.maximum(off, -lowest.clamp(min=0.0))
     joints_world = joints_world.clone()
     joints_world[..., 2] += off[..., None]
     delta = torch.cat((off[:, 1:], off[:, -1:]), dim=1) - off  # delta k = frame k+1 - frame k (last: 0)

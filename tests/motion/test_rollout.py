@@ -194,3 +194,18 @@ def _check_ramped_snap(model) -> None:
     added = lift[:, None] / 8.0  # each step within the primitive takes 1/8 of the lift (the deltas in step)
     torch.testing.assert_close(world[:, :-1, 212:276:3] - before[:, :-1, 212:276:3],
                                added[..., None].expand(3, 7, 22), atol=1e-5, rtol=0)
+
+
+def test_ramped_snap_never_puts_a_lifted_primitive_below_the_floor():
+    """Known answer: a primitive sunk 8 cm and lifted; the ramp would leave frame i 8 (7 - i)/8 cm under its
+    snapped height, but each frame goes down only until its lowest joint touches the floor."""
+    from latentrl.motion.rollout import ramp_snap
+
+    lowest = torch.tensor([0.05, 0.0, 0.03, 0.0, 0.0, 0.0, 0.01, 0.0])
+    joints = torch.zeros(1, 8, 22, 3)
+    joints[..., 2] = lowest[None, :, None] + torch.linspace(0.0, 1.0, 22)
+    out, future = ramp_snap(torch.zeros(1, 8, 276), joints, torch.tensor([0.08]))
+    want = torch.tensor([-0.05, 0.0, -0.03, 0.0, 0.0, 0.0, -0.01, 0.0])
+    torch.testing.assert_close(out[0, :, 0, 2] - joints[0, :, 0, 2], want)
+    assert (out[..., 2] >= -1e-7).all()
+    torch.testing.assert_close(future[0, :, 2], want)  # transl z moves with the joints
