@@ -40,7 +40,7 @@ from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.report import compare_reports
 from latentrl.evaluation.runner import policy_fn
 from latentrl.evaluation.tasks import RENDER_FORMATS  # (importing it attaches the shipped tasks' evaluators)
-from latentrl.evaluation.trained import motion_of, stored_env
+from latentrl.evaluation.trained import motion_of, stored_env, stored_eval_choices
 from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
 from latentrl.motion.rollout import lock_min_weight_problem
 from latentrl.ppo import load_policy
@@ -69,8 +69,9 @@ class EvalRequest:
     """None: the model named in the policy's stored env config (``"default"`` when it names none)."""
     allow_motion_mismatch: bool = False
     foot_lock_min_weight: float | None = None
-    """None: the policy's training value. Else the foot lock pins from this contact weight (a deployment choice
-    that differs from training; the report's settings record it)."""
+    """None: the value the policy stores for evaluation (``eval.foot_lock_min_weight``), else its training
+    value. Else the foot lock pins from this contact weight (a deployment choice that differs from training;
+    the report's settings record it)."""
     device: str | None = None
     seed: int = 0
     out: str | None = None
@@ -209,6 +210,11 @@ def evaluate(req: EvalRequest) -> int:
         req.motion = motion_of(env)
     spec, files = eval_suites(req.policy, req.paths)
     evaluator = spec.evaluator
+    stored = stored_eval_choices(policy_file(req.policy))
+    if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
+        req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
+        print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "
+              "setting; --foot-lock-min-weight overrides)", flush=True)
     settings = _settings(req)
     entries = sum(len(evaluator.load_suite(file)) for file in files)  # every file checked before models load
     if req.paths is None:

@@ -15,6 +15,7 @@ from typing import Any
 from latentrl.config import require, require_seed
 from latentrl.constants import SUCCESS_RADIUS_M
 from latentrl.envs.settings import StepSettings
+from latentrl.motion.rollout import lock_min_weight_problem
 from latentrl.motion.skeleton import FPS
 
 
@@ -34,11 +35,18 @@ class EvalConfig:
     """Replace every waypoint's text (e.g. evaluate a 'run' policy on walk paths)."""
     success_target: float | None = None
     """Stop training once eval success reaches this (used by `bench train`)."""
+    foot_lock_min_weight: float | None = None
+    """With the env's foot lock: evaluations (these and ``latentrl eval`` of the checkpoints, which store it) pin
+    a foot fully from this contact weight; None: the env's ``foot_lock_min_weight``. A card's figures taken with
+    another value than training's are reproduced by the policy alone."""
 
     def validate(self) -> None:
-        """Episodes and step budget are >= 1."""
+        """Episodes and step budget are >= 1; the foot lock's weight in range."""
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
+        if self.foot_lock_min_weight is not None:
+            problem = lock_min_weight_problem(self.foot_lock_min_weight)
+            require(problem is None, "foot_lock_min_weight", str(problem))
 
 
 MAX_EPISODES = 1 << 16
@@ -97,6 +105,12 @@ class EvalSettings(StepSettings):
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
         self.scene = getattr(env_cfg, "scene", None)
         self.observe_scene = True
+
+    def take_eval_config(self, eval_cfg: Any) -> None:
+        """The ``eval:`` section's deployment choices that differ from training (``foot_lock_min_weight``)."""
+        weight = getattr(eval_cfg, "foot_lock_min_weight", None)
+        if weight is not None:
+            self.foot_lock_min_weight = float(weight)
 
     def motion_kwargs(self) -> dict[str, Any]:
         """The env arguments that decide how the motion is stepped (what :meth:`take_training_env` sets)."""

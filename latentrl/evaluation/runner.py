@@ -269,6 +269,7 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
     settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
                             deterministic=eval_cfg.deterministic, device=str(device))
     settings.take_training_env(env_cfg)
+    settings.take_eval_config(eval_cfg)
     settings.validate()
     for _, paths in load_suites(files, eval_cfg.text):
         make_env(motion, paths, 1, settings)  # unknown prompts fail here (TextError), before training starts

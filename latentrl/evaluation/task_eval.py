@@ -179,6 +179,7 @@ def training_hook(run: Callable[[Callable, Any], list], env_cfg: Any, eval_cfg: 
     settings = EvalSettings(episodes=eval_cfg.episodes, max_steps=eval_cfg.max_steps,
                             deterministic=eval_cfg.deterministic, device=str(device))
     settings.take_training_env(env_cfg)
+    settings.take_eval_config(eval_cfg)
     settings.validate()
     target = getattr(eval_cfg, "success_target", None)
 

@@ -53,6 +53,26 @@ def stored_step_settings(config) -> StepSettings:
     return StepSettings.of(stored_env_config(config))
 
 
+EVAL_CHOICES = ("foot_lock_min_weight",)
+"""The ``eval:`` settings a checkpoint stores that ``latentrl eval`` takes as its defaults (flags override)."""
+
+
+def stored_eval_choices(policy: str | Path) -> dict:
+    """The evaluation settings a policy's card figures were taken with (its stored ``eval:`` section; None left out).
+
+    A policy trained with the foot lock at 0.5 but judged with it at 0.05 stores ``eval.foot_lock_min_weight``,
+    so ``latentrl eval POLICY`` reproduces the card without the flag. A file the loaders refuse gives ``{}``.
+    """
+    from latentrl.errors import LatentRLError
+    from latentrl.ppo.checkpoint import read_checkpoint
+
+    try:
+        section = (read_checkpoint(policy, map_location="cpu").get("config") or {}).get("eval") or {}
+    except (LatentRLError, OSError, AttributeError):
+        return {}
+    return {name: section[name] for name in EVAL_CHOICES if isinstance(section, dict) and section.get(name) is not None}
+
+
 def motion_of(env) -> str:
     """The motion model a stored ``EnvConfig`` names ('default' when there is none)."""
     return (env.motion if env is not None else None) or "default"
