@@ -55,8 +55,10 @@ def check_device(device: str, what: str = "--device"):
 
 
 # --------------------------------------------------------------------------- torch.compile
-def check_compile(device, what: str = "env.compile") -> None:
+def check_compile(device, what: str = "env.compile", off: str | None = None) -> None:
     """Refuse ``torch.compile`` before any work when this machine cannot compile: one line naming ``what``.
+
+    ``off``: how the line tells to run without compiling (default ``set WHAT=false``; a flag says "leave out ...").
 
     Why: torch compiles lazily, at the first step, and then fails with a dynamo traceback. It needs a
     writable cache folder (``TORCHINDUCTOR_CACHE_DIR``, default ``<tmp>/torchinductor_<user>``; and
@@ -66,6 +68,7 @@ def check_compile(device, what: str = "env.compile") -> None:
     """
     import torch
 
+    off = off or f"set {what}=false"
     kind = torch.device(device).type
     folders = [("TORCHINDUCTOR_CACHE_DIR", _inductor_cache_dir())]
     if kind == "cuda" and os.environ.get("TRITON_CACHE_DIR"):
@@ -78,19 +81,19 @@ def check_compile(device, what: str = "env.compile") -> None:
         if reason:
             source = f"{variable}={os.environ[variable]}" if os.environ.get(variable) else f"default of {variable}"
             raise ConfigError(f"{what}: torch.compile's cache folder {path} ({source}) is not writable ({reason}); "
-                              f"set {variable} to a writable folder, or set {what}=false")
+                              f"set {variable} to a writable folder, or {off}")
     if kind == "cpu":
         tried = _cxx_candidates()
         if not any(_runs(c) for c in tried):
             raise ConfigError(f"{what}: torch.compile on the CPU needs a C++ compiler, and none runs here (tried "
                               f"{', '.join(repr(c) for c in tried)}: $CXX, else g++ on PATH); install g++ or set CXX "
-                              f"to one, or set {what}=false")
+                              f"to one, or {off}")
     elif kind == "cuda":
         cc = os.environ.get("CC") or shutil.which("gcc") or shutil.which("clang")
         if not cc or not _runs(cc):
             tried = f"CC={os.environ['CC']!r}" if os.environ.get("CC") else "gcc or clang on PATH"
             raise ConfigError(f"{what}: torch.compile on CUDA needs a C compiler for Triton, and none runs here "
-                              f"(tried {tried}); install gcc or set CC to one, or set {what}=false")
+                              f"(tried {tried}); install gcc or set CC to one, or {off}")
 
 
 def _inductor_cache_dir() -> str:

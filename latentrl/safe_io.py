@@ -313,11 +313,14 @@ def read_json_file(path: str | Path, what: str, max_bytes: int, error: type[Exce
     """
     path = Path(path)
     if not path.is_file():
+        if path.exists():  # a folder, /dev/zero, a FIFO: reading would fail or never end
+            raise error(f"{path}: not a regular file ({'a folder' if path.is_dir() else 'a device or pipe'}); "
+                        f"expected a {what}")
         raise error(f"{what} not found: {path}")
     size = path.stat().st_size
     if size > max_bytes:
-        raise error(f"{path}: {size / (1 << 20):.0f} MiB is larger than the {max_bytes >> 20} MiB a {what} may have; "
-                    "split it into several files")
+        limit = f"{max_bytes >> 20} MiB" if max_bytes % (1 << 20) == 0 else f"{max_bytes:,} bytes"
+        raise error(f"{path}: {size:,} bytes is larger than the {limit} a {what} may have; split it into several files")
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:

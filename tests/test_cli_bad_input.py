@@ -6,6 +6,7 @@ folder (which holds the policy, so ``eval``'s default output folder would appear
 """
 
 import copy
+import importlib.util
 import json
 import re
 from pathlib import Path
@@ -24,6 +25,7 @@ TINY = str(ROOT / "configs" / "tiny.yaml")
 MTINY = str(ROOT / "configs" / "motion" / "tiny.yaml")
 CUDA = torch.cuda.is_available()
 MPS = torch.backends.mps.is_available()
+MUJOCO = importlib.util.find_spec("mujoco") is not None
 LONG = "x" * 1001
 
 
@@ -69,6 +71,7 @@ def fx(tmp_path_factory) -> Path:
                                                  "goal_text": ["walk"] * n}]))
     _round2_files(root, state)
     _round3_files(root)
+    _round3_late_files(root, model, motion)
     return root
 
 
@@ -565,7 +568,8 @@ def _suite_cases() -> dict[str, tuple[str | bytes, str]]:
         "far": (json.dumps(base).replace("0.9]", "1e308]"), pos + r"\[2\]: 1e\+308 is more than 1000 m"),
         "utf16": (json.dumps(base).encode("utf-16"), r"not a UTF-8 text file"),
         "binary": (bytes(range(256)), r"not a UTF-8 text file"),
-        "oversized": (b" " * (16 * 1024 * 1024 + 1), r"larger than the 16 MiB a constraint suite may have"),
+        "oversized": (b" " * (16 * 1024 * 1024 + 1),
+                      r"16,777,217 bytes is larger than the 16 MiB a constraint suite may have"),
     }
     return cases
 
@@ -767,8 +771,215 @@ ROUND3 += [
         r"/etc/passwd: not a readable torch file"),
     _r3("bad value", "play-port-word", ["play", "reach_walk_default", "--port", "x"], r"expected a port in 0\.\.65535"),
 ]
+SCENES = {  # scene files (latentrl.scene/1): name -> (content, what the line must say)
+    "bad": ('{"format": ', r"invalid JSON: Expecting value"),
+    "list": ("[1]", r"scene: expected a JSON object with 'format' and 'objects'"),
+    "format": ('{"format": "latentrl.scene/2", "objects": []}',
+               r"format: expected 'latentrl\.scene/1', got .*scene/2'"),
+    "objects-65": (json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [1, 2], "size": [0.6, 0.4, 1.0]}] * 65}), r"65 objects, more than the 64 allowed"),
+    "size-nan": ('{"format": "latentrl.scene/1", "objects": [{"type": "box", "center": [1, 2], "size": [NaN, 1, 1]}]}',
+                 r"objects\[0\]\.size\[0\]: expected a finite number, got nan"),
+    "center-inf": ('{"format": "latentrl.scene/1", "objects": [{"type": "cylinder", "center": [1, Infinity], '
+                   '"radius": 0.3, "height": 1}]}', r"objects\[0\]\.center\[1\]: expected a finite number, got inf"),
+    "radius-negative": (json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "cylinder", "center": [1, 2], "radius": -0.3, "height": 1}]}),
+        r"objects\[0\]\.radius: .*> 0, got -0\.3"),
+    "size-1e6": (json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [1, 2], "size": [1e6, 1, 1]}]}),
+        r"objects\[0\]\.size\[0\]: expected a number in \[0, 100\]"),
+    "type-sphere": (json.dumps({"format": "latentrl.scene/1", "objects": [{"type": "sphere", "center": [1, 2]}]}),
+                    r"objects\[0\]\.type: expected one of box, cylinder, seat, stairs, got 'sphere'"),
+    "stairs-1e6": (json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "stairs", "start": [0, 1], "direction_deg": 0, "width": 1, "riser": 0.1, "tread": 0.3,
+         "count": 10**6}]}), r"objects\[0\]\.count: expected an integer in \[1, 32\], got 1000000"),
+    "oversized": (b" " * ((1 << 20) + 1), r"1,048,577 bytes is larger than the 1 MiB a scene file may have"),
+    "deep": ("[" * 200_000 + "]" * 200_000, r"JSON nested too deeply for a scene file"),
+    "utf16": ('{"format": "latentrl.scene/1", "objects": []}'.encode("utf-16"), r"not a UTF-8 text file"),
+}
+HOSTILE_SCENES = {"objects-65", "size-1e6", "stairs-1e6", "oversized", "deep", "utf16"}
+GOAL = {"joint": "pelvis", "target": [0, 0.3], "time": 0.5}
+
+
+def _goals(**change) -> str:
+    return json.dumps([{"text": "walk", "goals": [{**GOAL, **change}]}])
+
+
+GOALS = {  # joint-goal files (docs/joint_goals.md): name -> (content, what the line must say)
+    "target-nan": (_goals().replace("0.3", "NaN"), r"entry 0, goal 0: field 'target' must be .*got \[0, nan\]"),
+    "time-nan": (_goals().replace("0.5", "NaN"), r"field 'time' must be seconds in \(0, 3600\] or \"asap\", got nan"),
+    "time-negative": (_goals(time=-1), r"field 'time' must be seconds in \(0, 3600\].*got -1"),
+    "time-1e9": (_goals(time=1e9), r"field 'time' must be seconds .*got 1000000000\.0"),
+    "time-word": (_goals(time="soon"), r"field 'time' must be seconds .*got 'soon'"),
+    "joint-tail": (_goals(joint="tail"), r"field 'joint' must be one of pelvis, .*got 'tail'"),
+    "object": ('{"text": "walk"}', r"expected a non-empty list of entries .*got dict"),
+    "target-4": (_goals(target=[0, 1, 2, 3]), r"field 'target' must be \[x, y, z\] or \[x, y\]"),
+    "foot-3d": (_goals(joint="left_foot", target=[0, 1, 2]), r"field 'target' must be \[x, y\] \(a foot's target"),
+    "no-text": ('[{"goals": []}]', r"entry 0: missing field 'text'"),
+    "goals-2000": (json.dumps([{"text": "walk", "goals": [{**GOAL, "time": 0.5 + i} for i in range(2000)]}]),
+                   r"field 'goals' must be a list of 1 to 1000 goals, got list of 2000"),
+    "entries-20000": (json.dumps([{"text": "walk", "goals": [GOAL]}] * 20_000),
+                      r"20000 entries, more than the 1000 a file may hold"),
+    "truncated": ("[{", r"invalid JSON: Expecting property name"),
+}
+HOSTILE_GOALS = {"goals-2000", "entries-20000"}
+
+
+def _round3_late_files(root: Path, model, motion: Path) -> None:
+    """Scene files, joint-goal files, a ReachJoint policy, a NaN motion and hostile links for the later rows."""
+    from latentrl.envs.reach_joint import ReachJointEnv
+    from latentrl.motion.checkpoint import file_sha256
+    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
+    from latentrl.ppo.config import PolicyConfig
+    from latentrl.ppo.policy import ActorCritic
+
+    for folder, cases in (("scenes", SCENES), ("goals", GOALS)):
+        (root / folder).mkdir()
+        for name, (data, _) in cases.items():
+            (root / folder / f"{name}.json").write_bytes(data if isinstance(data, bytes) else data.encode())
+    (root / "scenes" / "ok.json").write_text(json.dumps({"format": "latentrl.scene/1", "objects": []}))
+    (root / "goals" / "ok.json").write_text(_goals())
+    (root / "zero-link.json").symlink_to("/dev/zero")
+    (root / "dangling.json").symlink_to(root / "nowhere.json")
+    np.savez(root / "nanmotion.npz", joints=np.full((5, 22, 3), np.nan, np.float32), fps=30.0)
+    env = ReachJointEnv(1, motion=model)
+    torch.manual_seed(0)
+    policy = ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
+                         PolicyConfig(latent_dim=32), env.metadata["observation_layout"])
+    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
+                            optimizer=torch.optim.Adam(policy.parameters()),
+                            config={"env": {"task": "reach_joint", "texts": ["walk"]}},
+                            motion={"path": str(motion), "sha256": file_sha256(motion)})
+    save_checkpoint(state, root / "reach_joint.pt")
+
+
+RJ_EVAL = ["eval", "{fx}/reach_joint.pt", "--motion", "{fx}/motion.pt", "--episodes", "1", "--render", "0"]
+RJ_TRAIN = [*TRAIN, "--set", "env.task=reach_joint"]
+TRACK = ["physics", "track", "{fx}/ok.npz", "--out", "o"]
+LOOP = ["physics", "loop", "--motion", "{fx}/motion.pt", "--out", "o"]
+ROUND3 += [  # scenes, joint goals, physics: the formats and commands added after the rows above
+    # ------------------------------------------------ scene files through eval --scene and env.scene
+    *[_r3("hostile file" if name in HOSTILE_SCENES else "bad file", f"eval-scene-{name}",
+          [*EVAL, "--paths", "dart_demo_walk", "--scene", f"{{fx}}/scenes/{name}.json"],
+          rf"--scene: .*{re.escape(name)}\.json: .*{pattern}") for name, (_, pattern) in SCENES.items()],
+    _r3("bad file", "eval-scene-missing", [*EVAL, "--scene", "nowhere_scene"],
+        r"scene file not found: nowhere_scene \(looked in .*tasks/scenes\)"),
+    _r3("bad file", "eval-scene-folder", [*EVAL, "--scene", "{fx}/scenes"], r"scene file not found: .*scenes \("),
+    _r3("hostile file", "eval-scene-dev-zero", [*EVAL, "--scene", "/dev/zero"], r"scene file not found: /dev/zero"),
+    _r3("hostile file", "eval-scene-link-to-dev-zero", [*EVAL, "--scene", "{fx}/zero-link.json"],
+        r"scene file not found: .*zero-link\.json"),
+    _r3("bad file", "eval-scene-dangling-link", [*EVAL, "--scene", "{fx}/dangling.json"],
+        r"scene file not found: .*dangling\.json"),
+    _r3("bad file", "eval-scene-etc-passwd", [*EVAL, "--scene", "/etc/passwd"], r"/etc/passwd: invalid JSON"),
+    _r3("bad file", "train-scene-nan", [*TRAIN, "--set", "env.scene={fx}/scenes/size-nan.json"],
+        r"env\.scene: .*size-nan\.json: objects\[0\]\.size\[0\]: expected a finite number, got nan"),
+    _r3("hostile file", "train-scene-oversized", [*TRAIN, "--set", "env.scene={fx}/scenes/oversized.json"],
+        r"env\.scene: .*1,048,577 bytes is larger than the 1 MiB"),
+    _r3("bad file", "train-scene-folder", [*TRAIN, "--set", "env.scene={fx}/scenes"],
+        r"env\.scene: scene file not found"),
+    _r3("hostile file", "train-scene-dev-zero", [*TRAIN, "--set", "env.scene=/dev/zero"],
+        r"env\.scene: scene file not found: /dev/zero"),
+    _r3("bad value", "train-scene-random-count",
+        [*TRAIN, "--set", "env.scene={{random_obstacles: {{count: [3, 1000000]}}}}"],
+        r"random_obstacles\.count: expected \[min, max\] integers with 0 <= min <= max <= 64"),
+    _r3("bad value", "train-scene-random-typo", [*TRAIN, "--set", "env.scene={{random_obstacles: {{counts: 3}}}}"],
+        r"random_obstacles\.counts: unknown setting \(did you mean 'count'\?\)"),
+    _r3("bad value", "train-scene-inline-nan",
+        [*TRAIN, "--set", "env.scene={{format: latentrl.scene/1, objects: [{{type: box, center: [1, 2], "
+                          "size: [.nan, 1, 1]}}]}}"],
+        r"env\.scene: objects\[0\]\.size\[0\]: expected a finite number, got nan"),
+    _r3("bad value", "train-scene-number", [*TRAIN, "--set", "env.scene=5"],
+        r"env\.scene: expected a scene file, a latentrl\.scene/1 object or \{random_obstacles"),
+    # ------------------------------------------------ joint-goal files through eval of a ReachJoint policy
+    *[_r3("hostile file" if name in HOSTILE_GOALS else "bad file", f"eval-joint-goals-{name}",
+          [*RJ_EVAL, "--paths", f"{{fx}}/goals/{name}.json"], rf"{re.escape(name)}\.json: .*{pattern}")
+      for name, (_, pattern) in GOALS.items()],
+    _r3("bad file", "eval-joint-goals-missing", [*RJ_EVAL, "--paths", "nowhere_goals"],
+        r"path file not found: nowhere_goals \(give a file, or one of the suites \['pelvis_far'"),
+    _r3("hostile file", "eval-joint-goals-link-to-dev-zero", [*RJ_EVAL, "--paths", "{fx}/zero-link.json"],
+        r"path file not found: .*zero-link\.json"),
+    _r3("bad file", "eval-joint-goals-scene-file", [*RJ_EVAL, "--paths", "{fx}/scenes/ok.json"],
+        r"ok\.json: expected a non-empty list of entries"),
+    _r3("bad file", "eval-reach-policy-joint-goals", [*EVAL, "--paths", "{fx}/goals/ok.json"],
+        r"ok\.json: path 0: unknown field 'text' \(did you mean 'goal_text'\?\)"),
+    # ------------------------------------------------ env.reach_joint settings (train --set)
+    *[_r3("bad value", f"train-reach-joint-{value.replace('=', '-').replace('[', '').replace(']', '')}",
+          [*RJ_TRAIN, "--set", f"env.reach_joint.{value}"], rf"env\.reach_joint\.{value.split('=')[0]}: {pattern}")
+      for value, pattern in {
+          "radius=nan": r"must be metres > 0, got nan", "radius=-1": r"must be metres > 0, got -1\.0",
+          "near_share=1.5": r"must be a share in \[0, 1\], got 1\.5",
+          "far_time=[4,1]": r"must be \[min, max\] with 0\.0333 <= min <= max, got \[4\.0, 1\.0\]",
+          "far_time=[0,1]": r"must be \[min, max\] with 0\.0333 <= min", "far_time=[1,1e9]": r"must end by 3600 s",
+          "distance=[0,.inf]": r"must be \[min, max\] with 0 <= min <= max, got \[0\.0, inf\]",
+          "max_speed=0": r"must be m/s > 0, got 0\.0", "angle_deg=200": r"must be degrees in \[0, 180\], got 200\.0",
+          "joints=[tail]": r"unknown joint 'tail'", "joints=[]": r"must list goal joints from",
+          "planar=[tail]": r"unknown joint 'tail'", "height_offset=[-100,0]": r"must be \[min, max\] with -10 <= min",
+      }.items()],
+    _r3("bad file", "train-reach-joint-goals-missing", [*RJ_TRAIN, "--set", "env.reach_joint.goals=nowhere"],
+        r"goals: joint-goal file not found: nowhere"),
+    _r3("bad file", "train-reach-joint-goals-nan",
+        [*RJ_TRAIN, "--set", "env.reach_joint.goals={fx}/goals/target-nan.json"],
+        r"target-nan\.json: entry 0, goal 0: field 'target'"),
+    # ------------------------------------------------ physics track / loop (MuJoCo)
+    _r3("bad file", "physics-track-missing", ["physics", "track", "nowhere.npz", "--out", "o"],
+        r"motion file not found: nowhere\.npz"),
+    _r3("bad file", "physics-track-nan", ["physics", "track", "{fx}/nanmotion.npz", "--out", "o"],
+        r"nanmotion\.npz: field 'joints' holds NaN or inf in 5 of 5 frames"),
+    _r3("hostile file", "physics-track-dev-zero", ["physics", "track", "/dev/zero", "--out", "o"],
+        r"motion file not found: /dev/zero"),
+    _r3("bad file", "physics-track-folder", ["physics", "track", "{fx}/scenes", "--out", "o"],
+        r"motion file not found: .*scenes"),
+    _r3("hostile file", "physics-track-pickle", ["physics", "track", "{fx}/scenes/ok.json", "--out", "o"],
+        r"ok\.json: not a readable motion \.npz"),
+    _r3("bad file", "physics-track-bad-shape", ["physics", "track", "{fx}/badshape.npz", "--out", "o"],
+        r"badshape\.npz: field 'joints' must be \(T, 22, 3\)"),
+    _r3("bad value", "physics-track-out-is-file", [*TRACK[:-1], "{fx}/afile"],
+        r"--out .*afile exists and is not a dir"),
+    _r3("bad value", "physics-track-out-under-file", [*TRACK[:-1], "{fx}/afile/x"], r"--out .*afile is a file"),
+    _r3("bad value", "physics-track-no-out", TRACK[:-2], r"the following arguments are required: --out"),
+    *[_r3("bad value", f"physics-track-{flag[2:]}-{value}", [*TRACK, flag, value], pattern)
+      for flag, value, pattern in (
+        ("--height", "nan", r"--height must be in \[1\.0, 2\.5\] m, got nan"),
+        ("--height", "-1", r"--height must be in \[1\.0, 2\.5\] m, got -1\.0"),
+        ("--height", "100", r"--height must be in \[1\.0, 2\.5\] m, got 100\.0"),
+        ("--assist-hz", "nan", r"--assist-hz must be in \[0, 50\] \(0 switches the root assist off\), got nan"),
+        ("--assist-hz", "-2", r"--assist-hz must be in \[0, 50\].*got -2\.0"),
+        ("--assist-hz", "1e9", r"--assist-hz must be in \[0, 50\].*got 1000000000\.0"))],
+    *[_r3("bad value", f"physics-loop-{flag[2:]}-{value or 'empty'}", [*LOOP, flag, value], pattern)
+      for flag, value, pattern in (
+        ("--seconds", "nan", r"--seconds must be in \(0, 3600\], got nan"),
+        ("--seconds", "-1", r"--seconds must be in \(0, 3600\], got -1\.0"),
+        ("--seconds", "1e9", r"--seconds must be in \(0, 3600\], got 1000000000\.0"),
+        ("--text", "", r"--text: prompt '' is empty"), ("--text", "{LONG}", r"--text: .*has 1001 characters"),
+        ("--seed", "-1", r"--seed: must lie in \[0, 2\*\*32 - 1"),
+        ("--height", "inf", r"--height must be in .*got inf"),
+        ("--assist-hz", "inf", r"--assist-hz must be in \[0, 50\].*got inf"))],
+    _r3("bad file", "physics-loop-motion-missing", ["physics", "loop", "--motion", "nowhere.pt", "--out", "o"],
+        r"motion model not found: nowhere\.pt"),
+    _r3("bad file", "physics-loop-motion-etc-passwd", ["physics", "loop", "--motion", "/etc/passwd", "--out", "o"],
+        r"/etc/passwd: not a readable torch file"),
+    _r3("hostile file", "physics-loop-motion-evil", ["physics", "loop", "--motion", "{fx}/evil.pt", "--out", "o"],
+        r"evil\.pt: refused to load"),
+    _r3("bad value", "physics-loop-out-is-file", ["physics", "loop", "--out", "{fx}/afile"],
+        r"--out .*afile exists and is not a directory"),
+    _r3("bad value", "physics-loop-no-out", ["physics", "loop"], r"the following arguments are required: --out"),
+    _r3("bad value", "physics-no-subcommand", ["physics"], r"the following arguments are required: SUBCOMMAND"),
+    _r3("bad value", "physics-unknown-subcommand", ["physics", "fly"], r"argument SUBCOMMAND: invalid choice: 'fly'"),
+    # ------------------------------------------------ leftovers: play's empty text, bench's --compile preflight
+    _r3("bad value", "play-empty-text", ["play", "reach_walk_default", "--text", ""], r"--text: prompt '' is empty"),
+    _r3("bad value", "play-blank-text", ["play", "reach_walk_default", "--text", "   "],
+        r"--text: prompt '   ' is empty"),
+    _r3("fault", "bench-rollout-compile-no-compiler", ["bench", "rollout", "--device", "cpu", "--compile"],
+        r"--compile: torch\.compile on the CPU needs a C\+\+ compiler.*or leave out --compile", NO_CXX),
+    _r3("fault", "bench-env-compile-no-compiler", ["bench", "env", "--device", "cpu", "--compile"],
+        r"--compile: torch\.compile on the CPU needs a C\+\+ compiler.*or leave out --compile", NO_CXX),
+    _r3("fault", "bench-rollout-compile-cache-proc", ["bench", "rollout", "--device", "cpu", "--compile"],
+        r"--compile: torch\.compile's cache folder /proc/inductor .*or leave out --compile",
+        {"TORCHINDUCTOR_CACHE_DIR": "/proc/inductor"}),
+]
 ROWS += ROUND3
-SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS}
+SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS,
+        **{rid: not MUJOCO for rid, *_ in ROUND3 if rid.startswith("physics-")}}
 
 
 def tree(folder: Path) -> dict[str, int]:
@@ -837,11 +1048,13 @@ HOSTILE = re.compile(r"evil|bomb|aliases|deep|20000|400-digits|1e308|bit-flip|py
 def command_of(argv: list[str]) -> str:
     """The command a row drives: ``train``, ``motion sample``, ``export onnx``, ``bench env``, ..."""
     if not argv or argv[0] not in ("train", "quickstart", "eval", "compare", "optimize", "view", "play", "motion",
-                                   "bench", "export"):
+                                   "bench", "export", "physics"):
         return "top level"
+    if argv[0] == "physics" and (len(argv) < 2 or argv[1] not in ("track", "loop")):
+        return "physics"
     if argv[0] == "bench" and (len(argv) < 2 or argv[1] not in ("motion", "env", "rollout", "train")):
         return "bench"
-    return " ".join(argv[:2]) if argv[0] in ("motion", "bench", "export") and len(argv) > 1 else argv[0]
+    return " ".join(argv[:2]) if argv[0] in ("motion", "bench", "export", "physics") and len(argv) > 1 else argv[0]
 
 
 def kind_of(rid: str, argv: list[str]) -> str:

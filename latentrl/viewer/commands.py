@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from latentrl.errors import CheckpointError
+from latentrl.errors import CheckpointError, ConfigError
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
@@ -67,8 +67,11 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     if task not in PLAY_TASKS:
         raise CheckpointError(f"{policy}: play steers {' and '.join(PLAY_TASKS)} policies toward a clicked goal; this "
                               f"policy's task is '{task}' (evaluate it with latentrl eval)")
+    from latentrl.motion.text import prompt_problem
     from latentrl.viewer.record import Recorder, check_record
 
+    if text is not None and prompt_problem(text):  # an empty --text would fall back to the default silently
+        raise ConfigError(f"--text: {prompt_problem(text)}")
     check_record(record)
     require_viser()
     check_port(host, port)  # before the models load

@@ -209,6 +209,11 @@ def bench_env(args: EnvBenchRequest) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     devices = default_devices(args.device)
+    if args.compile:  # refuse before any timing when torch cannot compile here
+        from latentrl.preflight import check_compile
+
+        for device in devices:
+            check_compile(device, "--compile", "leave out --compile")
     out = {
         "benchmark": "env",
         "task": "latentrl/ReachLocation-v0",

@@ -265,6 +265,11 @@ def bench_rollout(req: RolloutBenchRequest) -> int:
     if req.threads:
         torch.set_num_threads(req.threads)
     devices = default_devices(req.device)
+    if req.compile:  # refuse before any timing when torch cannot compile here
+        from latentrl.preflight import check_compile
+
+        for device in devices:
+            check_compile(device, "--compile", "leave out --compile")
     peak = matmul_peak_gflops()
     out = {"benchmark": "rollout", "hardware": hardware(), "matmul_peak_gflops": peak, "models": {}}
     hw = f"{out['hardware']['cpu']}, {out['hardware']['torch_threads']} torch threads" + (
