@@ -1117,3 +1117,19 @@ def test_a_compiler_named_by_cxx_that_does_not_exist_is_refused_before_training(
     assert ("env.compile: torch.compile on the CPU needs a C++ compiler, and none runs here (tried "
             "'/nonexistent/g++'") in proc.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_the_shared_json_reader_names_folders_devices_and_the_exact_size(tmp_path):
+    """``read_json_file``: a folder or a device is not called missing; a size over the limit is said in bytes."""
+    from latentrl.errors import DataError
+    from latentrl.safe_io import read_json_file
+
+    with pytest.raises(DataError, match=r"^.*: not a regular file \(a folder\); expected a scene file$"):
+        read_json_file(tmp_path, "scene file", 1 << 20, DataError)
+    with pytest.raises(DataError, match=r"^/dev/zero: not a regular file \(a device or pipe\); expected a scene file$"):
+        read_json_file("/dev/zero", "scene file", 1 << 20, DataError)
+    (tmp_path / "big.json").write_bytes(b" " * ((1 << 20) + 1))
+    with pytest.raises(DataError, match=r"big\.json: 1,048,577 bytes is larger than the 1 MiB a scene file may have"):
+        read_json_file(tmp_path / "big.json", "scene file", 1 << 20, DataError)
+    with pytest.raises(DataError, match=r"big\.json: 1,048,577 bytes is larger than the 1,000 bytes a report"):
+        read_json_file(tmp_path / "big.json", "report", 1000, DataError)
