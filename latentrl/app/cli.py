@@ -342,6 +342,8 @@ def _bench_commands(sub) -> None:
                         help="spread each primitive's floor-snap shift over its frames (docs/motion.md)")
     motion.add_argument("--foot-lock", action="store_true",
                         help="roll out with the foot lock (planted feet do not slide; docs/motion.md)")
+    motion.add_argument("--no-skills", action="store_true",
+                        help="skip the scene-skill checks (crouch, sit, stairs, reach, wave)")
     motion.set_defaults(func=_bench_motion)
     _bench_optimize_command(bsub)
 

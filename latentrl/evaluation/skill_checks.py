@@ -42,6 +42,10 @@ PLANTED_SPEED_M_S = 0.15
 """A foot joint slower than this is planted (for the stairs check)."""
 REACH_TOL_M = 0.10
 """A reach succeeds when the hand comes this close to its target."""
+WAVE_MIN_RAISED = 0.2
+"""A wave keeps the hand above its shoulder at least this share of the frames (the data: 0.2 and more)."""
+WAVE_SWING_HZ = (1.0, 3.5)
+"""Side-to-side swings per raised second of a wave (the data's range)."""
 HANDS = (20, 21)
 """Wrist joints of the left and right hand (SMPL-22 has no finger joints)."""
 
@@ -53,6 +57,8 @@ __all__ = [
     "STAIR_FLOAT_TOL_M",
     "STAIR_PENETRATION_TOL_M",
     "REACH_TOL_M",
+    "WAVE_MIN_RAISED",
+    "WAVE_SWING_HZ",
     "crouch_depth",
     "hand_distance",
     "reach_check",

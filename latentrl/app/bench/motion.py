@@ -27,6 +27,7 @@ class MotionBenchRequest:
     no_floor_snap: bool = False
     snap_ramp: bool = False
     foot_lock: bool = False
+    no_skills: bool = False
 
 
 # --------------------------------------------------------------------------- motion quality
@@ -233,6 +234,151 @@ def motion_targets(p: dict, switch: dict, ref: dict | None) -> dict[str, bool]:
     return checks
 
 
+# --------------------------------------------------------------------------- scene skills
+#: Skill checks: name -> prompt(s) rolled out from the standing seed (each runs only where the model knows them).
+SKILL_PROMPTS = {
+    "crouch": ("crouch",),
+    "sit": ("sit down",),
+    "stairs": ("walk up stairs", "walk down stairs"),
+    "reach": ("reach with the left hand", "reach with the right hand"),
+    "wave": ("wave",),
+}
+SKILL_SECONDS = {"crouch": 2.0, "sit": 2.5, "stairs": 5.0, "reach": 2.0, "wave": 3.0}
+"""Rollout length per skill: the data's posture changes take 0.6-1.4 s, then a 0.5 s hold; six steps of stairs."""
+SEAT_HEIGHTS_M = (0.2, 0.6)
+"""Seat heights of the sit check: spread evenly over the data's range, one per rollout."""
+REACH_FRACTIONS = (0.7, 0.85)
+"""Reach targets at these shares of the arm's length (the data draws 0.6-0.95), each hand and direction."""
+REACH_SAMPLES = 64
+"""Noises tried per reach target; the best one counts (the target is met by noise choice)."""
+SKILL_SHARE_MIN = {"sit": 0.95, "reach": 0.90, "wave": 0.90}
+"""Least share of rollouts (targets for reach) that must pass."""
+NOT_IN_MODEL = "prompt not in the model"
+
+
+def prompt_known(model, text: str) -> bool:
+    """Whether ``text`` is in the model's prompt table (a fallback encoder's guess does not count)."""
+    from latentrl.motion.text import normalize_prompt
+
+    table = getattr(model.text_encoder, "table", None)
+    return table is not None and normalize_prompt(text) in table
+
+
+def _standing_rollout(model, text: str, seconds: float, batch: int, seed: int, guidance: float):
+    """``text`` rolled out from seed history 0 (a standing frame) for every row: (B, T, 22, 3) world joints."""
+    g = torch.Generator().manual_seed(seed)
+    state = model.initial_state(batch, g, seed_index=torch.zeros(batch, dtype=torch.long))
+    steps = max(1, round(seconds * FPS / FUTURE_LENGTH))
+    return model.rollout(text, steps, batch=batch, generator=g, guidance_scale=guidance, state=state).joints_world
+
+
+def skill_figures(model, batch: int = 8, seed: int = 0, guidance: float = GUIDANCE_SCALE,
+                  reach_samples: int = REACH_SAMPLES) -> dict[str, dict]:
+    """The scene skills' checks (``evaluation/skill_checks.py``) on rollouts from the standing seed.
+
+    One row per skill of ``SKILL_PROMPTS``: its figures and ``ok`` against the target, or ``status``
+    ``NOT_IN_MODEL`` (no ``ok``) where the model's prompt table lacks one of its prompts. Scenes are placed
+    from the seed's standing frame the way the data places them. Stairs roll out with the floor snap and the
+    foot lock off (neither knows the terrain).
+    """
+    from latentrl.datasets.locomotion.skills import REACH_DIRECTIONS
+    from latentrl.evaluation import skill_checks as S
+
+    rows: dict[str, dict] = {}
+    for name, prompts in SKILL_PROMPTS.items():
+        missing = [p for p in prompts if not prompt_known(model, p)]
+        if missing:
+            rows[name] = {"prompts": list(prompts), "status": NOT_IN_MODEL, "missing": missing}
+            continue
+        seconds = SKILL_SECONDS[name]
+        row: dict = {"prompts": list(prompts)}
+        if name == "crouch":
+            j = _standing_rollout(model, "crouch", seconds, batch, seed, guidance)
+            depth = S.crouch_depth(j)  # the first (seed) frame is the standing height
+            row.update(depth_m=float(depth.mean()), depth_min_m=float(depth.min()))
+            row["ok"] = row["depth_m"] >= S.CROUCH_MIN_DROP_M
+        elif name == "sit":
+            j = _standing_rollout(model, "sit down", seconds, batch, seed, guidance)
+            heights = torch.linspace(*SEAT_HEIGHTS_M, batch) if batch > 1 else torch.tensor([0.4])
+            seats = torch.stack([S.seat_behind(j[i, 1], float(h)) for i, h in enumerate(heights)])
+            res = S.sit_check(j, seats)
+            row.update(seated=float(res["seated"].float().mean()), height_err_m=float(res["height_err_m"].mean()),
+                       xy_err_m=float(res["xy_err_m"].mean()), seat_heights_m=[float(h) for h in heights])
+            row["ok"] = row["seated"] >= SKILL_SHARE_MIN["sit"]
+        elif name == "stairs":
+            snap, lock = model.floor_snap, model.foot_lock
+            model.floor_snap, model.foot_lock = None, False
+            try:
+                for prompt, up in zip(prompts, (True, False)):
+                    j = _standing_rollout(model, prompt, seconds, batch, seed, guidance)
+                    res = [S.stair_check(j[i, 2:], S.stairs_ahead(j[i, 1], up=up)) for i in range(batch)]
+                    key = "up" if up else "down"
+                    row[key] = {"penetration_m": sum(float(r["penetration_m"]) for r in res) / batch,
+                                "float_m": sum(float(r["float_m"]) for r in res) / batch,
+                                "planted": int(sum(int(r["planted"]) for r in res))}
+            finally:
+                model.floor_snap, model.foot_lock = snap, lock
+            row["ok"] = all(row[k]["penetration_m"] <= S.STAIR_PENETRATION_TOL_M
+                            and row[k]["float_m"] <= S.STAIR_FLOAT_TOL_M and row[k]["planted"] > 0
+                            for k in ("up", "down"))
+        elif name == "reach":
+            best = []
+            for hand, prompt in enumerate(prompts):
+                j = _standing_rollout(model, prompt, seconds, reach_samples, seed, guidance)
+                for direction in REACH_DIRECTIONS:
+                    for fraction in REACH_FRACTIONS:
+                        target = S.reach_target(j[0, 1], hand, direction, fraction)
+                        best.append(float(S.reach_check(j, target.expand(reach_samples, 3), hand)["distance_m"].min()))
+            row.update(targets=len(best), samples=reach_samples, best_distance_m=best,
+                       reached=sum(d <= S.REACH_TOL_M for d in best) / len(best))
+            row["ok"] = row["reached"] >= SKILL_SHARE_MIN["reach"]
+        elif name == "wave":
+            j = _standing_rollout(model, "wave", seconds, batch, seed, guidance)[:, 2:]
+            res = [S.wave_check(j, hand) for hand in (0, 1)]
+            right = res[1]["raised"] > res[0]["raised"]  # the hand raised longer is the waving one
+            raised = torch.where(right, res[1]["raised"], res[0]["raised"])
+            swings = torch.where(right, res[1]["swings_hz"], res[0]["swings_hz"])
+            lo, hi = S.WAVE_SWING_HZ
+            waving = (raised >= S.WAVE_MIN_RAISED) & (swings >= lo) & (swings <= hi)
+            row.update(raised=float(raised.mean()), swings_hz=float(swings.mean()), waving=float(waving.float().mean()))
+            row["ok"] = row["waving"] >= SKILL_SHARE_MIN["wave"]
+        rows[name] = row
+    return rows
+
+
+def _skill_summary(name: str, row: dict) -> str:
+    """One line of a skill row's figures (or why it did not run)."""
+    if "status" in row:
+        return f"{row['status']} ({', '.join(repr(p) for p in row['missing'])})"
+    if name == "crouch":
+        return f"pelvis drop {row['depth_m'] * 100:.1f} cm (lowest {row['depth_min_m'] * 100:.1f})"
+    if name == "sit":
+        return (f"seated {row['seated']:.0%}, pelvis height error {row['height_err_m'] * 100:.1f} cm, "
+                f"xy {row['xy_err_m'] * 100:.1f} cm")
+    if name == "stairs":
+        return ", ".join(f"{k}: penetration {row[k]['penetration_m'] * 100:.2f} cm, "
+                         f"float {row[k]['float_m'] * 100:.2f} cm ({row[k]['planted']} planted foot-frames)"
+                         for k in ("up", "down"))
+    if name == "reach":
+        return f"{row['reached']:.0%} of {row['targets']} targets within 10 cm (best of {row['samples']})"
+    return f"waving {row['waving']:.0%}, hand up {row['raised']:.0%}, {row['swings_hz']:.1f} swings/s"
+
+
+#: Check names of the skill rows (their targets, as in docs/benchmarks.md).
+SKILL_CHECK_NAMES = {
+    "crouch": "crouch: pelvis drop >= 25 cm",
+    "sit": "sit: pelvis on a 0.2-0.6 m seat (+-5 cm height, +-10 cm xy) in >= 95% of rollouts",
+    "stairs": "stairs up and down: planted-foot penetration <= 1 cm, float <= 3 cm",
+    "reach": "reach: hand within 10 cm of >= 90% of targets (best of 64 noises)",
+    "wave": "wave: hand up >= 20%, 1-3.5 swings/s in >= 90% of rollouts",
+}
+
+
+def skill_checks(rows: dict[str, dict]) -> dict[str, bool]:
+    """Pass/fail of the skill rows that ran; a row whose prompt the model lacks is neither."""
+    return {SKILL_CHECK_NAMES[name]: bool(row["ok"]) for name, row in rows.items() if "ok" in row}
+
+
 def _fmt(x: float | None, digits: int = 3) -> str:
     return "-" if x is None else f"{x:.{digits}f}"
 
@@ -330,6 +476,10 @@ def bench_motion(args: MotionBenchRequest) -> int:
           f"deepest below floor {sw['deepest_below_floor_cm']:.1f} cm; text transitions PJ {_fmt(tt['pj'])} "
           f"AUJ {_fmt(tt['auj'])}")
     p = out["probes"]
+    if not args.no_skills:
+        out["skills"] = skill_figures(model, batch=args.batch, seed=args.seed, guidance=args.guidance)
+        for name, row in out["skills"].items():
+            print(f"skill {name}: {_skill_summary(name, row)}", flush=True)
     checks = {
         "stable: finite, body height (pelvis over lower foot) in data range +-10 cm": all(
             r["finite"] for r in p.values())
@@ -337,8 +487,8 @@ def bench_motion(args: MotionBenchRequest) -> int:
                                 and r["pelvis_over_feet_max"] <= ref["pelvis_over_feet_range"][1] + 0.1
                                 for r in p.values())),
         "no vertical drift: world pelvis height in data range +-10 cm": ref is None or all(
-            ref["pelvis_z_range"][0] - 0.1 <= r["pelvis_z_min"] and r["pelvis_z_max"] <= ref["pelvis_z_range"][1] + 0.1
-            for r in p.values()),
+            ref["pelvis_z_range"][0] - 0.1 <= r["pelvis_z_min"]
+            and r["pelvis_z_max"] <= ref["pelvis_z_range"][1] + 0.1 for r in p.values()),
         "run faster than walk": p["run"]["speed_m_s"] > p["walk"]["speed_m_s"],
         "stand still < 0.1 m/s": p["stand still"]["speed_m_s"] < 0.1,
         "hop on left leg: left-foot-only contact dominates": p["hop on left leg"]["left_only"]
@@ -349,6 +499,7 @@ def bench_motion(args: MotionBenchRequest) -> int:
         "turn right curves right": p["turn right"]["turn_deg_s"] < -5,
     }
     checks.update(motion_targets(p, out["skill_switch"], ref))
+    checks.update(skill_checks(out.get("skills", {})))
     if ref:
         out["data_reference"] = {"pelvis_z_range": ref["pelvis_z_range"],
                                  "pelvis_over_feet_range": ref["pelvis_over_feet_range"], "skills": ref["skills"],
@@ -360,5 +511,8 @@ def bench_motion(args: MotionBenchRequest) -> int:
     out["checks"] = checks
     for name, ok in checks.items():
         print(f"[{'pass' if ok else 'FAIL'}] {name}")
+    for name, row in out.get("skills", {}).items():
+        if "status" in row:
+            print(f"[ -- ] {SKILL_CHECK_NAMES[name]}: {row['status']}")
     write_json(args.json, out)
     return 0
