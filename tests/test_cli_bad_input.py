@@ -823,6 +823,10 @@ GOALS = {  # joint-goal files (docs/joint_goals.md): name -> (content, what the 
     "truncated": ("[{", r"invalid JSON: Expecting property name"),
 }
 HOSTILE_GOALS = {"goals-2000", "entries-20000"}
+SUITE_SCENES = {  # a constraint suite's problem naming a scene file: name -> (its "scene" value)
+    "nan": "{fx}/scenes/size-nan.json", "oversized": "{fx}/scenes/oversized.json", "dev-zero": "/dev/zero",
+    "folder": "{fx}/scenes", "missing": "nowhere_scene.json",
+}
 
 
 def _round3_late_files(root: Path, model, motion: Path) -> None:
@@ -842,6 +846,12 @@ def _round3_late_files(root: Path, model, motion: Path) -> None:
     (root / "zero-link.json").symlink_to("/dev/zero")
     (root / "dangling.json").symlink_to(root / "nowhere.json")
     np.savez(root / "nanmotion.npz", joints=np.full((5, 22, 3), np.nan, np.float32), fps=30.0)
+    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
+    for name, scene in SUITE_SCENES.items():
+        problem = {"name": "p", "start": {"seed": 1}, "text": "walk", "primitives": 2, "constraints": [joint],
+                   "scene": scene.format(fx=root)}
+        (root / "suites" / f"scene-{name}.json").write_text(
+            json.dumps({"format": "latentrl.constraints/1", "problems": [problem]}))
     env = ReachJointEnv(1, motion=model)
     torch.manual_seed(0)
     policy = ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
@@ -890,6 +900,13 @@ ROUND3 += [  # scenes, joint goals, physics: the formats and commands added afte
         r"env\.scene: objects\[0\]\.size\[0\]: expected a finite number, got nan"),
     _r3("bad value", "train-scene-number", [*TRAIN, "--set", "env.scene=5"],
         r"env\.scene: expected a scene file, a latentrl\.scene/1 object or \{random_obstacles"),
+    *[_r3(kind, f"optimize-suite-scene-{name}", ["optimize", f"{{fx}}/suites/scene-{name}.json", "--no-progress"],
+          pattern) for name, kind, pattern in (
+        ("nan", "bad file", r"size-nan\.json: objects\[0\]\.size\[0\]: expected a finite number, got nan"),
+        ("oversized", "hostile file", r"oversized\.json: 1,048,577 bytes is larger than the 1 MiB a scene file"),
+        ("dev-zero", "hostile file", r"/dev/zero: not a regular file \(a device or pipe\); expected a scene file"),
+        ("folder", "bad file", r"scenes: not a regular file \(a folder\); expected a scene file"),
+        ("missing", "bad file", r"scene file not found: .*nowhere_scene\.json"))],
     # ------------------------------------------------ joint-goal files through eval of a ReachJoint policy
     *[_r3("hostile file" if name in HOSTILE_GOALS else "bad file", f"eval-joint-goals-{name}",
           [*RJ_EVAL, "--paths", f"{{fx}}/goals/{name}.json"], rf"{re.escape(name)}\.json: .*{pattern}")
