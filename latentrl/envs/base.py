@@ -330,6 +330,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
             self.guidance_scale,
             # priors without a lock keep working unlocked
             **({"foot_lock": True, "lock_min_weight": self.foot_lock_min_weight} if self.foot_lock else {}),
+            **({"terrain": self.scene.batch} if self.scene is not None else {}),  # stairs and box tops carry the body
         )
         diverged = diverged_envs(out.joints_world, out.state, self.divergence_limit, self.floor_height,
                                  self._feature_range)

@@ -15,7 +15,7 @@ from typing import Protocol, runtime_checkable
 import torch
 
 from latentrl.errors import ConfigError
-from latentrl.motion.rollout import RolloutState, StepResult
+from latentrl.motion.rollout import RolloutState, StepResult, Terrain
 
 
 @runtime_checkable
@@ -71,11 +71,12 @@ class MotionPrior(Protocol):
     def rollout_step(self, state: RolloutState, text_embedding: torch.Tensor, noise: torch.Tensor,
                      guidance_scale: float | torch.Tensor = ..., sampler: str = "ddim",
                      generator: torch.Generator | None = None, foot_lock: bool | None = None,
-                     lock_min_weight: float = ...) -> StepResult:
+                     lock_min_weight: float = ..., terrain: Terrain | None = None) -> StepResult:
         """One primitive from ``noise`` (B, *latent_shape) for every rollout, placed in the world.
 
         ``foot_lock``: keep planted feet from sliding (None: the model's default, off); ``lock_min_weight``:
-        the contact weight from which the lock pins a foot fully.
+        the contact weight from which the lock pins a foot fully; ``terrain``: anything with a batched
+        ``height(xy) -> z`` to place the motion on (envs pass it only with a scene, so a prior may omit it).
         """
         ...
 

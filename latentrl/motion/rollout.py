@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import torch
 from torch import nn
@@ -38,6 +38,8 @@ FLIGHT_CAP_M = 0.15
 #: touching (weight near 0) is corrected in proportion to its weight instead of locked outright. The envs'
 #: ``foot_lock_min_weight`` overrides it (0.05 pins any foot inside DART's 3 cm band: docs/motion.md).
 LOCK_MIN_WEIGHT = 0.5
+#: Highest terrain a primitive steps onto (metres above the body's lowest joint before it): :func:`ground_under`.
+MAX_STEP_UP_M = 0.3
 
 
 def lock_min_weight_problem(value: float) -> str | None:
@@ -56,6 +58,14 @@ def amp_problem(value: str | None) -> str | None:
     if value is None or value in AMP_DTYPES:
         return None
     return f"expected one of {tuple(AMP_DTYPES)} or null, got {value!r}"
+
+
+class Terrain(Protocol):
+    """Ground under the character for the floor snap; ``latentrl.scenes.SceneBatch`` is one (duck-typed here)."""
+
+    def height(self, xy: torch.Tensor) -> torch.Tensor:
+        """(B, ...) terrain z under (B, ..., 2) world points, metres."""
+        ...
 
 
 class PrimitiveSample(NamedTuple):
@@ -332,11 +342,13 @@ class MotionModel(nn.Module):
         generator: torch.Generator | None = None,
         foot_lock: bool | None = None,
         lock_min_weight: float = LOCK_MIN_WEIGHT,
+        terrain: Terrain | None = None,
     ) -> StepResult:
         """Sample one primitive, place it in the world, and re-canonicalize its last 2 frames.
 
         ``foot_lock``: apply :func:`lock_feet` (None: the model's :attr:`foot_lock` setting) with
-        ``lock_min_weight`` as its ``min_weight``.
+        ``lock_min_weight`` as its ``min_weight``. ``terrain``: the ground the floor snap measures against
+        (:class:`Terrain`, e.g. a scene's ``SceneBatch``); None is the flat floor at z = 0.
         """
         if self.pelvis_delta is None:
             raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")
@@ -349,12 +361,16 @@ class MotionModel(nn.Module):
             airborne = state.airborne  # without the snap nothing lands: the flags pass through
             future = sample.future
             if self.floor_snap is not None:
+                ground = None
+                if terrain is not None:  # the snap moves z only: the ground under each joint stays the same
+                    stand = state.world.apply(joints_of(state.history))[..., 2].flatten(1).amin(dim=1)
+                    ground = ground_under(joints_world, terrain, stand)
                 joints_world, placement, airborne = self._snap_to_floor(
-                    joints_world, placement, state.airborne_flags()
+                    joints_world, placement, state.airborne_flags(), ground
                 )
                 if self.floor_snap_ramp:
                     lift = placement.translation[:, 2] - state.world.translation[:, 2]
-                    joints_world, future = ramp_snap(future, joints_world, lift)
+                    joints_world, future = ramp_snap(future, joints_world, lift, ground)
             history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
             world = placement.compose(rotation, origin)
             if self.foot_lock if foot_lock is None else foot_lock:
@@ -389,7 +405,8 @@ class MotionModel(nn.Module):
                           placement)
 
     def _snap_to_floor(
-        self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor
+        self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor,
+        ground: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, WorldTransform, torch.Tensor]:
         """Keep the world floor at z = 0: shift each primitive so its lowest joint touches it.
 
@@ -405,10 +422,15 @@ class MotionModel(nn.Module):
         (policies learned to fly without them: a run policy's pelvis reached 4.96 m). DART's
         ``rollout_mld.py`` has a ``fix_floor`` option of the same kind.
 
-        ``airborne`` is the (B,) flags of the previous primitive; returns the shifted joints, the shifted
-        placement and the new flags.
+        ``airborne`` is the (B,) flags of the previous primitive; ``ground`` (B, F, J) the terrain height under
+        each joint (a scene's stairs and box tops), None for the flat floor at z = 0: the lowest joint is then
+        the one nearest the ground under it, so a foot on a tread carries the body. Returns the shifted
+        joints, the shifted placement and the new flags.
         """
-        lowest = joints_world[..., 2].flatten(1).min(dim=1).values  # (B,)
+        height = joints_world[..., 2] if ground is None else joints_world[..., 2] - ground  # above the ground
+        lowest = height.flatten(1).min(dim=1).values  # (B,)
+        if ground is not None:  # every joint inside an obstacle (no ground counts): left where it is
+            lowest = torch.where(torch.isinf(lowest), torch.zeros_like(lowest), lowest)
         land = (lowest <= self.floor_snap) | airborne
         target = torch.where(land, torch.zeros_like(lowest), lowest.clamp(max=FLIGHT_CAP_M))
         shift = target - lowest
@@ -463,8 +485,22 @@ class MotionModel(nn.Module):
                        state)
 
 
+def ground_under(joints_world: torch.Tensor, terrain: Terrain, stand: torch.Tensor,
+                 step_up: float = MAX_STEP_UP_M) -> torch.Tensor:
+    """(B, F, J) the terrain height under each joint of (B, F, J, 3) world joints, for the floor snap.
+
+    Why not the height alone: a scene's height is the top of the highest object over a point, so a hand in
+    a wall's footprint, or a foot walking into a 1 m box, would read the wall's or the box's top and the snap
+    would lift the whole body onto it. Terrain more than ``step_up`` above ``stand`` ((B,) world z of the
+    body's lowest joint in the frames before the primitive, where it stands) is an obstacle to collide with,
+    not a step: it reads ``-inf`` (the joint never decides the snap).
+    """
+    ground = terrain.height(joints_world[..., :2])
+    return torch.where(ground <= stand[:, None, None] + step_up, ground, float("-inf"))
+
+
 def ramp_snap(
-    future: torch.Tensor, joints_world: torch.Tensor, lift: torch.Tensor
+    future: torch.Tensor, joints_world: torch.Tensor, lift: torch.Tensor, ground: torch.Tensor | None = None
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Let the floor snap's vertical shift grow over the primitive's frames instead of jumping at its start.
 
@@ -481,6 +517,7 @@ def ramp_snap(
             values shift as the world's do.
         joints_world: (B, F, 22, 3) the primitive snapped as a whole.
         lift: (B,) metres the snap moved the primitive (z).
+        ground: (B, F, J) terrain height under each joint (:func:`ground_under`), None for the floor at z = 0.
 
     Returns ``(joints_world, future)``, both with the ramped heights.
     """
@@ -488,7 +525,8 @@ def ramp_snap(
     frac = torch.arange(1, f + 1, device=future.device, dtype=future.dtype) / f
     off = lift[:, None] * (frac - 1.0)  # (B, F): 0 at the last frame
     # a lifted (sunk) primitive's early frames never go below the floor: each goes down at most until it touches it
-    lowest = joints_world[..., 2].amin(dim=-1)  # (B, F) each frame's lowest joint, snapped as a whole
+    height = joints_world[..., 2] if ground is None else joints_world[..., 2] - ground
+    lowest = height.amin(dim=-1)  # (B, F) each frame's lowest joint above the ground, snapped as a whole
     off = torch.maximum(off, -lowest.clamp(min=0.0))
     joints_world = joints_world.clone()
     joints_world[..., 2] += off[..., None]
