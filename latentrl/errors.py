@@ -41,3 +41,19 @@ def closest(name: str, options: list[str] | tuple[str, ...]) -> str:
 
     match = difflib.get_close_matches(name, list(options), n=1, cutoff=0.5)
     return f" (did you mean '{match[0]}'?)" if match else ""
+
+
+def check_fields(item: object, fields: tuple[str, ...], where: str) -> None:
+    """Refuse a JSON entry that is not an object with exactly ``fields``: one line naming the field.
+
+    Why one function: every suite format (joystick timelines, joint goals, ...) checks its entries this way, and
+    their messages should read alike.
+    """
+    if not isinstance(item, dict):
+        raise DataError(f"{where}: expected an object with fields {list(fields)}, got {type(item).__name__}")
+    for key in item:
+        if key not in fields:
+            raise DataError(f"{where}: unknown field '{key}'{closest(str(key), fields)}; expected {list(fields)}")
+    for key in fields:
+        if key not in item:
+            raise DataError(f"{where}: missing field '{key}'")

@@ -25,7 +25,7 @@ import torch
 from latentrl.config import is_finite_number, require
 from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.goal import body_forward
-from latentrl.errors import DataError, closest
+from latentrl.errors import DataError, check_fields
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 from latentrl.motion.text import prompt_problem
@@ -86,19 +86,8 @@ def parse_timelines(data: Any, source: str = "timelines") -> list[CommandTimelin
     return [_parse_entry(item, f"{source}: entry {i}") for i, item in enumerate(data)]
 
 
-def _check_fields(item: Any, fields: tuple[str, ...], where: str) -> None:
-    if not isinstance(item, dict):
-        raise DataError(f"{where}: expected an object with fields {list(fields)}, got {type(item).__name__}")
-    for key in item:
-        if key not in fields:
-            raise DataError(f"{where}: unknown field '{key}'{closest(str(key), fields)}; expected {list(fields)}")
-    for key in fields:
-        if key not in item:
-            raise DataError(f"{where}: missing field '{key}'")
-
-
 def _parse_entry(item: Any, where: str) -> CommandTimeline:
-    _check_fields(item, _ENTRY_FIELDS, where)
+    check_fields(item, _ENTRY_FIELDS, where)
     text, commands, duration = item["text"], item["commands"], item["duration"]
     if not isinstance(text, str) or not text.strip():
         raise DataError(f"{where}: field 'text' must be a non-empty string, got {text!r:.80}")
@@ -114,7 +103,7 @@ def _parse_entry(item: Any, where: str) -> CommandTimeline:
     parsed, last = [], -1.0
     for j, command in enumerate(commands):
         here = f"{where}, command {j}"
-        _check_fields(command, _COMMAND_FIELDS, here)
+        check_fields(command, _COMMAND_FIELDS, here)
         t, heading, speed = command["t"], command["heading_deg"], command["speed"]
         if not is_finite_number(t) or (j == 0 and t != 0) or (j > 0 and not last < t < duration):
             expected = "0 (the first command starts the episode)" if j == 0 else \

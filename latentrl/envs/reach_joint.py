@@ -29,7 +29,7 @@ import torch
 from latentrl.config import is_finite_number, require
 from latentrl.envs.base import LatentMotionVectorEnv
 from latentrl.envs.goal import body_forward, rotate_xy
-from latentrl.errors import DataError, closest
+from latentrl.errors import DataError, check_fields, closest
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS, joint_index
 from latentrl.motion.text import prompt_problem
@@ -97,19 +97,8 @@ def _kind(value: Any) -> str:
     return "an empty list" if value == [] else type(value).__name__
 
 
-def _fields(item: Any, allowed: tuple[str, ...], where: str) -> None:
-    if not isinstance(item, dict):
-        raise DataError(f"{where}: expected an object with fields {list(allowed)}, got {type(item).__name__}")
-    for key in item:
-        if key not in allowed:
-            raise DataError(f"{where}: unknown field '{key}'{closest(str(key), allowed)}; expected {list(allowed)}")
-    for key in allowed:
-        if key not in item:
-            raise DataError(f"{where}: missing field '{key}'")
-
-
 def _parse_entry(item: Any, where: str) -> JointGoalEntry:
-    _fields(item, _ENTRY_FIELDS, where)
+    check_fields(item, _ENTRY_FIELDS, where)
     text, goals = item["text"], item["goals"]
     if not isinstance(text, str) or prompt_problem(text) is not None:
         raise DataError(f"{where}: field 'text' must be a prompt, "
@@ -130,7 +119,7 @@ def _parse_entry(item: Any, where: str) -> JointGoalEntry:
 
 
 def _parse_goal(goal: Any, where: str) -> JointGoal:
-    _fields(goal, _GOAL_FIELDS, where)
+    check_fields(goal, _GOAL_FIELDS, where)
     joint, target, time = goal["joint"], goal["target"], goal["time"]
     if joint not in JOINTS:
         raise DataError(f"{where}: field 'joint' must be one of {', '.join(JOINTS)}, got {joint!r:.80}"
