@@ -2,6 +2,7 @@
 
 The env (:class:`~latentrl.envs.base.LatentMotionVectorEnv`, argument ``scene``) holds one :class:`EnvScene`
 when a scene is set and None otherwise, so a flat-floor env runs exactly the code it ran before scenes existed.
+With a scene, :attr:`EnvScene.batch` is also the terrain each step's floor snap places the motion on.
 The scene observation (``scene_rays``) is :data:`NUM_RAYS` horizontal distances from the pelvis of the last
 history frame over the front half-plane, right (-90 degrees) to left (+90 degrees) of the body's forward axis,
 in metres clipped at :data:`RAY_RANGE_M`.
