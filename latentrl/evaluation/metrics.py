@@ -33,6 +33,7 @@ import torch
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.motion.contacts import contact_shares, foot_positions, skate_weights, weighted_foot_slide
 from latentrl.motion.heading import hip_yaw_rad
+from latentrl.motion.rollout import MAX_STEP_UP_M
 from latentrl.motion.skeleton import FOOT_JOINTS, PELVIS
 
 SKATE_THRESHOLD_M = CONTACT_HEIGHT_M
@@ -154,14 +155,17 @@ def seam_ratios(joints, history: int = 2, future: int = 8, floor: float = 0.0,
 
 
 def closd_penetration_mm(joints, floor: float = 0.0, tol: float = CLOSD_TOLERANCE_M) -> torch.Tensor:
-    """Mean depth of the lowest joint below the floor beyond ``tol``, mm -> (...)."""
-    low = _t(joints)[..., 2].amin(dim=-1) - floor
+    """Mean depth of the lowest joint below the floor beyond ``tol``, mm -> (...).
+
+    ``floor`` may be a (..., T, 22) ground under each joint (:func:`terrain_floor`): the joint nearest it counts.
+    """
+    low = (_t(joints)[..., 2] - floor).amin(dim=-1)
     return (-low - tol).clamp(min=0).mean(dim=-1) * 1000.0
 
 
 def closd_floating_mm(joints, floor: float = 0.0, tol: float = CLOSD_TOLERANCE_M) -> torch.Tensor:
-    """Mean height of the lowest joint above the floor beyond ``tol``, mm -> (...)."""
-    low = _t(joints)[..., 2].amin(dim=-1) - floor
+    """Mean height of the lowest joint above the floor (or a (..., T, 22) ground) beyond ``tol``, mm -> (...)."""
+    low = (_t(joints)[..., 2] - floor).amin(dim=-1)
     return (low - tol).clamp(min=0).mean(dim=-1) * 1000.0
 
 
@@ -222,21 +226,38 @@ EPISODE_METRICS: dict[str, str] = {
 """Motion-quality metrics of one episode (name -> unit), as :func:`episode_metrics` returns them."""
 
 
-def episode_metrics(joints, fps: float = 30.0, floor: float = 0.0) -> dict[str, float]:
+def terrain_floor(joints: torch.Tensor, terrain, floor: float = 0.0) -> torch.Tensor:
+    """(T, 22) the ground under each of (T, 22, 3) world joints on ``terrain``, for the floor and contact metrics.
+
+    ``terrain`` is anything with a batched ``height(xy)``, e.g. a one-row ``SceneBatch``. Terrain more than
+    :data:`~latentrl.motion.rollout.MAX_STEP_UP_M` above the frame's lowest joint is an obstacle (a hand over
+    a table, a foot inside a tall box: the scene metrics count those), not ground: such a joint is measured
+    against ``floor``, as the floor snap leaves it out.
+    """
+    ground = terrain.height(joints[None, ..., :2])[0].to(joints.dtype)
+    reach = joints[..., 2].amin(dim=-1, keepdim=True) + MAX_STEP_UP_M
+    return torch.where(ground <= reach, ground, torch.full_like(ground, floor))
+
+
+def episode_metrics(joints, fps: float = 30.0, floor: float = 0.0, terrain=None) -> dict[str, float]:
     """Every motion-quality metric of one whole episode (T, 22, 3) world joints, seed frames included.
 
     DART computes its metrics on the saved sequence, which starts with the 2 seed frames; so do we.
-    Returns the :data:`EPISODE_METRICS` names as floats.
+    ``terrain`` (a scene's ``SceneBatch`` row; None: the flat floor at ``floor``) puts each joint's ground
+    under it (:func:`terrain_floor`): a foot on a tread is on the floor. Returns the :data:`EPISODE_METRICS`
+    names as floats.
     """
     j = _t(joints)
+    ground = floor if terrain is None else terrain_floor(j, terrain, floor)
+    feet = ground if terrain is None else ground[..., list(FOOT_JOINTS)]  # (T, 2) under the feet
     return {
-        "skate_cm_s": float(foot_skate_cm_s(j, fps, floor)),
-        "skate_xy_cm_s": float(foot_skate_cm_s(j, fps, floor, horizontal=True)),
-        "floor_cm": float(foot_floor_distance_cm(j, floor)),
+        "skate_cm_s": float(foot_skate_cm_s(j, fps, feet)),
+        "skate_xy_cm_s": float(foot_skate_cm_s(j, fps, feet, horizontal=True)),
+        "floor_cm": float(foot_floor_distance_cm(j, feet)),
         "jerk": float(jerk(j, fps)),
-        "penetration_mm": float(closd_penetration_mm(j, floor)),
-        "floating_mm": float(closd_floating_mm(j, floor)),
-        "skating_mm": float(closd_skating_mm(j, floor)),
+        "penetration_mm": float(closd_penetration_mm(j, ground)),
+        "floating_mm": float(closd_floating_mm(j, ground)),
+        "skating_mm": float(closd_skating_mm(j, feet)),
     }
 
 

@@ -141,3 +141,19 @@ def test_an_env_on_a_platform_stands_on_it(tiny_model):
         moved = env.history_world() - flat.history_world()
         torch.testing.assert_close(moved[..., 2], torch.full_like(moved[..., 2], 0.2), atol=1e-5, rtol=0)
         torch.testing.assert_close(moved[..., :2], torch.zeros_like(moved[..., :2]), atol=1e-5, rtol=0)
+
+
+def test_metrics_measure_feet_against_the_tread():
+    """Known answer: feet standing still on a 0.2 m step are on the floor, not 20 cm above it."""
+    from latentrl.evaluation import metrics as M
+
+    joints = primitive((0.4, 0.6), (0.2, 0.2))[0]  # (8, 22, 3) both feet on the tread, the body above
+    joints[..., 0] = torch.where(joints[..., 2] > 0.5, 0.5, joints[..., 0])  # the whole body over the step
+    step = SceneBatch.from_scenes([STEP])
+    on = M.episode_metrics(joints, 30.0, 0.0, step)
+    flat = M.episode_metrics(joints, 30.0, 0.0)
+    assert on["floor_cm"] < 1e-4 and on["floating_mm"] == 0.0 and on["penetration_mm"] == 0.0
+    assert abs(flat["floor_cm"] - 20.0) < 1e-4 and flat["floating_mm"] > 190.0
+    assert M.episode_metrics(joints, 30.0, 0.0, SceneBatch.from_scenes([FLAT])) == flat  # a flat scene: same
+    wall = SceneBatch.from_scenes([Scene((Box((0.5, 0.0), (1.0, 2.0, 1.0)),))])  # too high to stand on
+    assert M.episode_metrics(joints, 30.0, 0.0, wall) == flat
