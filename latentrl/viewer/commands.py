@@ -12,9 +12,9 @@ from latentrl.errors import CheckpointError, ConfigError
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
-PLAY_TASKS = ("reach", "path")
-"""Tasks ``latentrl play`` steers: one goal, set by a click (a path policy that also observes the next
-waypoint is refused)."""
+PLAY_TASKS = ("reach", "path", "joystick")
+"""Tasks ``latentrl play`` steers: reach and path policies toward clicked goals and waypoints (a path policy
+that also observes the next waypoint is refused), joystick policies by the keyboard."""
 
 
 def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
@@ -46,7 +46,9 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
 def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str | None = None,
                  device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
                  allow_motion_mismatch: bool = False, record: str | Path | None = None) -> int:
-    """Steer a trained reach policy live: click on the floor to set its goal, pick its text from a list.
+    """Steer a trained policy live in the browser, and pick its text from a list.
+
+    Clicks set a reach/path policy's goal and waypoints; keys set a joystick policy's heading and speed.
 
     ``policy`` is a file or a shipped policy's name (``reach_walk_default``). The text list is ``text``
     (if given), the policy's training texts, then every prompt the motion model's text table knows; the
@@ -65,8 +67,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                               "or a shipped policy's name)")
     task = stored_task(policy)
     if task not in PLAY_TASKS:
-        raise CheckpointError(f"{policy}: play steers {' and '.join(PLAY_TASKS)} policies toward a clicked goal; this "
-                              f"policy's task is '{task}' (evaluate it with latentrl eval)")
+        raise CheckpointError(f"{policy}: play steers reach and path policies toward clicked goals and joystick "
+                              f"policies by the keyboard; this policy's task is '{task}' "
+                              "(evaluate it with latentrl eval)")
     from latentrl.motion.text import prompt_problem
     from latentrl.viewer.record import Recorder, check_record
 
@@ -89,15 +92,16 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     model = load_motion_model(motion, device=device)
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)
-    env = play_env(loaded.checkpoint, model, text, device)
-    if loaded.policy.action_dim == env.single_action_space.shape[0] and \
+    env = play_env(loaded.checkpoint, model, text, device, task)
+    if task != "joystick" and loaded.policy.action_dim == env.single_action_space.shape[0] and \
             loaded.policy.obs_dim == env.single_observation_space.shape[0] + 4:
         raise CheckpointError(f"{policy}: this {task} policy also observes the next waypoint; play steers one "
                               "clicked goal (reach policies, path policies trained without observe_next)")
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
     server = start_server(host, port, label=f"latentrl play {policy.name}", command="play")
-    title = (f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n"
-             "Click on the floor to set the goal; pick the text below.")
+    how = ("Arrows or WASD steer: up/W faster, down/S slower, left/A and right/D turn, space stops"
+           if task == "joystick" else "Click on the floor to set the goal, shift-click to add waypoints")
+    title = f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n{how}; pick the text below."
     recorder = Recorder(record, "play") if record else None
     controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
                                 seed=seed, recorder=recorder)

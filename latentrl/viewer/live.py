@@ -1,14 +1,17 @@
-"""``latentrl play``: a trained reach policy and the motion model run live; a click on the floor sets the goal.
+"""``latentrl play``: a trained policy and the motion model run live, steered from the page.
 
 :class:`SteeredReachEnv` is ``ReachLocation`` with one env whose goal and text come from the user
-instead of the sampler. :class:`LiveController` steps it with the policy whenever fewer than one
-primitive of frames is waiting, and shows the frames at the motion's own 30 frames/s, so the
-character moves in real time as long as generation keeps ahead (its speed is shown).
+instead of the sampler: a click sets the goal, shift-clicks append waypoints followed in order.
+:class:`SteeredJoystickEnv` is ``Joystick`` whose heading and speed command comes from the keyboard
+(arrows or WASD, through Viser's hotkey commands). :class:`LiveController` steps it with the policy
+whenever fewer than one primitive of frames is waiting, and shows the frames at the motion's own
+30 frames/s, so the character moves in real time as long as generation keeps ahead (its speed is shown).
 """
 
 from __future__ import annotations
 
 import collections
+import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -17,6 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from latentrl.envs.joystick import JoystickEnv, heading_deg, world_angle
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
@@ -29,6 +33,15 @@ MAX_GOAL_DISTANCE_M = 50.0
 """Clicks farther than this from the body are ignored (the env ends episodes 100 m from the goal)."""
 MAX_RAY_COORD_M = 1e6
 """A click ray's origin and direction components must be finite and within this (else the click is ignored)."""
+MAX_WAYPOINTS = 32
+"""Waypoints a path may hold at once; shift-clicks beyond it are ignored."""
+KEY_TURN_DEG = 15.0
+"""Degrees one left/right key press turns the joystick heading."""
+KEY_SPEED_STEP = 0.1
+"""m/s one up/down key press adds to or takes from the joystick speed (held within the policy's trained range)."""
+KEY_ACTIONS = {"arrowleft": "left", "A": "left", "arrowright": "right", "D": "right",
+               "arrowup": "faster", "W": "faster", "arrowdown": "slower", "S": "slower", "space": "stop"}
+"""Keys ``latentrl play`` takes for a joystick policy (Viser hotkey names) and what each does."""
 TRAIL_FRAMES = 6000
 START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
 """Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
@@ -86,6 +99,62 @@ class SteeredReachEnv(ReachLocationEnv):
         return super()._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
 
 
+class SteeredJoystickEnv(JoystickEnv):
+    """``Joystick`` whose command (heading, speed) and text are set from outside (:meth:`set_command`).
+
+    The command holds until set again (no random or timeline changes); :attr:`last_frames` holds the
+    (N, 8, 22, 3) world frames of the last step.
+    """
+
+    def __init__(self, num_envs: int = 1, **kwargs):
+        self._text_choice: int | None = None
+        self._user_command = (0.0, 1.0)
+        self.last_frames: torch.Tensor | None = None
+        super().__init__(num_envs, **kwargs)
+        self.set_command(0.0, sum(self.speed_range) / 2)
+
+    def set_command(self, heading: float, speed: float) -> None:
+        """Command world heading ``heading`` degrees (0 = +y, counter-clockwise) at ``speed`` m/s, across resets."""
+        self._user_command = (float(heading), float(speed))
+        self._heading[:] = world_angle(float(heading))
+        self._heading[:] = torch.remainder(self._heading + math.pi, 2 * math.pi) - math.pi
+        self._speed[:] = float(speed)
+
+    @property
+    def command(self) -> tuple[float, float]:
+        """(heading degrees wrapped to (-180, 180], speed m/s) of env 0."""
+        return float(heading_deg(self._heading)[0]), float(self._speed[0])
+
+    def set_text(self, text: str) -> None:
+        """Use ``text`` (one of :attr:`texts`) from now on, across resets."""
+        self._text_choice = self.texts.index(text)
+        self._text_idx[:] = self._text_choice
+
+    def clear_goal(self) -> None:
+        """Nothing to clear: the command is kept (the controller sets it on reset)."""
+
+    @property
+    def text(self) -> str:
+        """The text the env steps with now."""
+        return self.texts[int(self._text_idx[0])]
+
+    def _reset_task(self, idx: torch.Tensor) -> None:
+        super()._reset_task(idx)
+        if self._text_choice is not None:
+            self._text_idx[idx] = self._text_choice
+        self._heading[idx] = world_angle(self._user_command[0])
+        self._speed[idx] = self._user_command[1]
+
+    def _advance_task(self, reached: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        self._changed = torch.zeros_like(reached)
+        none = torch.zeros_like(reached)
+        return none, none
+
+    def _finish_step(self, reward, terms, reached, diverged, nonfinite, future, goal):
+        self.last_frames = future
+        return super()._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
+
+
 def floor_point(origin: Sequence[float], direction: Sequence[float], floor: float = 0.0) -> np.ndarray | None:
     """Where a click ray meets the floor plane z = ``floor``, or None when it points up or along it."""
     o, d = np.asarray(origin, dtype=np.float64), np.asarray(direction, dtype=np.float64)
@@ -95,8 +164,12 @@ def floor_point(origin: Sequence[float], direction: Sequence[float], floor: floa
     return o + t * d if t > 0 else None
 
 
-def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str) -> SteeredReachEnv:
-    """The env of ``latentrl play``: one :class:`SteeredReachEnv` that steps the motion as the policy's training env.
+def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str,
+             task: str = "reach") -> SteeredReachEnv | SteeredJoystickEnv:
+    """The env of ``latentrl play``: one steered env that steps the motion as the policy's training env.
+
+    ``task`` 'joystick' gives a :class:`SteeredJoystickEnv` (the policy's trained speed range bounds the
+    keys), any other a :class:`SteeredReachEnv`.
 
     Its texts are ``text``, the training texts and the prompts the model knows; its
     :class:`~latentrl.envs.settings.StepSettings` are the checkpoint's (:func:`stored_step_settings`).
@@ -105,16 +178,24 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     prompts = list(getattr(model.text_encoder, "prompts", None) or [])
     texts = list(dict.fromkeys([*([text] if text else []), *(env_cfg.get("texts") or []), *prompts])) or ["walk"]
     settings = stored_step_settings(checkpoint.get("config"))
+    if task == "joystick":
+        speeds = tuple((env_cfg.get("joystick") or {}).get("speed_range") or (0.7, 1.4))
+        return SteeredJoystickEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
+                                  autoreset_mode="Disabled", speed_range=speeds, **settings.step_kwargs())
     return SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
                            autoreset_mode="Disabled", **settings.step_kwargs())
 
 
 class LiveController:
-    """Runs a policy on a :class:`SteeredReachEnv` and draws the result in a Viser server.
+    """Runs a policy on a steered env and draws the result in a Viser server.
+
+    On a :class:`SteeredReachEnv` a click on the floor sets the path to one goal and a shift-click appends
+    a waypoint; reaching the goal moves it to the next waypoint. On a :class:`SteeredJoystickEnv` the keys of
+    :data:`KEY_ACTIONS` (Viser hotkey commands) turn and speed up the command, and clicks are ignored.
 
     Args:
         server: a ``viser.ViserServer``.
-        env: a one-env :class:`SteeredReachEnv`.
+        env: a one-env :class:`SteeredReachEnv` or :class:`SteeredJoystickEnv`.
         policy: an ``ActorCritic`` (``act(obs, deterministic)``).
         title: markdown shown at the top of the panel (strings from files in it must have gone through
             :func:`~latentrl.viewer.markup.plain`).
@@ -124,7 +205,7 @@ class LiveController:
         recorder: keeps the frames shown for ``--record`` (None: nothing kept).
     """
 
-    def __init__(self, server: Any, env: SteeredReachEnv, policy: Any, title: str, text: str,
+    def __init__(self, server: Any, env: SteeredReachEnv | SteeredJoystickEnv, policy: Any, title: str, text: str,
                  deterministic: bool = False, seed: int = 0, recorder: Any = None):
         self.server, self.env, self.policy, self.seed = server, env, policy, seed
         self.recorder = recorder
@@ -134,12 +215,15 @@ class LiveController:
         self.frames: collections.deque[np.ndarray] = collections.deque()
         self.trail: list[np.ndarray] = []
         self.goal: np.ndarray | None = None
+        self.path: list[np.ndarray] = []
+        """Waypoints still to reach, the current goal first (reach/path policies)."""
+        self.joystick = isinstance(env, SteeredJoystickEnv)
         self.active = False
         self.reached_at: float | None = None
         self.goal_set_at = 0.0
         self.gen_fps = 0.0
         self.show_fps = 0.0
-        self.message = "click on the floor to set a goal"
+        self.message = self._idle_message()
         self.scene = SkeletonScene(server)
         self.scene.set_floor(np.zeros(2), 40.0)
         gui = server.gui
@@ -153,7 +237,16 @@ class LiveController:
         self.text.on_update(lambda event: self._set_text(self.text.value))
         self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
         self.reset_button.on_click(lambda event: self.reset())
-        server.scene.on_click()(self._clicked)
+        if self.joystick:
+            self.keys = {}
+            for key, what in KEY_ACTIONS.items():
+                name = {"arrowleft": "←", "arrowright": "→", "arrowup": "↑", "arrowdown": "↓"}.get(key, key)
+                handle = gui.add_command(f"{what} ({name})", hotkey=key)  # type: ignore[arg-type]
+                handle.on_trigger(lambda event, key=key: self.press(key))
+                self.keys[key] = handle
+        else:
+            server.scene.on_click()(lambda event: self._clicked(event, append=False))
+            server.scene.on_click(modifier="shift")(lambda event: self._clicked(event, append=True))
         self.follower = CameraFollower(server)
         self.reset()
         self.thread = threading.Thread(target=self._run, name="latentrl-play", daemon=True)
@@ -171,7 +264,35 @@ class LiveController:
         with self.lock:
             self.env.set_text(text)
 
-    def _clicked(self, event: Any) -> None:
+    def _idle_message(self) -> str:
+        if self.joystick:
+            return "arrows or WASD: up/W faster, down/S slower, left/A and right/D turn; space stops"
+        return "click on the floor to set a goal; shift-click adds waypoints"
+
+    def press(self, key: Any) -> None:
+        """Apply one key of :data:`KEY_ACTIONS` to the joystick command; anything else is ignored with one line."""
+        if not self.joystick or choice(key, tuple(KEY_ACTIONS)) is None:
+            complain("play", f"ignored key {str(key)[:40]!r}: not one of {', '.join(KEY_ACTIONS)}"
+                     + ("" if self.joystick else " (keys steer joystick policies)"))
+            return
+        what = KEY_ACTIONS[key]
+        with self.lock:
+            heading, speed = self.env.command
+            lo, hi = self.env.speed_range
+            if what == "stop":
+                self.active = False
+                self.message = "stopped; any arrow or WASD key walks on"
+                return
+            if what in ("left", "right"):
+                heading += KEY_TURN_DEG if what == "left" else -KEY_TURN_DEG
+                heading = (heading + 180.0) % 360.0 - 180.0
+            else:
+                speed = min(hi, max(lo, speed + (KEY_SPEED_STEP if what == "faster" else -KEY_SPEED_STEP)))
+            self.env.set_command(heading, speed)
+            self.active = True
+            self.message = f"heading {heading:.0f}°, speed {speed:.1f} m/s"
+
+    def _clicked(self, event: Any, append: bool = False) -> None:
         origin = vector(event.ray_origin, 3, MAX_RAY_COORD_M)
         direction = vector(event.ray_direction, 3, MAX_RAY_COORD_M)
         if origin is None or direction is None:
@@ -181,36 +302,72 @@ class LiveController:
         point = floor_point(origin, direction, self.env.floor_height)
         if point is None or not np.isfinite(point).all():
             return
-        self.set_goal(point[:2])
+        if append:
+            self.add_waypoint(point[:2])
+        else:
+            self.set_goal(point[:2])
 
     def set_goal(self, xy: Sequence[float]) -> None:
-        """Send the character to ``xy`` (world metres); ignored beyond :data:`MAX_GOAL_DISTANCE_M`."""
+        """Send the character to ``xy`` (world metres), replacing the path; ignored beyond the distance bound.
+
+        The bound is :data:`MAX_GOAL_DISTANCE_M` from the body.
+        """
         with self.lock:
-            pelvis = self.pelvis()
-            if not float(np.hypot(xy[0] - pelvis[0], xy[1] - pelvis[1])) <= MAX_GOAL_DISTANCE_M:  # NaN too
-                self.message = f"goal ignored: more than {MAX_GOAL_DISTANCE_M:.0f} m away"
+            if not self._near(xy):
                 return
-            self.goal = np.array([float(xy[0]), float(xy[1]), 0.0])
-            self.env.set_goal(self.goal[:2])
-            self.active, self.reached_at, self.goal_set_at = True, None, time.perf_counter()
-            self.message = "walking to the goal"
-            self.scene.show_goal(self.goal)
+            self.path = [np.array([float(xy[0]), float(xy[1]), 0.0])]
+            self._aim()
         print(f"latentrl play: goal ({xy[0]:.2f}, {xy[1]:.2f})", flush=True)
+
+    def add_waypoint(self, xy: Sequence[float]) -> None:
+        """Append ``xy`` to the path (a shift-click); with no goal in force it becomes the goal."""
+        with self.lock:
+            if not self._near(xy):
+                return
+            if len(self.path) >= MAX_WAYPOINTS:
+                self.message = f"waypoint ignored: the path holds {MAX_WAYPOINTS} already"
+                return
+            self.path.append(np.array([float(xy[0]), float(xy[1]), 0.0]))
+            if self.active and len(self.path) > 1:
+                self.scene.set_waypoints(np.array(self.path[1:]))
+            else:
+                self.path = self.path[-1:]
+                self._aim()
+        print(f"latentrl play: waypoint ({xy[0]:.2f}, {xy[1]:.2f})", flush=True)
+
+    def _near(self, xy: Sequence[float]) -> bool:
+        pelvis = self.pelvis()
+        if not float(np.hypot(xy[0] - pelvis[0], xy[1] - pelvis[1])) <= MAX_GOAL_DISTANCE_M:  # NaN too
+            self.message = f"goal ignored: more than {MAX_GOAL_DISTANCE_M:.0f} m away"
+            return False
+        return True
+
+    def _aim(self) -> None:
+        """Make the path's first waypoint the env's goal and walk (caller holds the lock)."""
+        self.goal = self.path[0]
+        self.env.set_goal(self.goal[:2])
+        self.active, self.reached_at, self.goal_set_at = True, None, time.perf_counter()
+        self.message = "walking to the goal" if len(self.path) == 1 else f"walking a path of {len(self.path)} waypoints"
+        self.scene.show_goal(self.goal)
+        self.scene.set_waypoints(np.array(self.path[1:]) if len(self.path) > 1 else None)
 
     def reset(self) -> None:
         """Back to a fresh seed pose at the origin, no goal."""
         with self.lock:
             torch.manual_seed(self.seed)
             self.env.clear_goal()
+            if self.joystick:
+                self.env.set_command(0.0, sum(self.env.speed_range) / 2)
             self.env.set_text(self.text.value)
             self.obs, _ = self.env.reset(seed=self.seed)
             self.frames.clear()
             pose = self.env.history_world()[0, -1].cpu().numpy()
             self.current = pose
             self.trail = [pose[PELVIS]]
-            self.goal, self.active, self.reached_at = None, False, None
-            self.message = "click on the floor to set a goal"
+            self.goal, self.path, self.active, self.reached_at = None, [], False, None
+            self.message = self._idle_message()
             self.scene.show_goal(None)
+            self.scene.set_waypoints(None)
             self.scene.show_pose(pose)
             self.scene.show_trail(np.array(self.trail))
             self.follower.reset()
@@ -235,8 +392,14 @@ class LiveController:
         if bool(infos["diverged"][0]):
             self.message = "the motion diverged; press Reset"
             self.active = False
-        elif bool(infos["goal_reached"][0]):
+        elif not self.joystick and bool(infos["goal_reached"][0]) and len(self.path) > 1:
+            self.path.pop(0)
+            print(f"latentrl play: reached waypoint ({self.goal[0]:.2f}, {self.goal[1]:.2f}); "
+                  f"{len(self.path)} to go", flush=True)
+            self._aim()
+        elif not self.joystick and bool(infos["goal_reached"][0]):
             self.active = False
+            self.path = []
             self.reached_at = time.perf_counter()
             self.message = f"reached the goal in {self.reached_at - self.goal_set_at:.1f} s; click again"
             print(f"latentrl play: reached ({self.goal[0]:.2f}, {self.goal[1]:.2f}) "
@@ -261,6 +424,12 @@ class LiveController:
     def status_text(self) -> str:
         """The status panel: message, pelvis, goal, distance and generation speed (markdown)."""
         p = self.pelvis()
+        if self.joystick:
+            heading, speed = self.env.command
+            return (f"{self.message}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ncommand: heading {heading:.0f}° "
+                    f"(0 = +y, counter-clockwise), speed {speed:.1f} m/s  \ntext: **{plain(self.env.text)}**  \n"
+                    f"generation: {self.gen_fps:.0f} frames/s (policy + motion model)  \n"
+                    f"display: {self.show_fps:.0f} frames/s")
         goal = "none" if self.goal is None else f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) m"
         dist = "–" if self.goal is None else f"{np.hypot(*(self.goal[:2] - p[:2])):.2f} m"
         return (f"{self.message}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ngoal: {goal}  \ndistance: {dist}  \n"

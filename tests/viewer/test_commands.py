@@ -48,9 +48,9 @@ def test_port_in_use(capsys, motion_file):
         one_line_error(capsys, ["play", str(POLICY), "--port", str(port)], f"--port {port}: already in use")
 
 
-@pytest.mark.parametrize("name, task", [("joystick_walk_default", "joystick"), ("timed_walk_default", "timed")])
+@pytest.mark.parametrize("name, task", [("timed_walk_default", "timed")])
 def test_play_refuses_a_task_it_cannot_steer_by_name(capsys, name, task):
-    """A shipped joystick or timed policy: one line naming its task, not a dimension blaming the motion model."""
+    """A shipped timed policy: one line naming its task, not a dimension blaming the motion model."""
     one_line_error(capsys, ["play", name], f"this policy's task is '{task}'")
 
 
