@@ -440,9 +440,10 @@ def _viewer_commands(sub) -> None:
                                                        "viewer stops (MP4 needs latentrl[video])")
     view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port, record=a.record))
 
-    play = sub.add_parser("play", help="steer a reach policy live in the browser: click on the floor to set the goal")
-    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach or path policy, or a shipped "
-                                                       "policy by name (reach_walk_default)")
+    play = sub.add_parser("play", help="steer a policy live in the browser: clicks set a reach/path policy's goal "
+                                       "and waypoints, arrows or WASD a joystick policy's heading and speed")
+    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach, path or joystick policy, or a "
+                                                       "shipped policy by name (reach_walk_default)")
     play.add_argument("--motion", default=None,
                       help="the motion model the policy was trained on (default: the one its stored config names)")
     play.add_argument("--allow-motion-mismatch", action="store_true", help="run on another motion model (experts)")
