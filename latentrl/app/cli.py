@@ -413,6 +413,10 @@ def _eval_commands(sub) -> None:
                     help="evaluate among objects: a latentrl.scene/1 file or a name in tasks/scenes, or "
                          "random_obstacles (3-8 per episode); the report adds collision rate and penetration "
                          "(docs/scenes.md). Default: the policy's training scene")
+    ev.add_argument("--physics", action="store_true",
+                    help="reach/path policies: execute every primitive on a MuJoCo humanoid and plan from the "
+                         "simulated frames, beside the kinematic run of the same seeds (latentrl[physics]; "
+                         "docs/physics.md)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

@@ -85,6 +85,9 @@ class EvalRequest:
     scene: str | None = None
     """A scene to evaluate in (a ``latentrl.scene/1`` file or name in tasks/scenes, or ``random_obstacles``); None:
     the policy's training scene. A policy trained without a scene is evaluated blind to it (docs/scenes.md)."""
+    physics: bool = False
+    """Reach/path policies: every primitive executed by the physics tracker, its simulated frames the next history;
+    writes ``physics.json`` beside the kinematic run of the same seeds instead of the usual report (docs/physics.md)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -216,6 +219,8 @@ def evaluate(req: EvalRequest) -> int:
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "
               "setting; --foot-lock-min-weight overrides)", flush=True)
     settings = _settings(req)
+    if req.physics:
+        return _evaluate_physics(req, spec, files, settings)
     entries = sum(len(evaluator.load_suite(file)) for file in files)  # every file checked before models load
     if req.paths is None:
         print(f"evaluating on {', '.join(f.stem for f in files)} (the {spec.name} suites using only the policy's "
@@ -257,6 +262,69 @@ def evaluate(req: EvalRequest) -> int:
         lines.append(f"renders: {out_dir / 'renders'} (the first {draw} episode(s) of every path as "
                      f"{req.render.upper()} and BVH)")
     print("\n".join(lines))
+    return 0
+
+
+PHYSICS_TASKS = ("reach", "path")
+"""Tasks whose policies ``--physics`` runs (judged on waypoint paths)."""
+
+
+def _evaluate_physics(req: EvalRequest, spec: Any, files: list[Path], settings: EvalSettings) -> int:
+    """``latentrl eval --physics``: each path's episodes with physics in the loop and kinematic, same seeds (batch 1)."""
+    import json
+    import time
+
+    from latentrl.physics import require_mujoco
+
+    if spec.name not in PHYSICS_TASKS:
+        raise ConfigError(f"--physics: runs reach or path policies, this policy's task is '{spec.name}'")
+    if req.scene is not None or settings.scene is not None:
+        raise ConfigError("--physics: the humanoid walks on the flat floor; evaluate without a scene")
+    require_mujoco()
+    from latentrl.evaluation.physics_episodes import run_episode, summarize
+    from latentrl.evaluation.runner import load_suites, path_seed
+    from latentrl.physics.humanoid import build_humanoid
+    from latentrl.motion.canonical import features_to_world
+    from latentrl.physics.reference import fit_height
+    from latentrl.physics.tracker import ASSIST_HZ
+
+    req.policy = str(policy_file(req.policy))
+    beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
+    out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}-physics"
+    check_writable(out_dir, "--out")
+    model, policy, motion, policy_info, observe_next = _load(req, settings)
+    observe_next = spec.evaluator.fit(policy, model, files, settings, observe_next)
+    act = policy_fn(policy, settings.deterministic)
+    seed = model.initial_state(1, torch.Generator(device=settings.device).manual_seed(0))
+    seed_world = features_to_world(seed.history, seed.world, model.pelvis_delta)[0]
+    humanoid = build_humanoid(fit_height(seed_world[:, 144:210].reshape(-1, 22, 3).cpu().double().numpy()))
+    began = time.perf_counter()
+    paths = []
+    with locked_output(out_dir) as output:
+        for file, suite in load_suites(files):
+            for index, path in enumerate(suite):
+                seeds = [path_seed(settings.seed, file.stem, index) + e for e in range(settings.episodes)]
+                kin = [run_episode(act, model, path, settings, s, observe_next) for s in seeds]
+                phys = [run_episode(act, model, path, settings, s, observe_next, humanoid, ASSIST_HZ) for s in seeds]
+                paths.append({"suite": file.stem, "path_index": index, "kinematic": summarize(kin),
+                              "physics": summarize(phys), "episodes": {"kinematic": kin, "physics": phys}})
+                report = {"format": "latentrl.eval.physics/1", "command": " ".join(["latentrl", *req.argv(),
+                                                                                    "--physics"]),
+                          "date": time.strftime("%Y-%m-%d", time.gmtime()), "batch": 1,
+                          "humanoid": {"height_m": humanoid.height, "mass_kg": round(humanoid.mass, 3)},
+                          "assist_hz": ASSIST_HZ, "policy": policy_info, "motion": motion, "hardware": hardware(),
+                          "wall_seconds": time.perf_counter() - began, "paths": paths}
+                atomic_write_text(out_dir / "physics.json", json.dumps(report, indent=1))
+                output.keep()
+    for p in paths:
+        for run in ("kinematic", "physics"):
+            m = p[run]
+            extra = (f", falls {m['falls_total']}, assist {m['assist_percent_body_weight']:.1f} % body weight"
+                     if run == "physics" else "")
+            print(f"{p['suite']} path {p['path_index']} {run}: success {m['success_rate']:.2f}, time "
+                  f"{m['reach_time_s']:.2f} s, penetration {m['penetration_mm']:.3f} mm, floating "
+                  f"{m['floating_mm']:.1f} mm, skating {m['skating_mm']:.3f} mm{extra}")
+    print(f"wrote {out_dir / 'physics.json'}")
     return 0
 
 

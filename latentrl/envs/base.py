@@ -55,7 +55,7 @@ from latentrl.envs.scene import env_scene
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.task_hooks import TaskHooks
 from latentrl.envs.texts import TextTable
-from latentrl.motion.canonical import features_to_world
+from latentrl.motion.canonical import features_to_world, world_to_canonical
 from latentrl.motion.prior import MotionPrior, load_prior
 from latentrl.motion.representation import joints_of
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT, RolloutState
@@ -241,6 +241,19 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         if idx is not None:
             history, world = history[idx], world.index(idx)
         return world.apply(joints_of(history))
+
+    def set_history(self, features_world: torch.Tensor) -> None:
+        """Replace every env's history with (N, 2, 276) world features, canonicalized as a step's would be.
+
+        For executing primitives outside the motion model (``latentrl eval --physics``: the simulated frames
+        become the next history, so the policy acts on what physics did). Recorded episodes keep the planned frames.
+        """
+        state = self._require_state()
+        feats = torch.as_tensor(features_world, dtype=state.history.dtype, device=self.device)
+        require(tuple(feats.shape) == tuple(state.history.shape), "features_world",
+                f"expected shape {tuple(state.history.shape)}, got {tuple(feats.shape)}")
+        history, world = world_to_canonical(feats, self.motion.pelvis_delta)
+        self._state = RolloutState(history, world, torch.zeros(self.num_envs, dtype=torch.bool, device=self.device))
 
     # ------------------------------------------------------------------ reset
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None

@@ -116,6 +116,7 @@ def make_env(
     observe_next: bool = False,
     record_history: bool = False,
     max_steps: int | None = None,
+    record_features: bool = False,
 ) -> FollowPathEnv:
     """The evaluation env: env i follows path ``i % len(paths)``, no autoreset, DART's clips and thresholds."""
     return FollowPathEnv(
@@ -132,6 +133,7 @@ def make_env(
         success_threshold=settings.success_threshold,
         **settings.motion_kwargs(),
         record_history=record_history,
+        record_features=record_features,
         **({"scene": resolve_scene(settings.scene), "observe_scene": settings.observe_scene}
            if settings.scene is not None else {}),
     )

@@ -139,3 +139,63 @@ def _local(sim: Simulator) -> np.ndarray:
 def history_joints(state: RolloutState) -> np.ndarray:
     """(2, 22, 3) world joints of a rollout state's history (for checking what the model was given)."""
     return state.world.apply(joints_of(state.history))[0].detach().cpu().double().numpy()
+
+
+class PrimitiveExecutor:
+    """Executes one planned primitive at a time on the humanoid and returns the next history.
+
+    The same step as :func:`closed_loop`, for a caller that plans elsewhere (an env driven by a policy,
+    ``latentrl eval --physics``): it keeps the simulator and everything it did between primitives.
+
+    Args:
+        humanoid: the body.
+        seed_joints, seed_features: (2, 22, 3) and (2, 276) world joints and features of the start history.
+        pelvis_delta: (3,) the model's pelvis offset (``MotionModel.pelvis_delta``).
+        assist_hz: the tracker's root assist (None: none).
+    """
+
+    def __init__(self, humanoid: Humanoid, seed_joints: np.ndarray, seed_features: np.ndarray,
+                 pelvis_delta: np.ndarray, assist_hz: float | None = ASSIST_HZ):
+        self.humanoid, self.assist_hz = humanoid, assist_hz
+        self.pelvis_delta = np.asarray(pelvis_delta, dtype=np.float64)
+        seed_joints = np.asarray(seed_joints, dtype=np.float64)
+        seed_features = np.asarray(seed_features, dtype=np.float64)
+        self.sim = Simulator(humanoid)
+        first = build_reference(seed_joints, seed_features, FPS, humanoid)
+        self.sim.set_state(first.root_pos[-1], first.root_rot[-1], first.angles[-1], first.root_vel[-1],
+                           first.root_angvel[-1], first.angle_vel[-1])
+        self.planned = [seed_joints]
+        self.joints = [seed_joints[:-1], self.sim.joints()[None]]
+        self.local = [features_rotations(seed_features[:-1]), _local(self.sim)[None]]
+        self.assist = [np.zeros(HISTORY_LENGTH)]
+        self.falls: list[int] = []
+        self.frames = HISTORY_LENGTH
+
+    def execute(self, plan_joints: np.ndarray, plan_features: np.ndarray) -> np.ndarray:
+        """Track (F, 22, 3) world joints / (F, 276) world features; returns the (2, 276) simulated history."""
+        plan_joints = np.asarray(plan_joints, dtype=np.float64)
+        plan_features = np.asarray(plan_features, dtype=np.float64)
+        self.planned.append(plan_joints)
+        joints, local = np.concatenate(self.joints), np.concatenate(self.local)
+        last = simulated_features(joints[-2:], local[-2:], self.pelvis_delta)
+        ref = build_reference(np.concatenate((joints[-1:], plan_joints)),
+                              np.concatenate((last[-1:], plan_features)), FPS, self.humanoid,
+                              contact_heights(np.concatenate(self.planned)))
+        result = track(self.humanoid, ref, self.assist_hz, simulator=self.sim, start_state=False)
+        self.joints.append(result.joints[1:])
+        self.local.append(result.rotations[1:])
+        self.assist.append(result.assist_force[1:])
+        self.falls += [self.frames + f - 1 for f in result.falls]
+        self.frames += len(plan_joints)
+        return simulated_features(np.concatenate(self.joints)[-2:], np.concatenate(self.local)[-2:],
+                                  self.pelvis_delta)
+
+    @property
+    def simulated(self) -> np.ndarray:
+        """(T, 22, 3) world joints the humanoid went through (seed frames first)."""
+        return np.concatenate(self.joints)
+
+    @property
+    def assist_force(self) -> np.ndarray:
+        """(T,) mean |assist force| per frame, N."""
+        return np.concatenate(self.assist)
