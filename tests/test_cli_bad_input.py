@@ -659,11 +659,11 @@ ROUND3 += [
     _r3("bad value", "train-resume-nproc-timeout-nan", ["train", "--resume", "{fx}/badrun", "--nproc", "2"],
         r"LATENTRL_DIST_TIMEOUT='nan'", {"LATENTRL_DIST_TIMEOUT": "nan"}),
     _r3("bad value", "train-nproc-sb3", [*NPROC, "--trainer", "sb3"], r"trainer 'sb3' runs in one process only"),
-    # ------------------------------------------------ export onnx: tasks without a controller, unreadable policies
-    _r3("bad value", "export-onnx-joystick", ["export", "onnx", "joystick_walk_default", "--out", "c.onnx"],
-        r"reach and path policies.*this policy's task is 'joystick'"),
-    _r3("bad value", "export-onnx-timed", ["export", "onnx", "timed_walk_default", "--out", "c.onnx"],
-        r"this policy's task is 'timed'"),
+    # ------------------------------------------------ export onnx: joystick/timed bad arguments, unreadable policies
+    _r3("bad value", "export-onnx-joystick-batch-0", ["export", "onnx", "joystick_walk_default", "--out", "c.onnx",
+                                                      "--batch", "0"], r"argument --batch: must be > 0, got 0"),
+    _r3("bad value", "export-onnx-timed-opset-5", ["export", "onnx", "timed_walk_default", "--out", "c.onnx",
+                                                   "--opset", "5"], r"--opset must lie in \[17, \d+\], got 5"),
     _r3("bad file", "export-onnx-missing", ["export", "onnx", "nowhere.pt", "--out", "c.onnx"],
         r"policy checkpoint not found: nowhere\.pt"),
     _r3("bad file", "export-onnx-etc-passwd", ["export", "onnx", "/etc/passwd", "--out", "c.onnx"],

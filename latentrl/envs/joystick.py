@@ -129,6 +129,17 @@ def heading_deg(world_rad: torch.Tensor) -> torch.Tensor:
     return deg - 360.0 * torch.ceil((deg - 180.0) / 360.0)
 
 
+def command_observation(history_world: torch.Tensor, heading: torch.Tensor, speed: torch.Tensor) -> torch.Tensor:
+    """(N, 3) ``[command_dir | command_speed]``, pure so that the ONNX export builds it as the env does.
+
+    ``command_dir`` is the cos and sin of world angle ``heading`` (N,) (radians from +x) relative to the
+    body's facing at the last history frame; ``command_speed`` is ``speed`` (N,) in m/s.
+    """
+    forward, _ = body_forward(history_world[:, -1])
+    relative = heading - torch.atan2(forward[:, 1], forward[:, 0])
+    return torch.stack((relative.cos(), relative.sin(), speed), dim=-1)
+
+
 class JoystickEnv(LatentMotionVectorEnv):
     """Move at a commanded world heading and speed, which change at random times (or on a timeline).
 
@@ -294,9 +305,7 @@ class JoystickEnv(LatentMotionVectorEnv):
         return torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
 
     def _goal_observation(self, history_world: torch.Tensor) -> torch.Tensor:
-        forward, _ = body_forward(history_world[:, -1])
-        relative = self._heading - torch.atan2(forward[:, 1], forward[:, 0])
-        return torch.stack((relative.cos(), relative.sin(), self._speed), dim=-1)
+        return command_observation(history_world, self._heading, self._speed)
 
     def _reward_inputs(self, before, future, goal, reached) -> dict[str, torch.Tensor]:
         return {"command": torch.cat((self._direction(), self._speed[:, None]), dim=-1)}

@@ -80,6 +80,16 @@ def _parse_times(times: Any, count: int, where: str) -> tuple[float, ...]:
     return tuple(float(t) for t in times)
 
 
+def timed_observation(current: torch.Tensor, time_left: torch.Tensor, clip: float,
+                      following: torch.Tensor | None = None) -> torch.Tensor:
+    """(N, 5 or 9) ``[goal features | time_left clipped to +-clip | next goal features]``, pure for the ONNX export.
+
+    ``current`` and ``following`` (None: not observed) are (N, 4) goal features, ``time_left`` (N,) seconds.
+    """
+    obs = torch.cat((current, time_left.clamp(-clip, clip)[:, None]), dim=1)
+    return obs if following is None else torch.cat((obs, following), dim=1)
+
+
 class TimedPathEnv(FollowPathEnv):
     """Follow waypoints and reach each at its arrival time.
 
@@ -173,11 +183,9 @@ class TimedPathEnv(FollowPathEnv):
         return self._goal_time() - self._ep_len.float() * STEP_SECONDS
 
     def _goal_observation(self, history_world: torch.Tensor) -> torch.Tensor:
-        obs = torch.cat((self._goal_features(history_world, self._waypoint()),
-                         self._time_left().clamp(-self.time_left_clip, self.time_left_clip)[:, None]), dim=1)
-        if self.observe_next:
-            obs = torch.cat((obs, self._goal_features(history_world, self._waypoint(1))), dim=1)
-        return obs
+        following = self._goal_features(history_world, self._waypoint(1)) if self.observe_next else None
+        return timed_observation(self._goal_features(history_world, self._waypoint()), self._time_left(),
+                                 self.time_left_clip, following)
 
     def _reward_inputs(self, before, future, goal, reached) -> dict[str, torch.Tensor]:
         """The on-time speed toward the waypoint, and the arrival error of a waypoint reached in this step."""

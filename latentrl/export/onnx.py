@@ -11,9 +11,13 @@ history                   (B, 2, 276)     canonical, unnormalized history (the m
 world_rotation            (B, 3, 3)       canonical-to-world rotation: ``p_world = R p + t``
 world_translation         (B, 3)          canonical-to-world translation, metres
 airborne                  (B,)            1 where the last step left the body in the air (the floor snap's flag), else 0
-goal                      (B, 3)          goal or current waypoint, world metres, z up (z unused)
-next_goal                 (B, 3)          only for FollowPath policies trained with observe_next (at the last
+goal                      (B, 3)          reach, path, timed: goal or current waypoint, world metres, z up (z unused)
+time_left                 (B,)            timed: seconds until the current waypoint's arrival time (negative
+                                          when late; the graph clips it to +-``time_left_clip``)
+next_goal                 (B, 3)          only for path/timed policies trained with observe_next (at the last
                                           waypoint: as ``latentrl.settings.next_at_last`` says)
+command_heading_deg       (B,)            joystick: commanded world heading, degrees counter-clockwise from +y
+command_speed             (B,)            joystick: commanded speed, m/s
 text_embedding            (B, E)          only when no prompt was baked in (``--text``)
 ========================  ==============  ===================================================
 
@@ -29,7 +33,9 @@ next_world_translation    (B, 3)          feed back as ``world_translation``
 next_airborne             (B,)            feed back as ``airborne``
 ========================  ==============  ===================================================
 
-Inside the graph: the env's observation (DART's goal features, text, history, floor height) ->
+Inside the graph: the env's observation (the task's goal fields, built by the env's own functions:
+:func:`~latentrl.envs.goal.goal_features`, :func:`~latentrl.envs.timed.timed_observation`,
+:func:`~latentrl.envs.joystick.command_observation`; then text, history, floor height) ->
 the policy's mean -> :meth:`latentrl.motion.MotionModel.rollout_step` (10 DDIM steps with
 classifier-free guidance unrolled, the scale and the step indices as constants, then the VAE
 decode and the re-canonicalization). The rollout's floor snap is part of ``rollout_step`` and so of the graph;
@@ -61,8 +67,10 @@ from torch import nn
 from latentrl.constants import OBS_GOAL_ANGLE_CLIP_DEG, OBS_GOAL_DIST_CLIP_M
 from latentrl.envs.config import stored_env_config
 from latentrl.envs.goal import goal_features
+from latentrl.envs.joystick import command_observation, world_angle
 from latentrl.envs.observation import observe
 from latentrl.envs.settings import StepSettings
+from latentrl.envs.timed import timed_observation
 from latentrl.errors import CheckpointError, ConfigError, TextError
 from latentrl.motion.canonical import WorldTransform
 from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH, joints_of
@@ -74,8 +82,13 @@ MIN_OPSET = 17
 DEFAULT_OPSET = 17
 MAX_DIFF = 1e-3
 """``export_command`` fails when onnxruntime and torch differ by more than this after one step."""
-EXPORT_TASKS = ("reach", "path")
-"""Tasks whose observation the graph builds (a goal, and a next goal for path policies that observe it)."""
+EXPORT_TASKS = ("reach", "path", "joystick", "timed")
+"""Tasks whose observation the graph builds, each from its own inputs (:data:`TASK_INPUTS`)."""
+TASK_INPUTS = {"reach": ("goal",), "path": ("goal",), "timed": ("goal", "time_left"),
+               "joystick": ("command_heading_deg", "command_speed")}
+"""Task -> the graph inputs its observation is built from (``next_goal`` follows for observe_next policies)."""
+GOAL_SIZES = {"reach": (4,), "path": (4, 8), "timed": (5, 9), "joystick": (3,)}
+"""Task -> the goal-observation sizes its policies may have (the larger: observe_next)."""
 EXTRA = "pip install 'latentrl[onnx]' (packages onnx and onnxruntime)"
 OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation",
                 "next_airborne")
@@ -85,6 +98,10 @@ _MEANINGS = {
     "world_translation": "canonical-to-world translation, metres",
     "airborne": "1 where the previous step ended in the air (the floor snap lands it this step), else 0; start at 0",
     "goal": "goal or current waypoint, world metres, z up (z is not used)",
+    "time_left": "seconds until the current waypoint's arrival time, negative when late (clipped in the graph to "
+                 "+-latentrl.settings.time_left_clip)",
+    "command_heading_deg": "commanded world heading, degrees counter-clockwise from +y (the body's start facing)",
+    "command_speed": "commanded speed, m/s",
     "next_goal": "the waypoint after the current one, world metres (FollowPath observe_next policies); at the last "
                  "waypoint what latentrl.settings.next_at_last says: the last again (repeat) or last + (last - "
                  "previous) (extend; previous = the episode's start pelvis on a one-waypoint path)",
@@ -118,7 +135,9 @@ class ControllerStep(nn.Module):
         batch: B, fixed in the exported graph.
         settings: how the training env stepped the motion (guidance, action bound, foot lock; traced as constants).
             The graph runs in float32 whatever its ``amp`` (which the metadata records). None: the defaults.
-        observe_next: the policy observes a second goal (FollowPath ``observe_next``): adds ``next_goal``.
+        observe_next: the policy observes a second goal (path/timed ``observe_next``): adds ``next_goal``.
+        task: whose observation the graph builds (:data:`TASK_INPUTS` names its inputs).
+        time_left_clip: the timed env's clip of ``time_left``, seconds.
         text_embedding: (E,) or (1, E) prompt embedding baked in as a constant; ``None`` adds the
             ``text_embedding`` input.
         goal_angle_clip_deg, goal_dist_clip, floor_height: the env's observation settings.
@@ -127,7 +146,7 @@ class ControllerStep(nn.Module):
     def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, settings: StepSettings | None = None,
                  observe_next: bool = False, text_embedding: torch.Tensor | None = None,
                  goal_angle_clip_deg: float = OBS_GOAL_ANGLE_CLIP_DEG, goal_dist_clip: float = OBS_GOAL_DIST_CLIP_M,
-                 floor_height: float = 0.0):
+                 floor_height: float = 0.0, task: str = "reach", time_left_clip: float = 10.0):
         super().__init__()
         if int(batch) < 1:
             raise ConfigError(f"--batch must be >= 1, got {batch}")
@@ -136,6 +155,11 @@ class ControllerStep(nn.Module):
         self.settings = settings.step_settings() if settings is not None else StepSettings()
         self.settings.validate()
         self.guidance_scale, self.action_bound = self.settings.guidance_scale, self.settings.action_bound
+        if task not in TASK_INPUTS:
+            raise ConfigError(f"task must be one of {tuple(TASK_INPUTS)}, got '{task}'")
+        self.task, self.time_left_clip = task, float(time_left_clip)
+        if observe_next and task == "joystick":
+            raise ConfigError("a joystick policy observes no next goal (observe_next)")
         self.observe_next = bool(observe_next)
         self.goal_angle_clip_deg, self.goal_dist_clip = float(goal_angle_clip_deg), float(goal_dist_clip)
         self.floor_height = float(floor_height)
@@ -146,7 +170,8 @@ class ControllerStep(nn.Module):
             self.register_buffer("text", emb.expand(self.batch, -1).clone().to(model.device))
         else:
             self.text = None
-        self.input_names: tuple[str, ...] = ("history", "world_rotation", "world_translation", "airborne", "goal",
+        self.input_names: tuple[str, ...] = ("history", "world_rotation", "world_translation", "airborne",
+                                             *TASK_INPUTS[task],
                                              *(("next_goal",) if self.observe_next else ()),
                                              *(() if self.baked_text else ("text_embedding",)))
         self.output_names = OUTPUT_NAMES
@@ -160,7 +185,8 @@ class ControllerStep(nn.Module):
         """Input name -> shape, for this batch and this policy (next goal, baked text)."""
         b = self.batch
         shapes = {"history": (b, HISTORY_LENGTH, FEATURE_DIM), "world_rotation": (b, 3, 3), "world_translation": (b, 3),
-                  "airborne": (b,), "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim)}
+                  "airborne": (b,), "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim),
+                  "time_left": (b,), "command_heading_deg": (b,), "command_speed": (b,)}
         return {name: shapes[name] for name in self.input_names}
 
     def output_shapes(self) -> dict[str, tuple[int, ...]]:
@@ -170,12 +196,28 @@ class ControllerStep(nn.Module):
                 "next_history": (b, HISTORY_LENGTH, FEATURE_DIM), "next_world_rotation": (b, 3, 3),
                 "next_world_translation": (b, 3), "next_airborne": (b,)}
 
-    def observe(self, state: RolloutState, goals: Sequence[torch.Tensor], text: torch.Tensor) -> torch.Tensor:
-        """(B, obs_dim) the env's observation ``[goal(s) | text | history | scene]``: the env's own :func:`observe`."""
+    def observe(self, state: RolloutState, named: Mapping[str, torch.Tensor], text: torch.Tensor) -> torch.Tensor:
+        """(B, obs_dim) the env's observation ``[task fields | text | history | scene]`` from the named inputs.
+
+        Built by the envs' own functions (:func:`observe`, :func:`goal_features`, :func:`timed_observation`,
+        :func:`command_observation`), so the graph sees what the env's policy saw.
+        """
         history_world = state.world.apply(joints_of(state.history))
-        goal_obs = [goal_features(history_world[:, -1], state.world.rotation, g, self.goal_angle_clip_deg,
-                                  self.goal_dist_clip) for g in goals]
-        return observe(state.history, history_world, torch.cat(goal_obs, dim=1), text, self.floor_height)
+
+        def features(goal: torch.Tensor) -> torch.Tensor:
+            return goal_features(history_world[:, -1], state.world.rotation, goal, self.goal_angle_clip_deg,
+                                 self.goal_dist_clip)
+
+        following = features(named["next_goal"]) if self.observe_next else None
+        if self.task == "joystick":
+            goal_obs = command_observation(history_world, world_angle(named["command_heading_deg"]),
+                                           named["command_speed"])
+        elif self.task == "timed":
+            goal_obs = timed_observation(features(named["goal"]), named["time_left"], self.time_left_clip, following)
+        else:
+            goal_obs = features(named["goal"]) if following is None else torch.cat(
+                (features(named["goal"]), following), dim=1)
+        return observe(state.history, history_world, goal_obs, text, self.floor_height)
 
     def post_step(self, step: StepResult) -> StepResult:
         """World-space correction after the motion step; the identity, so the graph is exactly ``rollout_step``.
@@ -193,8 +235,7 @@ class ControllerStep(nn.Module):
         state = RolloutState(named["history"], WorldTransform(named["world_rotation"], named["world_translation"]),
                              named["airborne"] > 0.5)
         text = self.text if self.baked_text else named["text_embedding"]
-        goals = [named["goal"], *([named["next_goal"]] if self.observe_next else [])]
-        action = self.policy(self.observe(state, goals, text)).mean.clamp(-self.action_bound, self.action_bound)
+        action = self.policy(self.observe(state, named, text)).mean.clamp(-self.action_bound, self.action_bound)
         noise = action.reshape(self.batch, *self.model.latent_shape)
         step = self.model.rollout_step(state, text, noise, self.guidance_scale, foot_lock=self.foot_lock,
                                        lock_min_weight=self.foot_lock_min_weight)
@@ -216,7 +257,8 @@ class ControllerStep(nn.Module):
         goal = torch.stack((0.5 * torch.sin(rows), 1.5 + (rows % 3) * 0.75, torch.zeros_like(rows)), dim=-1)
         values = {"history": state.history, "world_rotation": state.world.rotation,
                   "world_translation": state.world.translation, "airborne": torch.zeros(self.batch), "goal": goal,
-                  "next_goal": goal + torch.tensor([1.0, 1.0, 0.0])}
+                  "next_goal": goal + torch.tensor([1.0, 1.0, 0.0]), "time_left": 2.0 + rows,
+                  "command_heading_deg": 30.0 * rows - 15.0, "command_speed": torch.full_like(rows, 1.2)}
         if not self.baked_text:
             emb = torch.zeros(1, self.model.text_dim) if text_embedding is None else text_embedding
             values["text_embedding"] = emb.reshape(-1, self.model.text_dim).expand(self.batch, -1).contiguous()
@@ -244,13 +286,17 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     check_finite_weights(policy, policy_path)
     if model.seed_history is None or model.pelvis_delta is None:
         raise CheckpointError(f"motion model {motion} has no seed history/pelvis_delta; a controller cannot start")
+    env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
+    task = str(env_cfg.get("task") or "path")
+    if task not in EXPORT_TASKS:
+        raise CheckpointError(f"{policy_path}: export onnx builds controllers of {', '.join(EXPORT_TASKS)} policies; "
+                              f"this policy's task is '{task}', which it cannot export")
     goal_size = policy.obs_dim - model.text_dim - HISTORY_LENGTH * FEATURE_DIM - 1
-    if policy.action_dim != model.latent_dim or goal_size not in (4, 8):
+    if policy.action_dim != model.latent_dim or goal_size not in GOAL_SIZES[task]:
         raise CheckpointError(
             f"{policy_path}: the policy ({policy.obs_dim}-D observations, {policy.action_dim}-D actions) does not fit "
             f"motion model {motion} ({model.text_dim}-D text, {model.latent_dim}-D latent); export it with the "
             "motion model it was trained on (--motion)")
-    env_cfg = (loaded.checkpoint.get("config") or {}).get("env") or {}
     try:
         stored = stored_env_config(loaded.checkpoint.get("config"))
     except ConfigError as exc:  # a stored value out of range (NaN guidance, ...): name the checkpoint
@@ -268,11 +314,14 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
         settings.validate()
     except ConfigError as exc:  # name the checkpoint and the stored field
         raise CheckpointError(f"{policy_path}: stored env: {exc}") from None
-    step = ControllerStep(policy, model, batch, settings=settings, observe_next=goal_size == 8, text_embedding=baked)
+    observe_next = goal_size == GOAL_SIZES[task][-1] and len(GOAL_SIZES[task]) == 2
+    time_left_clip = float((env_cfg.get("timed") or {}).get("time_left_clip", 10.0))
+    step = ControllerStep(policy, model, batch, settings=settings, observe_next=observe_next, text_embedding=baked,
+                          task=task, time_left_clip=time_left_clip)
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
             "motion": ident, "texts": texts, "text": text, "trained_texts": trained,
-            "next_at_last": (stored.next_at_last if stored is not None else "repeat") if goal_size == 8 else None}
+            "next_at_last": (stored.next_at_last if stored is not None else "repeat") if observe_next else None}
     return step, info
 
 
@@ -307,13 +356,15 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
     in_shapes, out_shapes = step.input_shapes(), step.output_shapes()
     contract = {"inputs": [{"name": n, "shape": list(s), "meaning": _MEANINGS[n]} for n, s in in_shapes.items()],
                 "outputs": [{"name": n, "shape": list(s), "meaning": _MEANINGS[n]} for n, s in out_shapes.items()]}
-    settings = {"batch": step.batch, "opset": opset, "fps": 30, "frames_per_step": FUTURE_LENGTH,
+    settings = {"task": step.task, "inputs": list(TASK_INPUTS[step.task]), "batch": step.batch, "opset": opset,
+                "fps": 30, "frames_per_step": FUTURE_LENGTH,
                 "guidance_scale": step.guidance_scale, "sampler": "ddim",
                 "diffusion_steps": step.model.diffusion.num_timesteps,
                 "action_bound": step.action_bound, "goal_angle_clip_deg": step.goal_angle_clip_deg,
                 "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
                 "foot_lock": step.foot_lock, "foot_lock_min_weight": step.foot_lock_min_weight,
                 "training_amp": step.settings.amp,
+                "time_left_clip": step.time_left_clip if step.task == "timed" else None,
                 "observe_next": step.observe_next, "next_at_last": info.get("next_at_last"),
                 "text": info.get("text") if step.baked_text else None}
     meta = {
@@ -420,8 +471,8 @@ def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: st
 
     task = stored_task(policy)
     if task not in EXPORT_TASKS:
-        raise CheckpointError(f"{policy}: export onnx builds controllers of {' and '.join(EXPORT_TASKS)} policies "
-                              f"(goal and next_goal inputs); this policy's task is '{task}', which it cannot export")
+        raise CheckpointError(f"{policy}: export onnx builds controllers of {', '.join(EXPORT_TASKS)} policies; "
+                              f"this policy's task is '{task}', which it cannot export")
 
     step, info = load_controller(policy, trained_motion(policy, motion), batch, text, allow_motion_mismatch)
     example = step.example_inputs(next(iter(info["texts"].values()), None))
