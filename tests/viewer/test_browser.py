@@ -247,3 +247,28 @@ def test_view_shows_hostile_strings_as_text(browser, tmp_path):
             " [...document.scripts].filter(s => s.textContent.includes('__pwned')).length, window.__pwned || 0]")
         assert injected == [0, 0, 0], f"[img elements, script elements, script ran]: {injected}"
         assert shown >= 3, f"the strings did not show as text:\n{page_text(browser)}"
+
+
+def test_play_steers_a_joystick_policy_by_the_keyboard(browser):
+    """The shipped joystick policy: A and the left arrow, pressed in the page, turn the command; the body walks."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    with serve("play", "joystick_walk_default") as (url, lines):
+        open_page(browser, url, "arrows or WASD")
+        start = status(browser)["pelvis"]
+        ActionChains(browser).send_keys("a").perform()
+        wait_text(browser, "heading 15°")
+        ActionChains(browser).send_keys(Keys.ARROW_LEFT).perform()
+        wait_text(browser, "heading 30°")
+        end = time.monotonic() + 40
+        while np.linalg.norm(status(browser)["pelvis"] - start) < 0.5:
+            assert time.monotonic() < end, f"the body did not walk: {page_text(browser)}"
+            time.sleep(0.5)
+
+
+def wait_text(driver, needle: str, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while needle not in page_text(driver):
+        assert time.monotonic() < end, f"page never showed {needle!r}:\n{page_text(driver)}"
+        time.sleep(0.2)
