@@ -1,5 +1,6 @@
-"""docs/export.md's onnxruntime snippet runs as pasted on exports of the shipped walk policy made with and
-without ``--text``, and its pelvis comes near the goal as the page says."""
+"""docs/export.md's onnxruntime snippets run as pasted: the reach one on exports of the shipped walk policy made
+with and without ``--text`` (its pelvis comes near the goal), the joystick and timed ones on exports of the shipped
+joystick and timed policies (the pelvis follows the command; it reaches the waypoint), as the page says."""
 
 import re
 from pathlib import Path
@@ -27,3 +28,31 @@ def test_the_snippet_runs_as_pasted(text, tmp_path, monkeypatch):
     assert joints.shape == (240, 22, 3) and np.isfinite(joints).all()
     reach = np.linalg.norm(joints[:, 0, :2] - names["goal"][0, :2], axis=1).min()
     assert reach < 0.3  # within DART's success radius (the page quotes the run's closest pass)
+
+
+def _section_snippet(title: str) -> str:
+    return re.search(rf"## {title}\n.*?```python\n(.*?)```", DOC.read_text(encoding="utf-8"), flags=re.S).group(1)
+
+
+def test_the_joystick_snippet_runs_as_pasted_and_follows_the_command(tmp_path, monkeypatch):
+    """Straight on (+y) for 4 s, then a left turn: the pelvis goes +y first, then -x, as the page says."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["export", "onnx", "joystick_walk_default", "--out", "joystick.onnx", "--text", "walk"]) == 0
+    names: dict = {"__name__": "__export_doc__"}
+    exec(compile(_section_snippet("Joystick policies"), "docs/export.md joystick block", "exec"), names)  # noqa: S102
+    pelvis = np.concatenate(names["frames"])[:, 0]
+    assert pelvis.shape == (240, 3) and np.isfinite(pelvis).all()
+    first, second = pelvis[119] - pelvis[0], pelvis[-1] - pelvis[119]
+    assert first[1] > 3.0 and abs(first[0]) < 0.5  # 4 s at 1.2 m/s along +y
+    assert second[0] < -3.0  # then along -x
+
+
+def test_the_timed_snippet_runs_as_pasted_and_reaches_the_waypoint(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["export", "onnx", "timed_walk_default", "--out", "timed.onnx", "--text", "walk"]) == 0
+    names: dict = {"__name__": "__export_doc__"}
+    exec(compile(_section_snippet("Timed policies"), "docs/export.md timed block", "exec"), names)  # noqa: S102
+    pelvis = np.concatenate(names["frames"])[:, 0]
+    assert pelvis.shape == (144, 3) and np.isfinite(pelvis).all()
+    dist = np.linalg.norm(pelvis[:, :2] - names["goal"][0, :2], axis=1)
+    assert dist.min() < 0.3 and dist[-1] < 0.3  # reaches the waypoint (DART's radius) and stays near it
