@@ -18,7 +18,8 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "latentrl"
 
 FLOORS = (
-    ("errors", "constants", "config", "safe_io", "preflight", "timing", "resources", "monitor", "runlock"),
+    ("errors", "constants", "config", "safe_io", "preflight", "timing", "resources", "monitor", "runlock",
+     "interrupts"),
     ("motion",),
     ("datasets", "render", "rewards", "scenes"),
     ("motion_training", "envs", "ppo", "physics"),

@@ -18,6 +18,7 @@ import threading
 from collections.abc import Sequence
 from pathlib import Path
 
+from latentrl import interrupts
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
 
@@ -724,6 +725,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    if program:
+        interrupts.install()  # SIGTERM (preemption, kill) saves and stops like Ctrl-C
     try:
         return args.func(args)
     except LatentRLError as exc:
@@ -740,8 +743,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         if program and threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGINT, signal.SIG_IGN)  # handled: another Ctrl-C must not cut the exit short
-        print("latentrl: interrupted", file=sys.stderr)
-        return 130
+        code = interrupts.exit_code()
+        print("latentrl: interrupted" + (" by SIGTERM" if code == 143 else ""), file=sys.stderr)
+        return code
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import torch
 
+from latentrl import interrupts
 from latentrl.config import MAX_THREADS, require, require_seed, to_dict, to_yaml
 from latentrl.datasets.locomotion import LocomotionConfig
 from latentrl.errors import CheckpointError, ConfigError, NonFiniteError
@@ -123,6 +125,7 @@ class MotionTrainer:
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.out = Path(out) if out else self.run_dir / "motion_model.pt"
         self.progress = progress
+        self._stop = interrupts.StopRequest()  # set by Ctrl-C/SIGTERM while run() trains
         self.device = torch.device(cfg.device)
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
@@ -283,6 +286,16 @@ class MotionTrainer:
         if save:
             self.save_checkpoint()
 
+    def _save_and_stop(self, name: str, loss: torch.Tensor, bar, start: float) -> None:
+        """Ctrl-C or SIGTERM arrived: save this step (a finite state only) and stop with KeyboardInterrupt."""
+        self._check_finite(self.step - 1, loss)
+        self.elapsed = time.perf_counter() - start
+        saved = self.save_checkpoint()
+        bar.close()
+        print(f"interrupted ({interrupts.signal_name(self._stop.signum)}): saved {name} step {self.step} to {saved}; "
+              f"continue with latentrl motion train --resume {self.run_dir}", file=sys.stderr, flush=True)
+        raise KeyboardInterrupt
+
     def _check_finite(self, step: int, loss: torch.Tensor) -> None:
         """Stop with :class:`NonFiniteError` on a NaN/inf loss or weight; the last ``state.pt`` stays as it was."""
         module = self.vae if self.stage == "vae" else self.denoiser
@@ -304,11 +317,12 @@ class MotionTrainer:
         done = self.step + (vcfg.steps if self.stage == "denoiser" else 0)
         bar = tqdm(total=total, initial=done, desc="motion train", disable=not self.progress, unit="step")
         start = time.perf_counter() - self.elapsed
-        if self.stage == "vae":
-            self._train_vae(bar, start)
-            self.stage, self.step = "denoiser", 0
-            self.save_checkpoint()
-        self._train_denoiser(bar, start)
+        with interrupts.deferred("a checkpoint after this step") as self._stop:
+            if self.stage == "vae":
+                self._train_vae(bar, start)
+                self.stage, self.step = "denoiser", 0
+                self.save_checkpoint()
+            self._train_denoiser(bar, start)
         bar.close()
         self.elapsed = time.perf_counter() - start
         model = self.build_model()
@@ -383,6 +397,8 @@ class MotionTrainer:
                 self.step += 1  # steps done: what a checkpoint records, so a resume does not repeat this one
                 bar.update(1)
                 self._maybe_checkpoint(cfg.steps, loss.detach())
+                if self._stop.requested:
+                    self._save_and_stop(stage.name, loss.detach(), bar, start)
             self.elapsed = time.perf_counter() - start
 
     def _train_vae(self, bar, start: float) -> None:

@@ -29,6 +29,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import torch
 
+from latentrl import interrupts
 from latentrl.errors import NonFiniteError
 from latentrl.monitor import EvalReport, Monitor, RolloutStats
 from latentrl.ppo import checkpoint as ckpt
@@ -404,9 +405,10 @@ class Runner:
 
 @contextlib.contextmanager
 def _sigint_deferred(runner: Runner):
-    """While training, the first Ctrl-C (SIGINT) asks the runner to save after this iteration and stop.
+    """While training, the first Ctrl-C asks the runner to save after this iteration and stop.
 
-    A second one stops at once. Only the main thread can install the handler; elsewhere nothing changes.
+    SIGTERM reaches this handler too (:func:`latentrl.interrupts.install`). A second Ctrl-C stops at once.
+    Only the main thread can install the handler; elsewhere nothing changes.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -416,8 +418,8 @@ def _sigint_deferred(runner: Runner):
         if runner.interrupted:
             raise KeyboardInterrupt
         runner.interrupted = True
-        print("\nCtrl-C: saving a checkpoint after this iteration (Ctrl-C again to stop without saving)",
-              file=sys.stderr, flush=True)
+        print(f"\n{interrupts.signal_name(signum)}: saving a checkpoint after this iteration "
+              "(Ctrl-C again to stop without saving)", file=sys.stderr, flush=True)
 
     previous = signal.signal(signal.SIGINT, handler)
     try:
