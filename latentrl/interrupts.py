@@ -10,6 +10,7 @@ which signal stopped the command (130 or 143).
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -33,9 +34,13 @@ def signal_name(signum: int) -> str:
 def install() -> None:
     """Make SIGTERM act as Ctrl-C for the rest of the process; only the main thread can install it.
 
-    A second SIGTERM is ignored, so a scheduler's repeated signal does not cut a save short.
+    A second SIGTERM is ignored, so a scheduler's repeated signal does not cut a save short. A torchrun rank
+    (``RANK``, ``WORLD_SIZE``, ``MASTER_ADDR``, ``MASTER_PORT`` set) is left as it is: torchrun stops the other
+    ranks with SIGTERM when one fails, and they must stop at once rather than wait on a collective to save.
     """
     if threading.current_thread() is not threading.main_thread():
+        return
+    if all(os.environ.get(name) for name in ("RANK", "WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT")):
         return
 
     def on_term(signum, frame):
