@@ -6,6 +6,7 @@ by a non-interactive shell does (``nohup latentrl ... &``), so only SIGTERM can 
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -85,3 +86,29 @@ def test_sigterm_during_train_saves_and_the_run_resumes(motion_file, tmp_path): 
     finally:
         code, err = _terminate(resumed)
     assert code == 143, err
+
+
+@pytest.mark.slow
+def test_sigterm_during_optimize_exits_143_and_the_same_command_finishes(motion_file, tmp_path):  # noqa: F811
+    from latentrl.motion.clip import load_motion_npz
+
+    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
+    suite = tmp_path / "suite.json"
+    suite.write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
+        {"name": f"p{i}", "start": {"seed": 0}, "text": "walk", "primitives": 2, "constraints": [joint]}
+        for i in range(4)]}))
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "latentrl", "optimize", str(suite), "--motion", str(motion_file), "--batch", "2",
+            "--out", str(out), "--no-progress"]
+    proc = _background([*argv, "--steps", "100000"], tmp_path)
+    assert wait_for(lambda: (out / ".lock").is_file(), proc), proc.stderr.read()
+    code, err = _terminate(proc)
+    assert code == 143, err
+    assert "Traceback" not in err and err.rstrip().endswith("latentrl: interrupted by SIGTERM"), err
+    assert not list(out.rglob(".*.tmp")), "a temporary file was left"
+    done = subprocess.run([*argv, "--steps", "3"], capture_output=True, text=True, env=ENV, cwd=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr
+    json.loads((out / "report.json").read_text())
+    assert sorted(p.stem for p in (out / "motions").glob("*.npz")) == [f"p{i}" for i in range(4)]
+    for motion in (out / "motions").glob("*.npz"):
+        load_motion_npz(motion)
