@@ -14,10 +14,7 @@ A YAML config holds values only::
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -166,9 +163,7 @@ def launch(req: TrainRequest) -> int:
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
            "-m", "latentrl", *req.argv()]
     print(f"launching {req.nproc} ranks: {' '.join(cmd[1:])}", flush=True)
-    # its own process group, so that a SIGTERM to this launcher alone reaches the ranks too (as SIGINT, below)
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1,
-                            start_new_session=True)
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1)
     output = distributed.TorchrunOutput()  # the ranks' lines pass; torchrun's report becomes one line below
     interrupted = False
     while True:
@@ -181,9 +176,7 @@ def launch(req: TrainRequest) -> int:
             if interrupted:  # a second Ctrl-C: stop waiting for the ranks
                 proc.terminate()
                 raise
-            interrupted = True  # tell every rank: each saves and stops; keep showing what they say
-            with contextlib.suppress(ProcessLookupError):  # torchrun may have ended already
-                os.killpg(proc.pid, signal.SIGINT)
+            interrupted = True  # Ctrl-C reached every rank too: each saves and stops; keep showing what they say
     sys.stderr.writelines(output.flush())
     code = proc.wait()
     if interrupted:
