@@ -270,7 +270,7 @@ PHYSICS_TASKS = ("reach", "path")
 
 
 def _evaluate_physics(req: EvalRequest, spec: Any, files: list[Path], settings: EvalSettings) -> int:
-    """``latentrl eval --physics``: each path's episodes with physics in the loop and kinematic, same seeds (batch 1)."""
+    """``latentrl eval --physics``: each path's episodes with physics in the loop and kinematically, same seeds."""
     import json
     import time
 
@@ -283,8 +283,8 @@ def _evaluate_physics(req: EvalRequest, spec: Any, files: list[Path], settings: 
     require_mujoco()
     from latentrl.evaluation.physics_episodes import run_episode, summarize
     from latentrl.evaluation.runner import load_suites, path_seed
-    from latentrl.physics.humanoid import build_humanoid
     from latentrl.motion.canonical import features_to_world
+    from latentrl.physics.humanoid import build_humanoid
     from latentrl.physics.reference import fit_height
     from latentrl.physics.tracker import ASSIST_HZ
 
