@@ -476,8 +476,8 @@ def _export_commands(sub) -> None:
     esub.required = True
     onnx = esub.add_parser("onnx", help="the whole controller step (policy mean, guided sampler, decoder, world "
                                         "update) as one ONNX graph (needs latentrl[onnx])")
-    onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach or path policy, or a "
-                                                       "shipped policy by name (reach_walk_default)")
+    onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach, path, joystick or "
+                                                       "timed policy, or a shipped policy by name (reach_walk_default)")
     onnx.add_argument("--out", required=True, metavar="FILE", help="output .onnx file")
     onnx.add_argument("--batch", type=_pos_int, default=1, help="characters per call, fixed in the graph (default 1)")
     onnx.add_argument("--text", help="bake this prompt in (default: the graph takes a text_embedding input)")
