@@ -163,6 +163,11 @@ def launch(req: TrainRequest) -> int:
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
            "-m", "latentrl", *req.argv()]
     print(f"launching {req.nproc} ranks: {' '.join(cmd[1:])}", flush=True)
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():  # Ctrl-C must reach this loop even when the shell
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # started it with SIGINT ignored (as the ranks do)
     proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1)
     output = distributed.TorchrunOutput()  # the ranks' lines pass; torchrun's report becomes one line below
     interrupted = False
