@@ -245,6 +245,17 @@ def test_ctrl_c_twice_on_the_sb3_trainer_exits_130_cleanly_and_the_run_resumes(s
 OPTIMIZE_KILLS_CI, OPTIMIZE_KILLS_FULL = 3, 10
 
 
+def optimize_argv(tmp_path: Path, motion_file: Path, problems: int) -> list[str]:
+    """``latentrl optimize`` of a small pelvis-target suite (written into ``tmp_path``) into ``tmp_path/out``."""
+    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
+    suite = tmp_path / "suite.json"
+    suite.write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
+        {"name": f"p{i}", "start": {"seed": 0}, "text": "walk", "primitives": 2, "constraints": [joint]}
+        for i in range(problems)]}))
+    return [sys.executable, "-m", "latentrl", "optimize", str(suite), "--motion", str(motion_file), "--batch", "2",
+            "--out", str(tmp_path / "out"), "--no-progress"]
+
+
 @pytest.mark.slow
 def test_optimize_killed_or_interrupted_then_run_again_leaves_only_whole_files(motion_file, tmp_path):
     """SIGKILL (and one SIGINT) of ``latentrl optimize`` at random moments; every file it left is whole, and the
@@ -253,14 +264,8 @@ def test_optimize_killed_or_interrupted_then_run_again_leaves_only_whole_files(m
 
     kills = OPTIMIZE_KILLS_FULL if FULL else OPTIMIZE_KILLS_CI
     rng = random.Random(5)
-    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
-    suite = tmp_path / "suite.json"
-    suite.write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
-        {"name": f"p{i}", "start": {"seed": 0}, "text": "walk", "primitives": 2, "constraints": [joint]}
-        for i in range(6)]}))
     out = tmp_path / "out"
-    argv = [sys.executable, "-m", "latentrl", "optimize", str(suite), "--motion", str(motion_file), "--batch", "2",
-            "--out", str(out), "--no-progress"]
+    argv = optimize_argv(tmp_path, motion_file, problems=6)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
 
     def whole() -> None:

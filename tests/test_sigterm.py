@@ -17,7 +17,16 @@ import pytest
 
 from latentrl.ppo.checkpoint import iteration_checkpoints, read_checkpoint
 from latentrl.safe_io import load_torch
-from tests.test_kill_loop import MOTION_STEP, MTINY, TINY, motion_file, start_lines, temporaries, wait_for  # noqa: F401
+from tests.test_kill_loop import (  # noqa: F401
+    MOTION_STEP,
+    MTINY,
+    TINY,
+    motion_file,
+    optimize_argv,
+    start_lines,
+    temporaries,
+    wait_for,
+)
 
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
 
@@ -92,14 +101,8 @@ def test_sigterm_during_train_saves_and_the_run_resumes(motion_file, tmp_path): 
 def test_sigterm_during_optimize_exits_143_and_the_same_command_finishes(motion_file, tmp_path):  # noqa: F811
     from latentrl.motion.clip import load_motion_npz
 
-    joint = {"type": "joint", "frame": 10, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}
-    suite = tmp_path / "suite.json"
-    suite.write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
-        {"name": f"p{i}", "start": {"seed": 0}, "text": "walk", "primitives": 2, "constraints": [joint]}
-        for i in range(4)]}))
     out = tmp_path / "out"
-    argv = [sys.executable, "-m", "latentrl", "optimize", str(suite), "--motion", str(motion_file), "--batch", "2",
-            "--out", str(out), "--no-progress"]
+    argv = optimize_argv(tmp_path, motion_file, problems=4)
     proc = _background([*argv, "--steps", "100000"], tmp_path)
     assert wait_for(lambda: (out / ".lock").is_file(), proc), proc.stderr.read()
     code, err = _terminate(proc)
