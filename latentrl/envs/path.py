@@ -2,7 +2,9 @@
 
 Path files are DART's ``data/test_locomotion/*.json``: a JSON list of paths, each
 ``{"goal_location": [[x, y, z], ...], "goal_text": ["walk", ...]}`` in the world frame (metres,
-z up, the episode starts with the pelvis at the origin facing +y; only xy is used).
+z up, the episode starts with the pelvis at the origin facing +y; only xy is used). A path may add
+``"scene"``: the scene it runs in (a ``latentrl.scene/1`` file beside the path file, in ``tasks/scenes`` by
+name, or inline; docs/scenes.md), so a maze or a staircase travels with the paths through it.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from latentrl.motion.text import prompt_problem
 from latentrl.safe_io import read_json_file
 
 _PATH_FIELDS = ("goal_location", "goal_text")
+_OPTIONAL_FIELDS = ("scene",)
 MAX_WAYPOINTS = 10_000
 """Most waypoints per path (DART's suites have 2-20); every env keeps a padded (W, 3) copy of its path."""
 MAX_FILE_BYTES = 64 << 20
@@ -40,6 +43,8 @@ class WaypointPath:
 
     waypoints: tuple[tuple[float, float, float], ...]
     texts: tuple[str, ...]
+    scene: Any = None
+    """The :class:`~latentrl.scenes.Scene` the path runs in (its ``"scene"`` field); None: the evaluation's own."""
 
 
 NEXT_AT_LAST = ("repeat", "extend")
@@ -54,11 +59,14 @@ def next_at_last_problem(value: str) -> str | None:
 def load_paths(file: str | Path) -> list[WaypointPath]:
     """Read a DART path file; errors name the file, path index, waypoint index and field (0-based)."""
     data = read_json_file(file, "path file", MAX_FILE_BYTES, DataError)
-    return parse_paths(data, str(file))
+    return parse_paths(data, str(file), Path(file).parent)
 
 
-def parse_paths(data: Any, source: str = "paths") -> list[WaypointPath]:
-    """Validate DART's path structure (already parsed from JSON) into :class:`WaypointPath` s."""
+def parse_paths(data: Any, source: str = "paths", base: Path | None = None) -> list[WaypointPath]:
+    """Validate DART's path structure (already parsed from JSON) into :class:`WaypointPath` s.
+
+    ``base``: the folder a path's ``scene`` file name is looked up in first (the path file's).
+    """
     if not isinstance(data, list):
         raise DataError(
             f"{source}: expected a list of paths like "
@@ -69,16 +77,37 @@ def parse_paths(data: Any, source: str = "paths") -> list[WaypointPath]:
     if len(data) > MAX_PATHS:
         raise DataError(f"{source}: {len(data)} paths, more than the {MAX_PATHS} a path file may hold; "
                         "split it into several files")
-    return [_parse_path(item, f"{source}: path {i}") for i, item in enumerate(data)]
+    return [_parse_path(item, f"{source}: path {i}", base) for i, item in enumerate(data)]
 
 
-def _parse_path(item: Any, where: str) -> WaypointPath:
+def _parse_scene(value: Any, where: str, base: Path | None) -> Any:
+    """A path's ``scene`` field as a fixed :class:`~latentrl.scenes.Scene` (a file beside the path file, a name)."""
+    from latentrl.envs.scene import resolve_scene
+    from latentrl.errors import LatentRLError
+    from latentrl.scenes.scene import Scene
+
+    if not isinstance(value, (str, dict)):
+        raise DataError(f"{where}: field 'scene' must be a scene file name or a latentrl.scene/1 object, "
+                        f"got {type(value).__name__}")
+    if isinstance(value, str) and base is not None and (base / value).is_file():
+        value = str(base / value)
+    try:
+        scene = resolve_scene(value)
+    except LatentRLError as exc:
+        raise DataError(f"{where}: field 'scene': {exc}") from None
+    if not isinstance(scene, Scene):
+        raise DataError(f"{where}: field 'scene' must be a fixed scene (random_obstacles is an env setting)")
+    return scene
+
+
+def _parse_path(item: Any, where: str, base: Path | None = None) -> WaypointPath:
     if not isinstance(item, dict):
         raise DataError(f"{where}: expected an object with fields {list(_PATH_FIELDS)}, got {type(item).__name__}")
     for key in item:
-        if key not in _PATH_FIELDS:
+        if key not in _PATH_FIELDS + _OPTIONAL_FIELDS:
             raise DataError(
-                f"{where}: unknown field '{key}'{closest(key, _PATH_FIELDS)}; expected {list(_PATH_FIELDS)}"
+                f"{where}: unknown field '{key}'{closest(key, _PATH_FIELDS + _OPTIONAL_FIELDS)}; expected "
+                f"{list(_PATH_FIELDS)} and optionally {list(_OPTIONAL_FIELDS)}"
             )
     for key in _PATH_FIELDS:
         if key not in item:
@@ -106,7 +135,8 @@ def _parse_path(item: Any, where: str) -> WaypointPath:
         if prompt_problem(text) is not None:
             raise DataError(f"{where}, waypoint {j}: field 'goal_text': {prompt_problem(text)}")
         waypoints.append(tuple(float(v) for v in point))
-    return WaypointPath(tuple(waypoints), tuple(texts))
+    scene = _parse_scene(item["scene"], where, base) if item.get("scene") is not None else None
+    return WaypointPath(tuple(waypoints), tuple(texts), scene)
 
 
 class FollowPathEnv(LatentMotionVectorEnv):

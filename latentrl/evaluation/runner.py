@@ -118,7 +118,14 @@ def make_env(
     max_steps: int | None = None,
     record_features: bool = False,
 ) -> FollowPathEnv:
-    """The evaluation env: env i follows path ``i % len(paths)``, no autoreset, DART's clips and thresholds."""
+    """The evaluation env: env i follows path ``i % len(paths)``, no autoreset, DART's clips and thresholds.
+
+    The scene is the first path's own (its ``scene`` field) when it has one, else ``settings.scene``; the policy
+    observes it only if it was trained with a scene (``settings.scene`` set).
+    """
+    scene = paths[0].scene if paths[0].scene is not None else (
+        resolve_scene(settings.scene) if settings.scene is not None else None)
+    observe = settings.observe_scene and settings.scene is not None
     return FollowPathEnv(
         num_envs,
         motion=motion,
@@ -134,8 +141,7 @@ def make_env(
         **settings.motion_kwargs(),
         record_history=record_history,
         record_features=record_features,
-        **({"scene": resolve_scene(settings.scene), "observe_scene": settings.observe_scene}
-           if settings.scene is not None else {}),
+        **({"scene": scene, "observe_scene": observe} if scene is not None else {}),
     )
 
 
@@ -227,7 +233,8 @@ def load_suites(files: Sequence[str | Path], text: str | None = None) -> list[tu
     """
     loaded = [(Path(f), load_paths(f)) for f in files]
     if text is not None:
-        loaded = [(f, [WaypointPath(p.waypoints, (text,) * len(p.waypoints)) for p in paths]) for f, paths in loaded]
+        loaded = [(f, [WaypointPath(p.waypoints, (text,) * len(p.waypoints), p.scene) for p in paths])
+                  for f, paths in loaded]
     return loaded
 
 
