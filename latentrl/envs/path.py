@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,7 @@ class WaypointPath:
 
     waypoints: tuple[tuple[float, float, float], ...]
     texts: tuple[str, ...]
-    scene: Any = None
+    scene: Any = field(default=None, kw_only=True)
     """The :class:`~latentrl.scenes.Scene` the path runs in (its ``"scene"`` field); None: the evaluation's own."""
 
 
@@ -136,7 +136,7 @@ def _parse_path(item: Any, where: str, base: Path | None = None) -> WaypointPath
             raise DataError(f"{where}, waypoint {j}: field 'goal_text': {prompt_problem(text)}")
         waypoints.append(tuple(float(v) for v in point))
     scene = _parse_scene(item["scene"], where, base) if item.get("scene") is not None else None
-    return WaypointPath(tuple(waypoints), tuple(texts), scene)
+    return WaypointPath(tuple(waypoints), tuple(texts), scene=scene)
 
 
 class FollowPathEnv(LatentMotionVectorEnv):
