@@ -51,10 +51,11 @@ from latentrl.envs.episode_state import (
 from latentrl.envs.goal import goal_features
 from latentrl.envs.history import HistoryRecorder, RecordedEpisodes
 from latentrl.envs.observation import ObservationLayout, observe
-from latentrl.envs.scene import env_scene
+from latentrl.envs.scene import HEIGHT_GRID_SPACING_M, env_scene, grid_offsets, height_grid_problem
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.task_hooks import TaskHooks
 from latentrl.envs.texts import TextTable
+from latentrl.errors import ConfigError
 from latentrl.motion.canonical import features_to_world, world_to_canonical
 from latentrl.motion.prior import MotionPrior, load_prior
 from latentrl.motion.representation import joints_of
@@ -101,6 +102,9 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
             inside its skin radius of one ends the episode. A scene adds the ``scene_rays`` observation group
             (unless ``observe_scene`` is False: a policy trained without a scene, evaluated among objects) and the
             ``collision`` and ``terrain_contact`` reward terms (docs/scenes.md).
+        height_grid, height_grid_spacing: with a scene, also observe the terrain on a ``height_grid`` x
+            ``height_grid`` grid of samples ``height_grid_spacing`` metres apart around the pelvis, in the body
+            frame (the ``scene_height_grid`` group; 0: none, the default).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -141,6 +145,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         scene: Any = None,
         terminate_on_collision: bool = False,
         observe_scene: bool = True,
+        height_grid: int = 0,
+        height_grid_spacing: float = HEIGHT_GRID_SPACING_M,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -184,6 +190,14 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         self.observe_scene = self.scene is not None and bool(observe_scene)
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
                 "needs a scene")
+        problem = height_grid_problem(height_grid, height_grid_spacing)
+        if problem is not None:
+            raise ConfigError(problem)
+        require(self.scene is not None or not height_grid, "height_grid", "needs a scene")
+        self.height_grid = int(height_grid) if self.observe_scene else 0
+        self.height_grid_spacing = float(height_grid_spacing)
+        self._grid_offsets = grid_offsets(self.height_grid, self.height_grid_spacing, self.device) \
+            if self.height_grid else None
         self.rewards = RewardComposer(reward_config, reward_weights,
                                       terms=self.reward_terms + (SCENE_TERMS if self.scene is not None else ()))
         if isinstance(texts, str):
@@ -208,7 +222,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
     # ------------------------------------------------------------------ construction
     def _setup_spaces(self) -> None:
         self._obs = ObservationLayout(self.goal_fields, self.text_table.dim,
-                                      self.scene.num_rays if self.observe_scene else 0)
+                                      self.scene.num_rays if self.observe_scene else 0, self.height_grid ** 2)
         bound, latent = self.step_settings.action_bound, self.motion.latent_dim
         self.single_action_space = gym.spaces.Box(-bound, bound, (latent,), np.float32)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (self._obs.size,), np.float32)
@@ -410,7 +424,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         history_world = state.world.apply(joints_of(state.history))
         return observe(state.history, history_world, self._goal_observation(history_world),
                        self.text_table.embeddings[self._text_idx], self.floor_height,
-                       self.scene.rays(history_world) if self.observe_scene else None)
+                       self.scene.rays(history_world) if self.observe_scene else None,
+                       self.scene.height_grid(history_world, self._grid_offsets) if self.height_grid else None)
 
     def _goal_features(self, history_world: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """(N, 4) :func:`goal_features` of ``goal`` with this env's clips."""

@@ -28,7 +28,7 @@ from latentrl.config import apply_aliases, require
 from latentrl.constants import ACTION_BOUND, GUIDANCE_SCALE
 from latentrl.envs.path import next_at_last_problem
 from latentrl.envs.reach_joint import ReachJointConfig
-from latentrl.envs.scene import resolve_scene
+from latentrl.envs.scene import HEIGHT_GRID_SPACING_M, height_grid_problem, resolve_scene
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.tasks import TASKS, task_spec
 from latentrl.errors import ConfigError, LatentRLError, closest
@@ -240,6 +240,11 @@ class EnvConfig:
     ``{random_obstacles: {count: [3, 8], ...}}`` drawn per episode; None: the flat floor alone."""
     terminate_on_collision: bool = False
     """With a scene: end an episode when a joint comes inside its skin radius of an object."""
+    height_grid: int = 0
+    """With a scene: also observe the terrain on a k x k grid around the pelvis (``scene_height_grid``, odd k in
+    [3, 15]); 0: no grid."""
+    height_grid_spacing: float = HEIGHT_GRID_SPACING_M
+    """Metres between neighbouring samples of the height grid."""
 
     def validate(self) -> None:
         """Every field in range: a registered task (and its ``options``), sizes, step settings, texts, weights."""
@@ -269,6 +274,10 @@ class EnvConfig:
                     f"{closest(name, tuple(REWARD_TERMS))}; known: {', '.join(REWARD_TERMS)}")
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
                 "needs a scene (env.scene)")
+        problem = height_grid_problem(self.height_grid, self.height_grid_spacing)
+        if problem is not None:
+            raise ConfigError(problem)
+        require(self.scene is not None or not self.height_grid, "height_grid", "needs a scene (env.scene)")
         if self.scene is not None:
             try:
                 self.scene_spec()
@@ -325,6 +334,8 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
         common["max_episode_steps"] = cfg.max_episode_steps
     if cfg.scene is not None:  # flat-floor envs get exactly the arguments they always had
         common.update(scene=cfg.scene_spec(), terminate_on_collision=cfg.terminate_on_collision)
+        if cfg.height_grid:
+            common.update(height_grid=cfg.height_grid, height_grid_spacing=cfg.height_grid_spacing)
     common.update(extra)
     return task_spec(cfg.task).env_class()(cfg.num_envs, **cfg.section.kwargs(), **common)
 

@@ -2,7 +2,8 @@
 
 An observation is ``[goal | text | motion | scene]``: the task's goal fields, the prompt embedding,
 the canonical 2-frame history and the pelvis height above the floor; an env with a scene appends
-``scene_rays``, the distances to the objects around (:mod:`latentrl.envs.scene`). The env and the exported ONNX
+``scene_rays``, the distances to the objects around, and optionally ``scene_height_grid``, the terrain around
+the pelvis (:mod:`latentrl.envs.scene`). The env and the exported ONNX
 controller (:mod:`latentrl.export.onnx`) both build it with :func:`observe`, so a policy sees the same
 vector in both.
 """
@@ -25,11 +26,12 @@ class ObservationLayout:
         goal_fields: the task's ``(name, size)`` goal fields, in order.
         text_dim: E, the size of a prompt embedding.
         rays: R, the scene rays (0: no scene, no ``scene_rays`` group).
+        grid: K, the samples of the local height grid (0: no ``scene_height_grid`` group).
     """
 
-    def __init__(self, goal_fields: Sequence[tuple[str, int]], text_dim: int, rays: int = 0):
+    def __init__(self, goal_fields: Sequence[tuple[str, int]], text_dim: int, rays: int = 0, grid: int = 0):
         named = (*goal_fields, ("text", text_dim), ("motion", HISTORY_LENGTH * FEATURE_DIM), ("scene", 1),
-                 *((("scene_rays", rays),) if rays else ()))
+                 *((("scene_rays", rays),) if rays else ()), *((("scene_height_grid", grid),) if grid else ()))
         self.fields: OrderedDict[str, tuple[int, int]] = OrderedDict()
         """Field name -> ``[start, stop)``: the goal fields, text, motion, scene."""
         start = 0
@@ -40,19 +42,24 @@ class ObservationLayout:
         """Length of the observation vector."""
         goal_stop = self.fields[goal_fields[-1][0]][1]
         self.groups: OrderedDict[str, tuple[int, int]] = OrderedDict(
-            goal=(0, goal_stop), **{k: self.fields[k] for k in ("text", "motion", "scene", "scene_rays")
-                                    if k in self.fields})
-        """Group name -> ``[start, stop)``: goal, text, motion, scene[, scene_rays] (what trainers split by)."""
+            goal=(0, goal_stop), **{k: self.fields[k] for k in ("text", "motion", "scene", "scene_rays",
+                                                                "scene_height_grid") if k in self.fields})
+        """Group name -> ``[start, stop)``: goal, text, motion, scene[, scene_rays][, scene_height_grid] (what trainers
+        split by)."""
 
 
 def observe(history: torch.Tensor, history_world: torch.Tensor, goal: torch.Tensor, text: torch.Tensor,
-            floor_height: float, rays: torch.Tensor | None = None) -> torch.Tensor:
-    """(N, obs_dim) float32 ``[goal | text | motion | scene[ | scene_rays]]``.
+            floor_height: float, rays: torch.Tensor | None = None, grid: torch.Tensor | None = None) -> torch.Tensor:
+    """(N, obs_dim) float32 ``[goal | text | motion | scene[ | scene_rays][ | scene_height_grid]]``.
 
     ``history`` (N, 2, 276) canonical features, ``history_world`` (N, 2, 22, 3) their world joints,
     ``goal`` (N, G) the task's goal observation, ``text`` (N, E) the prompt embeddings, ``rays`` (N, R) the
-    scene's ray distances (None: no scene).
+    scene's ray distances (None: no scene), ``grid`` (N, K) the local height grid (None: none).
     """
     scene = floor_height - history_world[:, 0, PELVIS, 2:3]
     parts = (goal, text, history.reshape(history.shape[0], -1), scene)
-    return torch.cat(parts if rays is None else (*parts, rays.to(scene.dtype)), dim=1)
+    if rays is not None:
+        parts = (*parts, rays.to(scene.dtype))
+    if grid is not None:
+        parts = (*parts, grid.to(scene.dtype))
+    return torch.cat(parts, dim=1)

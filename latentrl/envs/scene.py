@@ -5,7 +5,8 @@ when a scene is set and None otherwise, so a flat-floor env runs exactly the cod
 With a scene, :attr:`EnvScene.batch` is also the terrain each step's floor snap places the motion on.
 The scene observation (``scene_rays``) is :data:`NUM_RAYS` horizontal distances from the pelvis of the last
 history frame over the front half-plane, right (-90 degrees) to left (+90 degrees) of the body's forward axis,
-in metres clipped at :data:`RAY_RANGE_M`.
+in metres clipped at :data:`RAY_RANGE_M`. The optional local height grid (``scene_height_grid``, off by default)
+is the terrain around the same pelvis on a k x k grid in the body frame (:meth:`EnvScene.height_grid`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,23 @@ from latentrl.scenes.spec import load_scene, parse_scene
 
 NUM_RAYS = 16
 RAY_RANGE_M = 4.0
+HEIGHT_GRID_SPACING_M = 0.25
+"""Default distance between neighbouring samples of the height grid, metres."""
+HEIGHT_GRID_CLIP_M = 1.0
+"""Height-grid values are clipped to +/- this (a wall reads +1 m, as a tall step would)."""
+MAX_HEIGHT_GRID = 15
+"""Largest height-grid side (samples per row)."""
+
+
+def height_grid_problem(size: object, spacing: object) -> str | None:
+    """Why (``size``, ``spacing``) cannot be a height grid (0 = none, else an odd side 3..15, spacing in (0, 2] m)."""
+    if isinstance(size, bool) or not isinstance(size, int) or not (size == 0 or (3 <= size <= MAX_HEIGHT_GRID
+                                                                                 and size % 2 == 1)):
+        return f"height_grid: expected 0 (none) or an odd number of samples per side in [3, {MAX_HEIGHT_GRID}], " \
+               f"got {size!r:.30}"
+    if isinstance(spacing, bool) or not isinstance(spacing, (int, float)) or not 0 < spacing <= 2.0:
+        return f"height_grid_spacing: expected metres in (0, 2], got {spacing!r:.30}"
+    return None
 
 
 def scene_spec(value: Any) -> Scene | RandomObstacles | None:
@@ -115,12 +133,50 @@ class EnvScene:
             objects.append(Cylinder((x, y), r, 2 * hh, z - hh))
         return Scene(tuple(objects), self.floor_height)
 
+    def replace(self, scene: Scene) -> None:
+        """Put ``scene`` in place of a fixed scene, for every env from the next step on.
+
+        Why: ``latentrl play`` drops boxes while the policy walks; collisions, contact, the floor snap and the
+        ``scene_rays`` observation all read :attr:`batch`, so they see the new objects at once. Random obstacles
+        are drawn per episode and are not replaced.
+        """
+        if self.random:
+            raise ConfigError("scene: random obstacles are drawn per episode; only a fixed scene can be replaced")
+        device = self.batch.floor_height.device
+        self.spec = scene
+        self.batch = SceneBatch.from_scenes([scene], device)
+
     def rays(self, history_world: torch.Tensor) -> torch.Tensor:
         """(N, NUM_RAYS) distances from the last history frame's pelvis, right to left, clipped at RAY_RANGE_M."""
         forward, _ = body_forward(history_world[:, -1])
         fx, fy = forward[:, :1], forward[:, 1:2]
         dirs = torch.stack((self._cos * fx - self._sin * fy, self._sin * fx + self._cos * fy), dim=-1)  # (N, R, 2)
         return self.batch.rays(history_world[:, -1, PELVIS, :2], dirs, RAY_RANGE_M)
+
+    def height_grid(self, history_world: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
+        """(N, K) terrain height at ``offsets`` (K, 2) (:func:`grid_offsets`) around the last history frame's pelvis.
+
+        Each value is the terrain under the sample minus the terrain under the pelvis (the ground the body stands
+        on or sits over), metres, clipped to +/- :data:`HEIGHT_GRID_CLIP_M`: a step up ahead reads +riser.
+        """
+        forward, pelvis = body_forward(history_world[:, -1])
+        fx, fy = forward[:, None, 0], forward[:, None, 1]
+        a, b = offsets[None, :, 0], offsets[None, :, 1]
+        xy = torch.stack((pelvis[:, None, 0] + a * fx - b * fy, pelvis[:, None, 1] + a * fy + b * fx), dim=-1)
+        ground = self.batch.height(torch.cat((pelvis[:, None, :2], xy), dim=1))  # (N, 1 + K)
+        return (ground[:, 1:] - ground[:, :1]).clamp(-HEIGHT_GRID_CLIP_M, HEIGHT_GRID_CLIP_M)
+
+
+def grid_offsets(size: int, spacing: float, device: torch.device | str = "cpu") -> torch.Tensor:
+    """(size * size, 2) body-frame offsets (forward, left) of the height grid, metres.
+
+    Row-major: rows run from behind the pelvis to in front of it along the forward axis, and within a row the
+    samples run from right to left (as the rays do); the middle sample is the pelvis itself.
+    """
+    half = (size - 1) / 2
+    steps = (torch.arange(size, dtype=torch.float32, device=device) - half) * spacing
+    fwd, left = torch.meshgrid(steps, steps, indexing="ij")
+    return torch.stack((fwd.reshape(-1), left.reshape(-1)), dim=-1)
 
 
 def env_scene(value: Any, num_envs: int, device: torch.device, floor_height: float) -> EnvScene | None:

@@ -94,6 +94,10 @@ class EvalSettings(StepSettings):
     None: the flat floor."""
     observe_scene: bool = True
     """Whether the policy observes the scene (False: a policy trained without one, evaluated among objects)."""
+    height_grid: int = 0
+    """The policy's local height grid (``env.height_grid``; 0: none), observed with the scene."""
+    height_grid_spacing: float = 0.25
+    """Its sample spacing, metres (``env.height_grid_spacing``)."""
 
     def take_training_env(self, env_cfg: Any) -> None:
         """Step the motion as the policy's training env did (its :class:`StepSettings`; None: the defaults).
@@ -105,6 +109,8 @@ class EvalSettings(StepSettings):
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
         self.scene = getattr(env_cfg, "scene", None)
         self.observe_scene = True
+        self.height_grid = int(getattr(env_cfg, "height_grid", 0) or 0)
+        self.height_grid_spacing = float(getattr(env_cfg, "height_grid_spacing", 0.25))
 
     def take_eval_config(self, eval_cfg: Any) -> None:
         """The ``eval:`` section's deployment choices that differ from training (``foot_lock_min_weight``)."""

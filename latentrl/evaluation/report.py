@@ -186,7 +186,8 @@ def build_report(
         "policy": policy,
         "motion": motion,
         "settings": {**{k: v for k, v in asdict(settings).items()
-                        if k not in ("scene", "observe_scene") or settings.scene is not None}, "fps": FPS,
+                        if k not in ("scene", "observe_scene", "height_grid", "height_grid_spacing")
+                        or settings.scene is not None}, "fps": FPS,
                      "budget_s": settings.budget_s, "files": [s.file for s in suites]},
         "hardware": hardware or {},
         "speed": speed or {},
@@ -224,6 +225,12 @@ def write_report(out_dir: str | Path, report: dict[str, Any]) -> tuple[Path, Pat
     return js, md
 
 
+MAX_REPORT_BYTES = 64 << 20
+"""Largest ``report.json`` read (65,536 episodes of 100 paths stay far below it)."""
+EPISODE_NUMBERS = ("reach_time_s", "skate_cm_s", "floor_cm", "steps", "final_dist_m", "goal_error_cm")
+"""Per-episode fields that must be numbers or null (what ``view`` and ``compare`` show)."""
+
+
 def load_report(path: str | Path) -> dict[str, Any]:
     """Read a ``report.json`` (or a folder holding one); errors name the file and what is wrong."""
     path = Path(path)
@@ -231,10 +238,13 @@ def load_report(path: str | Path) -> dict[str, Any]:
         path = path / REPORT_JSON
     if not path.is_file():
         raise DataError(f"report not found: {path} (give a report.json or the eval output folder)")
+    if path.stat().st_size > MAX_REPORT_BYTES:
+        raise DataError(f"{path}: {path.stat().st_size:,} bytes is larger than the {MAX_REPORT_BYTES >> 20} MiB "
+                        "a report may have")
     try:
         report = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: not a JSON report ({str(exc)[:120]})") from None
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise DataError(f"{path}: not a JSON report ({str(exc)[:120] or 'nested too deeply'})") from None
     if not isinstance(report, dict) or report.get("format") != FORMAT:
         found = report.get("format") if isinstance(report, dict) else type(report).__name__
         raise DataError(f"{path}: not a latentrl evaluation report (format {found!r}, expected {FORMAT!r})")
@@ -264,15 +274,51 @@ def _check_report(report: dict, path: Path) -> None:
                 need(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)),
                      f"{field}.metrics.{key}.{part}", "a number or null", v)
 
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    def episode(ep: Any, field: str) -> None:
+        need(isinstance(ep, dict), field, "an object", ep)
+        e = ep.get("episode", 0)
+        need(isinstance(e, int) and not isinstance(e, bool) and 0 <= e <= 10**9, f"{field}.episode",
+             "an integer >= 0", e)
+        motion = ep.get("motion")
+        need(motion is None or isinstance(motion, str), f"{field}.motion", "null or a file name", motion)
+        if motion is not None and (Path(motion).is_absolute() or ".." in Path(motion).parts):
+            raise DataError(f"{path}: field '{field}.motion' {motion[:80]!r} points outside the report's folder")
+        need(ep.get("success") is None or isinstance(ep.get("success"), bool), f"{field}.success",
+             "true, false or null", ep.get("success"))
+        need(ep.get("end") is None or isinstance(ep.get("end"), str), f"{field}.end", "a string or null", ep.get("end"))
+        for key in EPISODE_NUMBERS:  # NaN stays allowed (older reports wrote it for undefined values)
+            v = ep.get(key)
+            need(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)), f"{field}.{key}",
+                 "a number or null", v)
+
+    def path_entry(p: Any, field: str) -> None:
+        metrics(p, field)
+        index = p.get("index", 0)
+        need(isinstance(index, int) and not isinstance(index, bool), f"{field}.index", "an integer", index)
+        wps = p.get("waypoints", [])
+        need(isinstance(wps, list) and all(isinstance(w, list) and len(w) == 3 and all(number(x) for x in w)
+                                           for w in wps), f"{field}.waypoints", "a list of [x, y, z] finite numbers",
+             wps)
+        eps = p.get("episodes", [])
+        need(isinstance(eps, list), f"{field}.episodes", "a list", eps)
+        for j, ep in enumerate(eps):
+            episode(ep, f"{field}.episodes.{j}")
+
     need(isinstance(report["settings"], dict), "settings", "an object", report["settings"])
     need(isinstance(report["suites"], dict), "suites", "an object of suites", report["suites"])
+    policy = report.get("policy")
+    need(policy is None or (isinstance(policy, dict) and isinstance(policy.get("path", ""), str)), "policy",
+         "an object whose 'path' is a string", policy)
     metrics(report["overall"], "overall")
     for name, suite in report["suites"].items():
         metrics(suite, f"suites.{name}")
         paths = suite.get("paths", [])
         need(isinstance(paths, list), f"suites.{name}.paths", "a list", paths)
         for i, p in enumerate(paths):
-            metrics(p, f"suites.{name}.paths.{i}")
+            path_entry(p, f"suites.{name}.paths.{i}")
 
 
 # --------------------------------------------------------------------------- report.md

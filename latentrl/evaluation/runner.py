@@ -142,6 +142,8 @@ def make_env(
         record_history=record_history,
         record_features=record_features,
         **({"scene": scene, "observe_scene": observe} if scene is not None else {}),
+        **({"height_grid": settings.height_grid, "height_grid_spacing": settings.height_grid_spacing}
+           if scene is not None and observe and settings.height_grid else {}),
     )
 
 
@@ -233,7 +235,7 @@ def load_suites(files: Sequence[str | Path], text: str | None = None) -> list[tu
     """
     loaded = [(Path(f), load_paths(f)) for f in files]
     if text is not None:
-        loaded = [(f, [WaypointPath(p.waypoints, (text,) * len(p.waypoints), p.scene) for p in paths])
+        loaded = [(f, [WaypointPath(p.waypoints, (text,) * len(p.waypoints), scene=p.scene) for p in paths])
                   for f, paths in loaded]
     return loaded
 
