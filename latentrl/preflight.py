@@ -228,6 +228,8 @@ def locked_output(folder: str | Path, what: str = "--out folder") -> Iterator[Ne
     A second ``eval`` or ``optimize`` writing into the same folder is refused at once in one line
     naming the folder and the PID that holds it, and never removes that holder's folder.
     """
+    from latentrl.safe_io import remove_temporaries  # torch-heavy; preflight's other checks stay light
+
     lock = RunLock(folder, what=what, hint="wait for it to finish or choose another --out")
     with NewOutput(folder) as output:
         try:
@@ -236,4 +238,5 @@ def locked_output(folder: str | Path, what: str = "--out folder") -> Iterator[Ne
             output.keep()  # the folder belongs to the process holding the lock
             raise
         with lock:
+            remove_temporaries(folder)  # what a killed writer of this folder left half-written
             yield output

@@ -112,6 +112,29 @@ def atomic_write_with(path: str | Path, write: Callable[[Path], Any]) -> Path:
     return path
 
 
+_TEMPORARY = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp(\.[A-Za-z0-9]{1,8})?$")
+"""The names :func:`_replacing` gives its temporary files: ``.<name>.<8 random characters>.tmp[.<suffix>]``."""
+
+
+def remove_temporaries(folder: str | Path) -> list[Path]:
+    """Delete the temporary files that atomic writes killed mid-way (SIGKILL) left in ``folder`` and its subfolders.
+
+    Only names of :func:`_replacing`'s pattern, one folder level deep (an output folder's ``motions/``,
+    ``renders/``). Call it only while holding the folder's lock: a live writer's file must not vanish.
+    """
+    folder = Path(folder)
+    if not folder.is_dir() or folder.is_symlink():
+        return []
+    removed = []
+    for sub in [folder, *(d for d in folder.iterdir() if d.is_dir() and not d.is_symlink())]:
+        for path in sub.iterdir():
+            if _TEMPORARY.match(path.name) and path.is_file() and not path.is_symlink():
+                with contextlib.suppress(OSError):
+                    path.unlink()
+                    removed.append(path)
+    return removed
+
+
 def open_no_follow(path: str | Path, flags: int, what: str = "file", mode: int = 0o644) -> int:
     """``os.open(path, flags | O_NOFOLLOW)`` for a file written in place; ``ConfigError`` if it is not a plain file.
 

@@ -10,6 +10,21 @@ PARITY = SHARED / "reference" / "dart_parity_A"
 
 
 
+def pytest_addoption(parser):
+    parser.addoption("--kills", type=int, default=None, metavar="N",
+                     help="tests/test_kill_loop.py: SIGKILLs per command (train, eval, optimize, motion train); "
+                          "default: the CI counts; 50 for the full loop (docs/robustness.md)")
+
+
+@pytest.fixture(scope="session")
+def kill_count(request) -> int | None:
+    """``--kills N`` (the kill loop's count per command), or None for each loop's CI count."""
+    count = request.config.getoption("--kills")
+    if count is not None and count < 1:
+        raise pytest.UsageError(f"--kills {count}: expected a count >= 1")
+    return count
+
+
 @pytest.fixture(scope="session")
 def parity_dir() -> Path:
     if not (PARITY / "expected.pt").is_file():

@@ -2,8 +2,9 @@
 
 After every kill: every checkpoint file on disk loads (a write is never visible half-done), and the next
 ``--resume`` starts exactly at the newest of them, so env-step counters never go backwards; the run then
-finishes. CI runs ``KILLS_CI`` kills; ``LATENTRL_FULL_KILL_LOOP=1`` runs ``KILLS_FULL`` (docs/robustness.md).
-``motion train`` and ``optimize`` get the same treatment, and the SB3 trainer two real Ctrl-Cs.
+finishes. CI runs ``KILLS_CI`` kills; ``pytest --kills N`` runs N per command (the full loop: 50,
+docs/robustness.md). ``motion train``, ``eval`` and ``optimize`` get the same treatment, and the SB3 trainer two
+real Ctrl-Cs.
 """
 
 import json
@@ -24,8 +25,7 @@ from tests.helpers import make_tiny_model
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ROOT / "configs" / "tiny.yaml"
-KILLS_CI, KILLS_FULL = 5, 50
-FULL = os.environ.get("LATENTRL_FULL_KILL_LOOP") == "1"
+KILLS_CI = 5
 START = re.compile(r"trainer: start at iteration (\d+), (\d+) env steps")
 MODES = ("write", "random", "launch")
 """How a cycle picks its moment: at the next temporary checkpoint file seen after a random delay (inside
@@ -65,8 +65,9 @@ def motion_file(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_sigkill_at_random_moments_always_resumes_from_the_newest_complete_checkpoint(motion_file, tmp_path):
-    kills = KILLS_FULL if FULL else KILLS_CI
+def test_sigkill_at_random_moments_always_resumes_from_the_newest_complete_checkpoint(motion_file, tmp_path,
+                                                                                     kill_count):
+    kills = kill_count or KILLS_CI
     rng = random.Random(7)
     run, logs = tmp_path / "run", tmp_path / "logs"
     logs.mkdir()
@@ -121,7 +122,7 @@ def test_sigkill_at_random_moments_always_resumes_from_the_newest_complete_check
         assert report["during_write"] >= 1, f"no kill landed inside a checkpoint write: {report}"
 
 
-MOTION_KILLS_CI, MOTION_KILLS_FULL = 2, 10
+MOTION_KILLS_CI = 2
 MTINY = ROOT / "configs" / "motion" / "tiny.yaml"
 MOTION_STEP = re.compile(r"^(vae|denoiser) step (\d+):", re.M)
 STAGES = ("vae", "denoiser")
@@ -139,8 +140,8 @@ def motion_progress(run: Path) -> tuple[int, int]:
 
 
 @pytest.mark.slow
-def test_sigkill_motion_training_resumes_from_its_last_state(tmp_path):
-    kills = MOTION_KILLS_FULL if FULL else MOTION_KILLS_CI
+def test_sigkill_motion_training_resumes_from_its_last_state(tmp_path, kill_count):
+    kills = kill_count or MOTION_KILLS_CI
     steps = 4 * kills + 6  # per stage
     rng = random.Random(11)
     run, logs = tmp_path / "run", tmp_path / "logs"
@@ -242,7 +243,7 @@ def test_ctrl_c_twice_on_the_sb3_trainer_exits_130_cleanly_and_the_run_resumes(s
             resumed.wait()
 
 
-OPTIMIZE_KILLS_CI, OPTIMIZE_KILLS_FULL = 3, 10
+OPTIMIZE_KILLS_CI = 3
 
 
 def optimize_argv(tmp_path: Path, motion_file: Path, problems: int) -> list[str]:
@@ -257,23 +258,24 @@ def optimize_argv(tmp_path: Path, motion_file: Path, problems: int) -> list[str]
 
 
 @pytest.mark.slow
-def test_optimize_killed_or_interrupted_then_run_again_leaves_only_whole_files(motion_file, tmp_path):
+def test_optimize_killed_or_interrupted_then_run_again_leaves_only_whole_files(motion_file, tmp_path, kill_count):
     """SIGKILL (and one SIGINT) of ``latentrl optimize`` at random moments; every file it left is whole, and the
     same command run again into the same ``--out`` finishes (the lock died with the process)."""
     from latentrl.motion.clip import load_motion_npz
 
-    kills = OPTIMIZE_KILLS_FULL if FULL else OPTIMIZE_KILLS_CI
+    kills = kill_count or OPTIMIZE_KILLS_CI
     rng = random.Random(5)
     out = tmp_path / "out"
     argv = optimize_argv(tmp_path, motion_file, problems=6)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
 
-    def whole() -> None:
+    def whole(final: bool = False) -> None:
         if (out / "report.json").is_file():
             json.loads((out / "report.json").read_text())
         for motion in (out / "motions").glob("*.npz") if (out / "motions").is_dir() else []:
             load_motion_npz(motion)
-        assert not [p for p in out.rglob(".*.tmp")], "a temporary file was left"
+        if final:  # a kill inside a write leaves its temporary file; the next run removes it
+            assert not [p for p in out.rglob(".*.tmp*")], "a temporary file was left"
 
     landed = 0
     for i in range(kills):
@@ -292,8 +294,85 @@ def test_optimize_killed_or_interrupted_then_run_again_leaves_only_whole_files(m
         whole()
     done = subprocess.run([*argv, "--steps", "3"], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
     assert done.returncode == 0, done.stderr
-    whole()
+    whole(final=True)
     report = json.loads((out / "report.json").read_text())
     assert sorted(p.stem for p in (out / "motions").glob("*.npz")) == [f"p{i}" for i in range(6)], report.keys()
     print(json.dumps({"optimize_signals": kills, "while_running": landed}))
     assert landed >= 1, "no signal reached a running optimize"
+
+
+EVAL_KILLS_CI = 3
+EVAL_PATHS = 8
+
+
+def _eval_outputs_whole(out: Path) -> int:
+    """Check what ``latentrl eval`` left in ``out``: no report or a valid one (and its plot and motions load);
+    returns how many paths the report holds (0 without one)."""
+    from PIL import Image
+
+    from latentrl.evaluation.report import load_report
+    from latentrl.motion.clip import load_motion_npz
+
+    paths = 0
+    if (out / "report.json").is_file():
+        report = load_report(out / "report.json")
+        paths = sum(len(suite["paths"]) for suite in report["suites"].values())
+        assert 1 <= paths <= EVAL_PATHS, paths
+    if (out / "paths.png").is_file():
+        with Image.open(out / "paths.png") as png:
+            png.load()
+    for motion in (out / "motions").glob("*.npz") if (out / "motions").is_dir() else []:
+        load_motion_npz(motion)
+    return paths
+
+
+@pytest.mark.slow
+def test_eval_killed_at_random_moments_leaves_no_report_or_a_valid_one_and_a_rerun_completes(eval_files, tmp_path,
+                                                                                           kill_count):
+    """SIGKILL of ``latentrl eval`` at random moments (half of them inside a file write): the report it left is
+    absent or loads, with the paths finished so far; plots and motions load; the same command into the same
+    ``--out`` then finishes, removes the temporary files killed writes left and reports every path."""
+    from latentrl.evaluation.report import load_report
+
+    kills = kill_count or EVAL_KILLS_CI
+    rng = random.Random(13)
+    out = tmp_path / "out"
+    suite = tmp_path / "paths.json"
+    suite.write_text(json.dumps([{"goal_location": [[0.0, 0.0, 0.0], [0.0, 40.0 + i, 0.0]],
+                                  "goal_text": ["walk", "walk"]} for i in range(EVAL_PATHS)]))
+    argv = [sys.executable, "-m", "latentrl", "eval", str(eval_files["policy"]), "--motion",
+            str(eval_files["motion"]), "--paths", str(suite), "--episodes", "2", "--max-steps", "6", "--out", str(out),
+            "--no-progress"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    report = {"eval_kills": 0, "during_write": 0, "finished_before_kill": 0, "with_report": 0}
+
+    def temporaries_left() -> list[Path]:
+        return [p for p in out.rglob(".*.tmp*")] if out.is_dir() else []
+
+    for i in range(kills):
+        proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=tmp_path)
+        # the lock file stays after a kill: wait for this process to hold it (its PID written there)
+        wait_for(lambda: (out / ".lock").is_file() and (out / ".lock").read_text().strip() == str(proc.pid), proc)  # noqa: B023
+        time.sleep(rng.uniform(0.0, 3.0))
+        if i % 2 == 0:
+            before = set(temporaries_left())
+            wait_for(lambda: bool(set(temporaries_left()) - before), proc)  # noqa: B023 - inside a write
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGKILL)
+            report["eval_kills"] += 1
+        else:
+            report["finished_before_kill"] += 1
+        proc.wait(timeout=120)
+        err = proc.stderr.read().decode()
+        assert "Traceback" not in err, err
+        report["during_write"] += bool(temporaries_left())
+        report["with_report"] += _eval_outputs_whole(out) > 0
+    done = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert _eval_outputs_whole(out) == EVAL_PATHS
+    assert not temporaries_left(), f"temporary files were left: {temporaries_left()}"
+    final = load_report(out / "report.json")
+    assert all(len(p["episodes"]) == 2 for s in final["suites"].values() for p in s["paths"])
+    assert len(list((out / "motions").glob("*.npz"))) == 2 * EVAL_PATHS
+    print(json.dumps(report))
+    assert report["eval_kills"] >= 1, f"no kill reached a running eval: {report}"
