@@ -15,7 +15,6 @@ A YAML config holds values only::
 from __future__ import annotations
 
 import dataclasses
-import subprocess
 import sys
 import time
 from dataclasses import dataclass, field
@@ -163,29 +162,7 @@ def launch(req: TrainRequest) -> int:
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
            "-m", "latentrl", *req.argv()]
     print(f"launching {req.nproc} ranks: {' '.join(cmd[1:])}", flush=True)
-    import signal
-    import threading
-
-    if threading.current_thread() is threading.main_thread():  # Ctrl-C must reach this loop even when the shell
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # started it with SIGINT ignored (as the ranks do)
-    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1)
-    output = distributed.TorchrunOutput()  # the ranks' lines pass; torchrun's report becomes one line below
-    interrupted = False
-    while True:
-        try:
-            for line in proc.stderr:
-                sys.stderr.writelines(output.feed(line))
-                sys.stderr.flush()
-            break
-        except KeyboardInterrupt:
-            if interrupted:  # a second Ctrl-C: stop waiting for the ranks
-                proc.terminate()
-                raise
-            interrupted = True  # Ctrl-C reached every rank too: each saves and stops; keep showing what they say
-    sys.stderr.writelines(output.flush())
-    code = proc.wait()
-    if interrupted:
-        raise KeyboardInterrupt
+    code, output = distributed.run_torchrun(cmd)  # Ctrl-C, SIGTERM or SIGHUP: the ranks save one iteration
     if code:
         run_dir = Path(req.resume or req.run_dir)
         cause = output.cause() or f"a rank failed (torchrun exit {code})"

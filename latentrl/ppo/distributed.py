@@ -25,6 +25,9 @@ import datetime
 import os
 import re
 import signal
+import subprocess
+import sys
+import threading
 from collections.abc import Iterable, Iterator
 from typing import Any
 
@@ -189,6 +192,17 @@ class Collective:
         with self.guard("broadcast_object_list"):
             torch.distributed.broadcast_object_list(box, src=0)
         return box[0]
+
+    def any(self, flag: bool) -> bool:
+        """Whether ``flag`` is true on at least one rank (one small all-reduce): a decision every rank takes alike."""
+        if not self.enabled:
+            return flag
+        nccl = torch.distributed.get_backend() == "nccl"
+        device = torch.device("cuda", torch.cuda.current_device()) if nccl else None
+        value = torch.tensor([int(flag)], dtype=torch.int32, device=device)
+        with self.guard("all_reduce"):
+            torch.distributed.all_reduce(value, op=torch.distributed.ReduceOp.MAX)
+        return bool(value.item())
 
     # ------------------------------------------------------------------ update
     def average_gradients(self, params: Iterable[nn.Parameter]) -> None:
@@ -370,3 +384,43 @@ class TorchrunOutput:
                 name = f"signal {-value}"
             return f"rank {rank.group(1)} was killed by {name}"
         return f"rank {rank.group(1)} exited with code {value}"
+
+
+def run_torchrun(cmd: list[str]) -> tuple[int, TorchrunOutput]:
+    """Run torchrun's ``cmd`` for ``latentrl train --nproc``: its exit code and its filtered stderr.
+
+    torchrun runs in its own session, so the signals that stop a run reach this launcher alone, and the
+    launcher passes the first of them on as one SIGINT: Ctrl-C from a terminal, SIGTERM to its PID (a
+    scheduler's preemption, after :func:`latentrl.interrupts.install`) and SIGHUP (the terminal closed).
+    torchrun then sends each rank SIGINT; the ranks agree on the iteration to stop at (the runner's
+    ``Collective.any``), rank 0 saves it, and this raises ``KeyboardInterrupt`` once torchrun has ended.
+    A second signal stops waiting (torchrun gets SIGTERM). Works even when the shell started the launcher
+    with SIGINT ignored, as the ranks do.
+    """
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if hasattr(signal, "SIGHUP"):
+            signal.signal(signal.SIGHUP, signal.default_int_handler)
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1,
+                            start_new_session=True)
+    output = TorchrunOutput()  # the ranks' lines pass; torchrun's report becomes the caller's one line
+    interrupted = False
+    while True:
+        try:
+            for line in proc.stderr:
+                sys.stderr.writelines(output.feed(line))
+                sys.stderr.flush()
+            break
+        except KeyboardInterrupt:
+            if interrupted:  # a second signal: stop waiting for the ranks
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGTERM)
+                raise
+            interrupted = True  # every rank saves the same iteration and stops; keep showing what they say
+            with contextlib.suppress(ProcessLookupError):  # torchrun may have ended already
+                os.killpg(proc.pid, signal.SIGINT)
+    sys.stderr.writelines(output.flush())
+    code = proc.wait()
+    if interrupted:
+        raise KeyboardInterrupt
+    return code, output

@@ -220,6 +220,9 @@ class Runner:
         self.times: list[IterationTime] = []
         self.stop_requested = False
         self.interrupted = False
+        """Stop after this iteration, saved: decided at the iteration's end, by every rank alike (see ``signalled``)."""
+        self.signalled = False
+        """This process got Ctrl-C or SIGTERM; under torchrun the ranks agree on it at the next iteration end."""
         self.last_checkpoint: Path | None = None
         self.extended_from: int | None = None
         """The run's former ``ppo.total_steps`` when this resume extends it (``--total-steps``), else None."""
@@ -383,6 +386,8 @@ class Runner:
                                + " ".join(f"{n} {v:.4g}" for n, v in self.last_eval.metrics.items()))
             self.stop_requested = self.dist.broadcast_object(self.stop_requested)
         due = cfg.checkpoint_every and k % cfg.checkpoint_every == 0
+        # ranks see a signal in different iterations: all stop at the first iteration end where one has it
+        self.interrupted = self.interrupted or self.dist.any(self.signalled)
         if (due or self.interrupted) and not (last or self.stop_requested):
             self.check_ranks_agree()
             self.save(ckpt.iteration_path(self.run_dir, k))
@@ -415,9 +420,9 @@ def _sigint_deferred(runner: Runner):
         return
 
     def handler(signum, frame):
-        if runner.interrupted:
+        if runner.signalled:
             raise KeyboardInterrupt
-        runner.interrupted = True
+        runner.signalled = True
         print(f"\n{interrupts.signal_name(signum)}: saving a checkpoint after this iteration "
               "(Ctrl-C again to stop without saving)", file=sys.stderr, flush=True)
 

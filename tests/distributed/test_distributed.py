@@ -271,3 +271,63 @@ def test_ctrl_c_under_nproc_saves_once_shows_the_ranks_lines_and_the_run_resumes
     start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
     assert start in (run / "train.log").read_text()
     assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
+
+
+def test_ranks_that_see_a_signal_in_different_iterations_stop_at_the_same_one_and_rank_0_saves_it(tmp_path):
+    """Rank 1 alone gets SIGINT, inside the second iteration: at that iteration's end every rank agrees to stop
+    (one all-reduce of the flag), rank 0 saves it, and both stop with the same weights."""
+    run = tmp_path / "run"
+    ok(launch(2, "skew", run))
+    r0, r1 = (torch.load(run / f"rank{r}.pt", weights_only=False) for r in (0, 1))
+    assert r0["interrupted"] == r1["interrupted"] == 2, (r0["interrupted"], r1["interrupted"])
+    for name in r0["state"]:
+        assert torch.equal(r0["state"][name], r1["state"][name]), name
+    saved = ckpt.iteration_checkpoints(run)
+    assert [p.name for p in saved] == ["iter_2.pt"]  # checkpoint_every=0: the stop wrote it
+    assert ckpt.read_checkpoint(saved[0])["env_steps"] == 128
+    assert not (run / ckpt.FINAL).exists()
+
+
+@pytest.mark.slow
+def test_sigterm_to_the_nproc_launcher_alone_saves_one_iteration_on_every_rank_and_the_run_resumes(tmp_path):
+    """SIGTERM to the PID of ``latentrl train --nproc 2`` only (Kubernetes signals the container's first process;
+    ``kill PID``), started with SIGINT ignored as a background job is: the launcher passes it on, every rank
+    stops at the same iteration, rank 0 saves it, exit 143; ``--resume RUN --nproc 2`` starts there and finishes."""
+    import signal
+    import time
+
+    run = tmp_path / "run"
+    total = 128 * 40
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
+    cmd = [sys.executable, "-m", "latentrl", "train", str(ROOT / "configs" / "tiny.yaml"), "--nproc", "2",
+           "--set", "ppo.checkpoint_every=0", "--total-steps", str(total), "--run-dir", str(run), "--no-progress"]
+    proc = subprocess.Popen(cmd, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.monotonic() + LAUNCH_TIMEOUT_S
+        log = run / "train.log"
+        while not (log.is_file() and "iter 2 " in log.read_text()):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "training did not reach its second iteration"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)  # the launcher's PID alone
+        _, err = proc.communicate(timeout=90)  # bounded: a hang fails here
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 143, err[-3000:]
+    assert "Traceback" not in err and err.strip().splitlines()[-1] == "latentrl: interrupted by SIGTERM", err[-3000:]
+    saved = ckpt.iteration_checkpoints(run)
+    assert len(saved) == 1, saved  # checkpoint_every=0: the stop wrote it
+    newest = ckpt.read_checkpoint(saved[0])
+    notes = [line for line in err.splitlines() if line.startswith("interrupted: saved iteration")]
+    assert len(notes) == 2 and len(set(notes)) == 1, err[-3000:]  # both ranks stopped at the same iteration
+    assert notes[0].startswith(f"interrupted: saved iteration {newest['iteration']} "), err[-3000:]
+    resumed = subprocess.run([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--nproc", "2",
+                              "--no-progress"], env=env, cwd=tmp_path, capture_output=True, text=True,
+                             timeout=LAUNCH_TIMEOUT_S * 2)
+    ok(resumed)
+    start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
+    assert start in (run / "train.log").read_text()
+    assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
