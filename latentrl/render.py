@@ -1,7 +1,9 @@
 """Motion files and pictures: the shared ``.npz`` motion format, GIF/MP4 animations and BVH export.
 
-Animations (:func:`render_video`): Pillow draws a 2-D projection per frame (a body of capsules on a
-shaded floor, or a skeleton) in the viewer's colours; GIF through Pillow, MP4 through imageio-ffmpeg.
+Animations (:func:`render_video`, :func:`render_clip`): Pillow draws a 2-D projection per frame (a body of
+capsules on a shaded floor, or a skeleton) in the viewer's colours, with the motion's scene (boxes, pillars,
+seats, stairs) and its goal markers; GIF through Pillow, MP4 through imageio-ffmpeg, an in-memory GIF for
+TensorBoard (:func:`gif_bytes`).
 
 BVH (:func:`save_bvh`, :func:`load_bvh`): the SMPL-22 skeleton, Y-up, centimetres, 6 channels per joint
 so that the file reproduces the generated joint positions exactly (docs/evaluation.md, section 6).
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,6 +41,7 @@ from latentrl.motion.skeleton import (
     rest_offsets,
 )
 from latentrl.safe_io import atomic_write_bytes, atomic_write_with
+from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch, Seat, Stairs
 
 # --------------------------------------------------------------------------- pictures
 # Colours shared with the browser viewer (its scene module imports them from here), RGB 0-255.
@@ -46,6 +50,10 @@ LEFT, RIGHT, CENTRE = (60, 120, 220), (225, 105, 60), (90, 90, 100)
 CONTACT, AIRBORNE = (40, 190, 80), (150, 150, 150)
 GOAL, WAYPOINT, TRAIL = (220, 40, 60), (250, 180, 40), (70, 70, 200)
 SKY, FLOOR_LIGHT, FLOOR_DARK, SHADOW = (222, 228, 236), (200, 200, 196), (176, 176, 172), (140, 140, 138)
+SCENE_COLOURS = {Box: (168, 152, 136), Cylinder: (150, 162, 178), Seat: (118, 152, 110), Stairs: (186, 180, 168)}
+"""Colour of each scene object type (the viewer's): boxes warm grey, pillars blue-grey, seats green, stairs stone."""
+FACE_SHADES = (1.12, 0.86, 0.7)
+"""Brightness of an object's faces: tops, sides facing the light (+x, -y: the camera's side), the others."""
 
 RENDER_SIZE = 480
 """Width and height of rendered frames in pixels (a multiple of 16, as H.264 wants)."""
@@ -116,21 +124,161 @@ class Camera:
         return np.stack((x, y), axis=-1), depth
 
 
-def follow_targets(joints: np.ndarray, window: int = 15) -> np.ndarray:
+def follow_targets(joints: np.ndarray, window: int = 15, ground: np.ndarray | None = None) -> np.ndarray:
     """(T, 3) points the camera looks at: the pelvis xy averaged over ``window`` frames, :data:`LOOK_HEIGHT` up.
 
-    The average keeps the picture from swaying with every step.
+    The average keeps the picture from swaying with every step. ``ground`` (T,): the terrain height under
+    the pelvis (stairs, a platform), averaged the same way and added to the height, so a climb stays in view.
     """
     xy = np.asarray(joints, dtype=np.float64)[:, 0, :2]
+    z = np.zeros(len(xy)) if ground is None else np.asarray(ground, dtype=np.float64).reshape(len(xy))
+    track = np.concatenate((xy, z[:, None]), axis=1)
     half = max(0, int(window) // 2)
-    padded = np.concatenate((np.repeat(xy[:1], half, 0), xy, np.repeat(xy[-1:], half, 0)))
-    sums = np.concatenate((np.zeros((1, 2)), np.cumsum(padded, axis=0)))
+    padded = np.concatenate((np.repeat(track[:1], half, 0), track, np.repeat(track[-1:], half, 0)))
+    sums = np.concatenate((np.zeros((1, 3)), np.cumsum(padded, axis=0)))
     smooth = (sums[2 * half + 1 :] - sums[: -2 * half - 1]) / (2 * half + 1)
-    return np.concatenate((smooth, np.full((len(xy), 1), LOOK_HEIGHT)), axis=1)
+    smooth[:, 2] += LOOK_HEIGHT
+    return smooth
+
+
+MARKER_RADIUS = 0.07
+"""Radius (m) of the ball that marks a raised target (a joint goal above the terrain)."""
+RAISED_M = 0.05
+"""A target more than this above the terrain under it is a ball on a stalk; lower ones are rings on the terrain."""
+NOW_RADIUS = 0.16
+"""Radius (m) of the ring of the goal in force at the frame (inside a waypoint's :data:`GOAL_RADIUS` ring)."""
+_CORNERS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1], [-1, -1, 1], [1, -1, 1], [1, 1, 1],
+                     [-1, 1, 1]], dtype=np.float64)
+_FACES = (((0, 3, 2, 1), (0.0, 0.0, -1.0)), ((4, 5, 6, 7), (0.0, 0.0, 1.0)), ((0, 1, 5, 4), (0.0, -1.0, 0.0)),
+          ((1, 2, 6, 5), (1.0, 0.0, 0.0)), ((2, 3, 7, 6), (0.0, 1.0, 0.0)), ((3, 0, 4, 7), (-1.0, 0.0, 0.0)))
+"""A box's faces: corner indices (of :data:`_CORNERS`) and the outward normal before turning."""
+_LIGHT = np.array([0.6, -0.8, 0.0])
+"""Horizontal direction towards the light: side faces turned towards it take the brighter side shade."""
+_RING = np.linspace(0, 2 * np.pi, 25)[:-1]
+
+
+class Solid(NamedTuple):
+    """One drawable primitive of a scene object: an upright box or a vertical cylinder, world metres."""
+
+    kind: str
+    """``box`` or ``cylinder``."""
+    centre: np.ndarray
+    """(3,) centre."""
+    half: np.ndarray
+    """(3,) half sizes before turning (a cylinder: radius, radius, half height)."""
+    yaw: float
+    """Radians about +z (boxes)."""
+    colour: tuple[int, int, int]
+
+
+class Marker(NamedTuple):
+    """A target drawn in the frame: a ring on the terrain or, when raised above it, a ball on a stalk."""
+
+    point: np.ndarray
+    """(3,) the target; a ring's z is the terrain height under it."""
+    ground: float
+    """Terrain height under the target (the stalk's foot)."""
+    colour: tuple[int, int, int]
+    radius: float
+    """Ring radius, metres (balls: :data:`MARKER_RADIUS`)."""
+    raised: bool
+
+
+def as_scene(scene: Scene | str | None) -> Scene | None:
+    """A :class:`~latentrl.scenes.Scene` from a scene or its ``latentrl.scene/1`` JSON text (a clip's ``scene``)."""
+    if scene is None or isinstance(scene, Scene):
+        return scene
+    from latentrl.scenes.spec import scene_from_json
+
+    return scene_from_json(str(scene), "motion scene")
+
+
+def scene_solids(scene: Scene | None) -> list[Solid]:
+    """The boxes and cylinders that draw ``scene`` (a staircase gives one box per step), in its types' colours."""
+    out: list[Solid] = []
+    for obj in (scene.objects if scene is not None else ()):
+        boxes, cylinders = Scene((obj,), scene.floor_height).primitives()
+        colour = SCENE_COLOURS[type(obj)]
+        out.extend(Solid("box", np.array(b[:3]), np.array(b[3:6]), float(b[6]), colour) for b in boxes)
+        out.extend(Solid("cylinder", np.array(c[:3]), np.array((c[3], c[3], c[4])), 0.0, colour) for c in cylinders)
+    return out
+
+
+def terrain_heights(scene: Scene | None, xy: np.ndarray) -> np.ndarray:
+    """(...) terrain z under (..., 2) points: the floor, or the top of the highest object over it."""
+    xy = np.asarray(xy, dtype=np.float64)
+    if scene is None:
+        return np.zeros(xy.shape[:-1])
+    if not scene.objects:
+        return np.full(xy.shape[:-1], scene.floor_height)
+    import torch
+
+    batch = SceneBatch.from_scenes([scene], dtype=torch.float64)
+    flat = torch.as_tensor(xy.reshape(1, -1, 2))
+    return batch.height(flat).reshape(xy.shape[:-1]).numpy()
+
+
+def markers(points: np.ndarray | None, colour: tuple[int, int, int], scene: Scene | None,
+            radius: float = GOAL_RADIUS) -> list[Marker]:
+    """Markers for targets (W, 2 or 3) (z defaults to the terrain): rings on the terrain, balls where raised."""
+    if points is None or not len(points):
+        return []
+    pts = np.asarray(points, dtype=np.float64).reshape(len(points), -1)
+    ground = terrain_heights(scene, pts[:, :2])
+    out = []
+    for p, g in zip(pts, ground):
+        z = p[2] if len(p) > 2 else g
+        raised = z > g + RAISED_M
+        out.append(Marker(np.array((p[0], p[1], z if raised else g)), float(g), colour,
+                          MARKER_RADIUS if raised else radius, bool(raised)))
+    return out
+
+
+def _closest_point(solid: Solid, p: np.ndarray) -> np.ndarray:
+    """The point of ``solid`` nearest to ``p`` (``p`` itself when inside)."""
+    d = p - solid.centre
+    if solid.kind == "cylinder":
+        r = np.hypot(d[0], d[1])
+        k = min(1.0, solid.half[0] / r) if r > 0 else 0.0
+        return solid.centre + np.array((d[0] * k, d[1] * k, np.clip(d[2], -solid.half[2], solid.half[2])))
+    c, s = np.cos(solid.yaw), np.sin(solid.yaw)
+    local = np.clip(np.array((c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2])), -solid.half, solid.half)
+    return solid.centre + np.array((c * local[0] - s * local[1], s * local[0] + c * local[1], local[2]))
+
+
+def _clip_near(cam: Camera, points: np.ndarray) -> np.ndarray:
+    """The part of a convex polygon (K, 3) in front of the camera's near plane (Sutherland-Hodgman, one plane)."""
+    depth = (points - cam.position) @ cam.forward - NEAR
+    if (depth > 0).all():
+        return points
+    out = []
+    for i in range(len(points)):
+        a, b, da, db = points[i - 1], points[i], depth[i - 1], depth[i]
+        if (da > 0) != (db > 0):
+            out.append(a + (b - a) * (da / (da - db)))
+        if db > 0:
+            out.append(b)
+    return np.asarray(out).reshape(-1, 3)
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull (monotone chain) of 2-D points (K, 2), in order around it."""
+    pts = sorted(map(tuple, np.asarray(points)))
+
+    def half(seq):
+        chain: list = []
+        for q in seq:
+            while len(chain) >= 2 and ((chain[-1][0] - chain[-2][0]) * (q[1] - chain[-2][1])
+                                       - (chain[-1][1] - chain[-2][1]) * (q[0] - chain[-2][0])) <= 0:
+                chain.pop()
+            chain.append(q)
+        return chain[:-1]
+
+    return np.array(half(pts) + half(pts[::-1]))
 
 
 class FrameRenderer:
-    """Draws one frame of a motion with Pillow: sky, shaded floor tiles, pelvis track, goals, shadow and body.
+    """Draws one frame of a motion with Pillow: sky, shaded floor tiles, pelvis track, goals, shadow, scene and body.
 
     Why Pillow: a 2-D projection drawn with a few hundred polygons costs a few milliseconds per frame,
     where a matplotlib 3-D figure costs tens.
@@ -139,9 +287,11 @@ class FrameRenderer:
         size: width and height in pixels.
         style: ``body`` (capsules, a head, a shadow) or ``skeleton`` (thin bones and joint dots).
         title: text above the picture.
+        scene: the scene the motion moves in (a :class:`~latentrl.scenes.Scene` or its JSON text), or None.
     """
 
-    def __init__(self, size: int = RENDER_SIZE, style: str = "body", title: str = ""):
+    def __init__(self, size: int = RENDER_SIZE, style: str = "body", title: str = "",
+                 scene: Scene | str | None = None):
         from PIL import Image, ImageDraw, ImageFont
 
         if style not in STYLES:
@@ -155,6 +305,9 @@ class FrameRenderer:
         self.bones = [(PARENTS[j], j) for j in range(1, NUM_JOINTS)]
         self.radii = np.array([_bone_radius(j) for _, j in self.bones])
         self.colours = [side_colour(j) for _, j in self.bones]
+        self.scene = as_scene(scene)
+        self.solids = scene_solids(self.scene)
+        self.floor_z = self.scene.floor_height if self.scene is not None else 0.0
 
     def _backdrop(self):
         """The sky, a vertical gradient: what every frame starts from."""
@@ -181,7 +334,7 @@ class FrameRenderer:
         """1 m tiles in two shades around the target, fading into the sky with distance (on-screen ones only)."""
         x0, y0 = int(np.floor(target[0])) - 6, int(np.floor(target[1])) - 2
         xs, ys = np.meshgrid(np.arange(x0, x0 + 13), np.arange(y0, y0 + 14), indexing="ij")
-        pix, depth = cam.project(np.stack((xs, ys, np.zeros_like(xs)), axis=-1).astype(np.float64))
+        pix, depth = cam.project(np.stack((xs, ys, np.full(xs.shape, self.floor_z)), axis=-1).astype(np.float64))
         quads = np.stack((pix[:-1, :-1], pix[1:, :-1], pix[1:, 1:], pix[:-1, 1:]), axis=2)  # (12, 13, 4, 2)
         depths = np.stack((depth[:-1, :-1], depth[1:, :-1], depth[1:, 1:], depth[:-1, 1:]), axis=2)
         lo, hi = quads.min(axis=2), quads.max(axis=2)
@@ -198,21 +351,12 @@ class FrameRenderer:
         if len(points) < 2:
             return
         pts = np.concatenate((points[::2, :2], points[-1:, :2]))
-        pix, depth = cam.project(np.concatenate((pts, np.full((len(pts), 1), 0.005)), axis=1))
+        pix, depth = cam.project(np.concatenate((pts, np.full((len(pts), 1), self.floor_z + 0.005)), axis=1))
         keep = np.concatenate(([False], depth > NEAR, [False]))
         edges = np.flatnonzero(np.diff(keep.astype(np.int8)))
         for start, stop in zip(edges[::2], edges[1::2]):
             if stop - start > 1:
                 draw.line([tuple(q) for q in pix[start:stop]], fill=colour, width=width, joint="curve")
-
-    def _goals(self, draw, cam: Camera, goals: np.ndarray) -> None:
-        ring = np.linspace(0, 2 * np.pi, 17)[:-1]
-        for g in goals:
-            pts = np.stack((g[0] + GOAL_RADIUS * np.cos(ring), g[1] + GOAL_RADIUS * np.sin(ring),
-                            np.full_like(ring, 0.01)), axis=1)
-            pix, depth = cam.project(pts)
-            if depth.min() > NEAR:
-                draw.polygon([tuple(p) for p in pix], fill=WAYPOINT, outline=_scaled(WAYPOINT, 0.7))
 
     def _colours(self, p: np.ndarray) -> list[tuple[int, int, int]]:
         """Each bone's colour: its side's, the foot bones turning green with their floor contact (as in the viewer).
@@ -234,7 +378,7 @@ class FrameRenderer:
         """
         if shadow:
             p = p.copy()
-            p[:, 2] = 0.0
+            p[:, 2] = self.floor_z
         pix, depth = cam.project(p)
         if depth.min() <= NEAR:
             return
@@ -267,23 +411,109 @@ class FrameRenderer:
             r = width * 1.2
             draw.ellipse((pix[j, 0] - r, pix[j, 1] - r, pix[j, 0] + r, pix[j, 1] + r), fill=side_colour(j))
 
+    def _polygon(self, draw, cam: Camera, points: np.ndarray, colour) -> None:
+        """A filled, outlined 3-D convex polygon (K, 3), cut at the near plane."""
+        points = _clip_near(cam, points)
+        if len(points) >= 3:
+            pix, _ = cam.project(points)
+            draw.polygon([tuple(q) for q in pix], fill=colour, outline=_scaled(colour, 0.8))
+
+    def _box(self, draw, cam: Camera, solid: Solid) -> None:
+        """The faces of a box that face the camera (never more than three, so never overlapping), shaded."""
+        c, s = np.cos(solid.yaw), np.sin(solid.yaw)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        corners = solid.centre + (_CORNERS * solid.half) @ turn.T
+        for index, normal in _FACES:
+            n = turn @ np.array(normal)
+            face = corners[list(index)]
+            if n @ (face.mean(axis=0) - cam.position) >= 0:
+                continue
+            shade = FACE_SHADES[0] if n[2] > 0.5 else FACE_SHADES[1] if n @ _LIGHT > 0 else FACE_SHADES[2]
+            self._polygon(draw, cam, face, _scaled(solid.colour, shade))
+
+    def _cylinder(self, draw, cam: Camera, solid: Solid) -> None:
+        """A pillar: the hull of its two rims (its outline from any view) and the top when seen from above."""
+        r, h = solid.half[0], solid.half[2]
+        rims = [np.stack((solid.centre[0] + r * np.cos(_RING), solid.centre[1] + r * np.sin(_RING),
+                          np.full_like(_RING, solid.centre[2] + z)), axis=1) for z in (-h, h)]
+        pix, depth = cam.project(np.concatenate(rims))
+        if depth.min() <= NEAR:  # a pillar across the camera plane: left out rather than drawn wrong
+            return
+        draw.polygon([tuple(q) for q in _hull(pix)], fill=_scaled(solid.colour, FACE_SHADES[1]),
+                     outline=_scaled(solid.colour, FACE_SHADES[1] * 0.8))
+        if cam.position[2] > solid.centre[2] + h:
+            self._polygon(draw, cam, rims[1], _scaled(solid.colour, FACE_SHADES[0]))
+
+    def _marker(self, draw, cam: Camera, marker: Marker) -> None:
+        """A ring on the terrain, or a ball on a stalk down to the terrain."""
+        x, y, z = marker.point
+        if not marker.raised:
+            ring = np.stack((x + marker.radius * np.cos(_RING), y + marker.radius * np.sin(_RING),
+                             np.full_like(_RING, z + 0.01)), axis=1)
+            self._polygon(draw, cam, ring, marker.colour)
+            return
+        pix, depth = cam.project(np.array(((x, y, z), (x, y, marker.ground + 0.01))))
+        if depth.min() <= NEAR:
+            return
+        draw.line((tuple(pix[0]), tuple(pix[1])), fill=_scaled(marker.colour, 0.7), width=max(1, self.size // 240))
+        rad = max(2.0, marker.radius * cam.focal / depth[0])
+        (u, v) = pix[0]
+        draw.ellipse((u - rad, v - rad, u + rad, v + rad), fill=marker.colour, outline=_scaled(marker.colour, 0.62))
+        draw.ellipse((u - 0.55 * rad, v - 0.6 * rad, u - 0.05 * rad, v - 0.1 * rad), fill=_scaled(marker.colour, 1.3))
+
+    def _depth_ordered(self, draw, cam: Camera, p: np.ndarray, items: list[Marker]) -> None:
+        """Scene objects, raised markers and the body by the painter's algorithm, far ones first.
+
+        An object (or marker) is behind the body when its point nearest to the pelvis is farther from the
+        camera than the pelvis: a separating test that holds for convex objects clear of the body (a body
+        standing on a step, beside a pillar, behind a wall). Each side is then drawn far to near.
+        """
+        pelvis = p[0]
+        behind: list[tuple[float, int, object]] = []
+        front: list[tuple[float, int, object]] = []
+        for solid in self.solids:
+            side = front if (pelvis - _closest_point(solid, pelvis)) @ cam.forward > 0 else behind
+            side.append((-float((solid.centre - cam.position) @ cam.forward), 0, solid))
+        for marker in items:  # counted a radius nearer: a ring on a step is drawn after the step
+            side = front if (pelvis - marker.point) @ cam.forward > 0 else behind
+            side.append((marker.radius + 0.05 - float((marker.point - cam.position) @ cam.forward), 1, marker))
+        for group in (behind, None, front):
+            if group is None:
+                if self.style == "body":
+                    self._capsules(draw, cam, p, shadow=False)
+                else:
+                    self._skeleton(draw, cam, p)
+                continue
+            for _, kind, item in sorted(group, key=lambda e: e[0]):
+                if kind:
+                    self._marker(draw, cam, item)
+                elif item.kind == "box":
+                    self._box(draw, cam, item)
+                else:
+                    self._cylinder(draw, cam, item)
+
     def draw(self, joints: np.ndarray, target: np.ndarray, track: np.ndarray | None = None,
-             goals: np.ndarray | None = None, label: str = ""):
-        """One frame (a PIL RGB image) of joints (22, 3) seen by a :class:`Camera` looking at ``target``."""
+             goals: np.ndarray | None = None, label: str = "", marks: Sequence[Marker] = ()):
+        """One frame (a PIL RGB image) of joints (22, 3) seen by a :class:`Camera` looking at ``target``.
+
+        ``goals`` (W, 2 or 3): waypoints drawn as :data:`WAYPOINT` markers; ``marks``: markers made already
+        (:func:`markers`, what :func:`render_frames` passes so that terrain heights are found once).
+        """
         img = self.background.copy()
         draw = self._draw.Draw(img)
         cam = Camera(target, self.size)
         self._floor(draw, cam, target)
         if track is not None:
             self._path(draw, cam, track, TRAIL, max(1, self.size // 240))
-        if goals is not None and len(goals):
-            self._goals(draw, cam, goals)
+        marks = [*markers(goals, WAYPOINT, self.scene), *marks]
+        flat = [not m.raised and m.ground <= self.floor_z + 1e-6 for m in marks]
+        for m, on_floor in zip(marks, flat):
+            if on_floor:
+                self._marker(draw, cam, m)
         p = np.asarray(joints, dtype=np.float64)
         if self.style == "body":
             self._capsules(draw, cam, p, shadow=True)
-            self._capsules(draw, cam, p, shadow=False)
-        else:
-            self._skeleton(draw, cam, p)
+        self._depth_ordered(draw, cam, p, [m for m, on_floor in zip(marks, flat) if not on_floor])
         if self.title:
             draw.text((8, 6), self.title, fill=(30, 30, 30), font=self.small)
         if label:
@@ -293,19 +523,50 @@ class FrameRenderer:
 
 
 def render_frames(joints: np.ndarray, fps: float = FPS, texts: Sequence[str] | None = None, title: str = "",
-                  stride: int = 1, size: int = RENDER_SIZE, goals: np.ndarray | None = None, style: str = "body"):
-    """Yield the PIL frames of a motion (T, 22, 3): every ``stride``-th frame, the camera following the pelvis."""
+                  stride: int = 1, size: int = RENDER_SIZE, goals: np.ndarray | None = None, style: str = "body",
+                  scene: Scene | str | None = None, frame_goals: np.ndarray | None = None):
+    """Yield the PIL frames of a motion (T, 22, 3): every ``stride``-th frame, the camera following the pelvis.
+
+    ``goals`` (W, 2 or 3): the episode's waypoints or joint targets (:data:`WAYPOINT` rings, balls where
+    raised); ``scene``: the objects around the motion (a Scene or its JSON text); ``frame_goals`` (T, 3):
+    the goal in force at each frame (a smaller :data:`GOAL` marker).
+    """
     joints = np.asarray(joints, dtype=np.float64)
-    renderer = FrameRenderer(size, style, title)
-    targets = follow_targets(joints)
-    goals = None if goals is None or not len(goals) else np.asarray(goals, dtype=np.float64)
+    renderer = FrameRenderer(size, style, title, scene)
+    scene = renderer.scene
+    targets = follow_targets(joints, ground=terrain_heights(scene, joints[:, 0, :2]) if scene is not None else None)
+    marks = markers(goals, WAYPOINT, scene)
+    now = None
+    if frame_goals is not None and len(frame_goals):
+        now = np.asarray(frame_goals, dtype=np.float64)
+        distinct, inverse = np.unique(now, axis=0, return_inverse=True)
+        now_marks = markers(distinct, GOAL, scene, NOW_RADIUS)
     for i in range(0, len(joints), max(1, int(stride))):
         text = texts[i] if texts is not None and i < len(texts) else ""
-        yield renderer.draw(joints[i], targets[i], joints[: i + 1, 0], goals, f"{i / fps:5.2f} s  {text}".strip())
+        extra = [now_marks[int(inverse.reshape(-1)[min(i, len(now) - 1)])]] if now is not None else []
+        yield renderer.draw(joints[i], targets[i], joints[: i + 1, 0], None, f"{i / fps:5.2f} s  {text}".strip(),
+                            [*marks, *extra])
+
+
+def clip_goals(clip: MotionClip) -> np.ndarray | None:
+    """(T, 3) the goal in force at each frame of a clip (its per-primitive ``goals``), or None if it has none.
+
+    Seed frames show the first primitive's goal.
+    """
+    if clip.goals is None or not len(clip.goals) or clip.primitive is None or len(clip.primitive) != clip.frames:
+        return None
+    goals = np.asarray(clip.goals, dtype=np.float64)
+    return goals[np.clip(np.asarray(clip.primitive), 0, len(goals) - 1)]
+
+
+def clip_frames(clip: MotionClip, stride: int = 1, size: int = RENDER_SIZE, title: str = "", style: str = "body"):
+    """:func:`render_frames` of a :class:`MotionClip` with everything it carries: scene, waypoints, goals."""
+    return render_frames(clip.joints, clip.fps, clip.texts, title, stride, size, clip.waypoints, style,
+                         scene=clip.scene, frame_goals=clip_goals(clip))
 
 
 PALETTE_COLOURS = (LEFT, RIGHT, CENTRE, CONTACT, AIRBORNE, GOAL, WAYPOINT, TRAIL, SKY, FLOOR_LIGHT, FLOOR_DARK,
-                   SHADOW)
+                   SHADOW, *SCENE_COLOURS.values())
 
 
 def _gif_palette(first):
@@ -316,7 +577,7 @@ def _gif_palette(first):
     """
     from PIL import Image
 
-    shades = [_scaled(c, k) for c in PALETTE_COLOURS for k in (0.62, 1.0, 1.2, 1.3)]
+    shades = [_scaled(c, k) for c in PALETTE_COLOURS for k in (0.62, 0.7, 0.8, 0.86, 1.0, 1.12, 1.2, 1.3)]
     strip = Image.new("RGB", (len(shades), 1))
     strip.putdata(shades)
     sample = Image.new("RGB", (first.width, first.height + 8))
@@ -325,7 +586,7 @@ def _gif_palette(first):
     return sample.quantize(colors=255, method=Image.Quantize.MEDIANCUT)
 
 
-def _write_gif(tmp: Path, frames, duration_ms: int) -> None:
+def _write_gif(tmp, frames, duration_ms: int) -> None:
     from PIL import Image
 
     first = next(frames)
@@ -366,11 +627,13 @@ def video_problem(path: str | Path) -> str | None:
 
 def render_video(path: str | Path, joints: np.ndarray, fps: float = FPS, texts: Sequence[str] | None = None,
                  title: str = "", stride: int | None = None, size: int = RENDER_SIZE,
-                 goals: np.ndarray | None = None, style: str = "body") -> Path:
+                 goals: np.ndarray | None = None, style: str = "body", scene: Scene | str | None = None,
+                 frame_goals: np.ndarray | None = None) -> Path:
     """Render a motion (T, 22, 3) as a GIF or MP4 (by ``path``'s suffix), atomically; returns ``path``.
 
     ``stride`` keeps every n-th frame (default: :data:`GIF_STRIDE` for GIF, 1 for MP4); the file
     plays in real time at ``fps / stride``. MP4 (H.264) needs ``latentrl[video]`` (imageio-ffmpeg).
+    ``goals``, ``scene`` and ``frame_goals``: as :func:`render_frames` draws them.
     """
     if Path(path).suffix.lower() not in VIDEO_FORMATS:
         raise DataError(f"{path}: expected a .gif or .mp4 file")
@@ -381,10 +644,26 @@ def render_video(path: str | Path, joints: np.ndarray, fps: float = FPS, texts: 
     joints, fps = check_motion(joints, fps, str(path))
     mp4 = Path(path).suffix.lower() == ".mp4"
     stride = max(1, int(stride if stride is not None else (1 if mp4 else GIF_STRIDE)))
-    frames = render_frames(joints, fps, texts, title, stride, size, goals, style)
+    frames = render_frames(joints, fps, texts, title, stride, size, goals, style, scene, frame_goals)
     if mp4:
         return atomic_write_with(path, lambda tmp: _write_mp4(tmp, frames, fps / stride, int(size)))
     return atomic_write_with(path, lambda tmp: _write_gif(tmp, frames, int(round(1000 * stride / fps))))
+
+
+def render_clip(path: str | Path, clip: MotionClip, title: str = "", stride: int | None = None,
+                size: int = RENDER_SIZE, style: str = "body") -> Path:
+    """:func:`render_video` of a :class:`MotionClip` with everything it carries: its scene, waypoints and goals."""
+    return render_video(path, clip.joints, clip.fps, clip.texts, title, stride, size, clip.waypoints, style,
+                        scene=clip.scene, frame_goals=clip_goals(clip))
+
+
+def gif_bytes(frames, fps: float) -> bytes:
+    """PIL frames as an animated GIF in memory (what TensorBoard's image plugin plays), at ``fps`` frames/s."""
+    import io
+
+    buffer = io.BytesIO()
+    _write_gif(buffer, iter(frames), int(round(1000 / fps)))
+    return buffer.getvalue()
 
 
 def render_gif(path: str | Path, joints: np.ndarray, fps: float = FPS, texts: Sequence[str] | None = None,
