@@ -16,8 +16,8 @@ from latentrl.errors import ConfigError
 SECTIONS = ("tasks", "policies", "configs", "suites", "prompts")
 """What ``latentrl list SECTION`` accepts; no section prints them all, in this order."""
 
-SUITE_KINDS = ("paths", "joystick", "timed", "joint_goals", "constraints")
-"""Folders of ``latentrl/tasks``: waypoint paths, command timelines, timed paths, joint goals, noise-optimization
+SUITE_KINDS = ("paths", "joystick", "timed", "joint_goals", "sit", "constraints")
+"""Folders of ``latentrl/tasks``: waypoint paths, command timelines, timed paths, joint goals, seats, noise-optimization
 constraints."""
 
 

@@ -241,8 +241,8 @@ class EnvConfig:
     terminate_on_collision: bool = False
     """With a scene: end an episode when a joint comes inside its skin radius of an object."""
     height_grid: int = 0
-    """With a scene: also observe the terrain on a k x k grid around the pelvis (``scene_height_grid``, odd k in
-    [3, 15]); 0: no grid."""
+    """With a scene (``scene``, or a task's own such as sit's seat): also observe the terrain on a k x k grid around
+    the pelvis (``scene_height_grid``, odd k in [3, 15]); 0: no grid."""
     height_grid_spacing: float = HEIGHT_GRID_SPACING_M
     """Metres between neighbouring samples of the height grid."""
 
@@ -277,7 +277,6 @@ class EnvConfig:
         problem = height_grid_problem(self.height_grid, self.height_grid_spacing)
         if problem is not None:
             raise ConfigError(problem)
-        require(self.scene is not None or not self.height_grid, "height_grid", "needs a scene (env.scene)")
         if self.scene is not None:
             try:
                 self.scene_spec()
@@ -334,8 +333,8 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
         common["max_episode_steps"] = cfg.max_episode_steps
     if cfg.scene is not None:  # flat-floor envs get exactly the arguments they always had
         common.update(scene=cfg.scene_spec(), terminate_on_collision=cfg.terminate_on_collision)
-        if cfg.height_grid:
-            common.update(height_grid=cfg.height_grid, height_grid_spacing=cfg.height_grid_spacing)
+    if cfg.height_grid:  # the env refuses it without a scene (env.scene, or a task's own such as sit's seat)
+        common.update(height_grid=cfg.height_grid, height_grid_spacing=cfg.height_grid_spacing)
     common.update(extra)
     return task_spec(cfg.task).env_class()(cfg.num_envs, **cfg.section.kwargs(), **common)
 

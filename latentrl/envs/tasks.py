@@ -151,5 +151,7 @@ for _spec in (
              "latentrl/TimedPath-v0", 256, "timed", ("timed_walk",)),
     TaskSpec("reach_joint", "latentrl.envs.reach_joint:ReachJointEnv", "latentrl.envs.reach_joint:ReachJointConfig",
              "latentrl/ReachJoint-v0", 64, "joint_goals", ("pelvis_near", "pelvis_far")),
+    TaskSpec("sit", "latentrl.envs.sit:SitEnv", "latentrl.envs.sit:SitConfig", "latentrl/Sit-v0", 64, "sit",
+             ("sit_seats",)),
 ):
     TASKS[_spec.name] = _spec

@@ -23,7 +23,7 @@ from latentrl.envs.config import resolve_task_file
 from latentrl.envs.path import load_paths
 from latentrl.envs.tasks import attach_evaluator
 from latentrl.errors import CheckpointError
-from latentrl.evaluation import joint_goals, joystick, plots, report, timed
+from latentrl.evaluation import joint_goals, joystick, plots, report, sit, timed
 from latentrl.evaluation.config import EvalConfig
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, prompts_label
 from latentrl.evaluation.runner import fit_policy, measure_speed, run_suites
@@ -292,7 +292,8 @@ TIMED = SuiteEvaluator("timed", timed, timed.load_timed_paths, timed.TimingCrite
                        lambda entry: set(entry.texts), takes_observe_next=True)
 
 JOINT_GOALS = JointGoalEvaluator()
+SIT = SuiteEvaluator("sit", sit, sit.load_seats, sit.SitCriteria, lambda entry: set(), takes_observe_next=False)
 
 for _task, _evaluator in (("reach", PATHS), ("path", PATHS), ("joystick", JOYSTICK), ("timed", TIMED),
-                          ("reach_joint", JOINT_GOALS)):
+                          ("reach_joint", JOINT_GOALS), ("sit", SIT)):
     attach_evaluator(_task, _evaluator)

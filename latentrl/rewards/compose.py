@@ -28,6 +28,7 @@ name                  weight   term
 ``terrain_contact``   0        -(lower foot's distance to the terrain beyond 3 cm), x0.1 hop/run (scenes)
 ``joint_dist``        1.0      the goal joint's progress toward its target, metres per step (ReachJoint)
 ``joint_arrival``     5.0      at the goal time, exp(-joint error / 0.1 m), in [0, 1] (ReachJoint)
+``pelvis_height``     1.0      -|pelvis z - the task's pelvis height target|, metres, mean over the new frames (Sit)
 ====================  =======  ====================================================================
 
 Each task computes and reports only its own terms (``terms=`` of :class:`RewardComposer`; the envs'
@@ -97,6 +98,8 @@ class RewardInputs:
     joint_error: torch.Tensor | None = None
     """ReachJoint: (N, 3) the goal joint's distance to its target (m) at the last frame before the step, at the
     step's last frame (the goal-time frame when that is in the step) and at the goal-time frame (NaN elsewhere)."""
+    pelvis_target: torch.Tensor | None = None
+    """Sit: (N,) the world z the pelvis should be at during the step (seated or standing), NaN where there is none."""
 
     def step_seconds(self) -> float:
         """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
@@ -292,6 +295,14 @@ def _joint_dist(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 def _joint_arrival(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.joint_arrival` at the goal time (ReachJoint)."""
     return terms.joint_arrival(x.joint_error[:, 2])
+
+
+@reward_term("pelvis_height", 1.0, inputs=('pelvis_target',))
+def _pelvis_height(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """-(mean |pelvis z - target| over the new frames) where the task sets a target (Sit), 0 where it does not."""
+    target = x.pelvis_target
+    error = (x.joints_world[:, x.history_length:, PELVIS, 2] - target[:, None]).abs().mean(dim=1)
+    return torch.where(torch.isfinite(target), -error, torch.zeros_like(error))
 
 
 @reward_term("collision", 0.0, inputs=('scene',))

@@ -96,7 +96,7 @@ def test_config_and_evaluation_carry_the_grid(tiny_model):
     env = build(cfg, "cpu", motion=tiny_model)
     assert env.observation_layout["scene_height_grid"][1] - env.observation_layout["scene_height_grid"][0] == 49
     with pytest.raises(ConfigError, match="height_grid: needs a scene"):
-        EnvConfig(height_grid=7).validate()
+        build(EnvConfig(num_envs=1, height_grid=7), "cpu", motion=tiny_model)
     with pytest.raises(ConfigError, match="height_grid_spacing: expected metres"):
         EnvConfig(scene="stairs_15", height_grid=7, height_grid_spacing=-1).validate()
     settings = EvalSettings(episodes=1, max_steps=1)
