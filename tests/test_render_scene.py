@@ -105,3 +105,24 @@ def test_a_clip_renders_with_its_scene_and_markers_and_an_in_memory_gif_decodes(
     data = gif_bytes(clip_frames(clip, stride=3, size=160), fps=10)
     with Image.open(io.BytesIO(data)) as gif:
         assert gif.format == "GIF" and gif.n_frames == 4 and gif.info["duration"] == 100
+
+
+def test_eval_render_draws_the_episodes_scene(eval_files, tmp_path):
+    """``latentrl eval --scene FILE --render gif``: the episode GIF shows the scene's box in its colour."""
+    import json
+
+    from PIL import Image
+
+    from latentrl.app.cli import main
+
+    scene = tmp_path / "box.json"
+    scene.write_text(scene_to_json(Scene((Box((0.8, 1.5), (0.6, 0.6, 0.9)),))))
+    paths = tmp_path / "mini.json"
+    paths.write_text(json.dumps([{"goal_location": [[0.0, 3.0, 0.0]], "goal_text": ["walk"]}]))
+    out = tmp_path / "out"
+    assert main(["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
+                 "--episodes", "1", "--max-steps", "2", "--device", "cpu", "--out", str(out), "--no-progress",
+                 "--scene", str(scene), "--render", "gif"]) == 0
+    with Image.open(out / "renders" / "mini_path0_ep000.gif") as gif:
+        frame = np.asarray(gif.convert("RGB"))
+    assert shade_mask(frame, SCENE_COLOURS[Box], tol=3).sum() > 200

@@ -8,7 +8,7 @@ brings its own evaluator instead.
 
 Every episode's motion goes to ``motions/<suite>_<entry>_ep<e>.npz``; the first ``render`` episodes of an
 entry are also drawn as ``renders/*.gif`` (every :data:`GIF_STRIDE` th frame) or ``renders/*.mp4`` (every frame,
-``render_format``) and written as BVH.
+``render_format``), with the episode's scene and goals, and written as BVH.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from latentrl.evaluation.runner import fit_policy, measure_speed, run_suites
 from latentrl.evaluation.skills import match_share
 from latentrl.evaluation.task_eval import aggregate, build_task_report, results_table, write_task_report
 from latentrl.motion.clip import MotionClip
-from latentrl.render import render_video, save_bvh
+from latentrl.render import render_clip, save_bvh
 
 GIF_STRIDE = 3
 """Rendered GIFs keep every 3rd frame (10 fps): a 60 s episode is 600 frames, about a minute to draw on CPU."""
@@ -49,8 +49,7 @@ def write_episode(out_dir: Path, name: str, clip: MotionClip, title: str, write_
         written = f"motions/{name}.npz"
     if render:
         gif = render_format == "gif"
-        render_video(out_dir / "renders" / f"{name}.{render_format}", clip.joints, fps=clip.fps, texts=clip.texts,
-                     title=title, stride=GIF_STRIDE if gif else 1, goals=clip.waypoints)
+        render_clip(out_dir / "renders" / f"{name}.{render_format}", clip, title, stride=GIF_STRIDE if gif else 1)
         save_bvh(out_dir / "renders" / f"{name}.bvh", clip.joints, clip.fps)
     return written
 
