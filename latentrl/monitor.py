@@ -25,6 +25,8 @@ native and SB3 runs overlay. Tags use SB3's names where SB3 has one:
 ``eval/mean_reward``        periodic evaluation: mean return of its episodes (when the evaluator reports it)
 ``eval/<metric>``           periodic evaluation: ``success_rate``, ``reach_time_s``, ``skate_cm_s``, ``floor_cm``
 ``eval/trajectories``       top-down trajectory plot (image)
+``eval/episode``            one rendered evaluation episode every ``eval.video_every`` evaluations (an animated GIF
+                            image summary: TensorBoard's Images tab plays it)
 ``hyperparameters``         the resolved config as a markdown table (text)
 ``motion/<stage>/<term>``   motion-model training (``latentrl motion train``): each loss term of the
                             ``vae`` and ``denoiser`` stages, ``rollout_p`` and ``learning_rate``; x-axis: stage steps
@@ -60,6 +62,7 @@ EVAL_PREFIX = "eval/"
 EVAL_METRICS = ("success_rate", "reach_time_s", "skate_cm_s", "floor_cm")
 EVAL_MEAN_REWARD = "eval/mean_reward"
 EVAL_TRAJECTORIES = "eval/trajectories"
+EVAL_EPISODE = "eval/episode"
 HPARAMS = "hyperparameters"
 MOTION_PREFIX = "motion/"
 """Prefix of motion-model training tags: ``motion/<stage>/<term>``."""
@@ -84,6 +87,17 @@ class RolloutStats(NamedTuple):
     """How many episodes the means cover."""
 
 
+class EpisodeVideo(NamedTuple):
+    """A rendered episode for TensorBoard: an animated GIF and what it holds."""
+
+    gif: bytes
+    """The encoded GIF (TensorBoard's image plugin plays animated GIFs)."""
+    width: int
+    height: int
+    frames: int
+    fps: float
+
+
 class EvalReport(NamedTuple):
     """What an evaluation hook returns to a trainer."""
 
@@ -93,6 +107,8 @@ class EvalReport(NamedTuple):
     """Tag -> matplotlib figure or (H, W, 3) uint8 image, e.g. ``{EVAL_TRAJECTORIES: fig}``."""
     stop: bool = False
     """Ask the trainer to end the run after this evaluation (e.g. a benchmark's success >= 0.9)."""
+    videos: Mapping[str, EpisodeVideo] = {}
+    """Tag -> rendered episode, e.g. ``{EVAL_EPISODE: video}`` (written as an animated GIF image)."""
 
 
 class Monitor:
@@ -160,6 +176,8 @@ class Monitor:
             self._scalar(tag_for("eval", name), value, step)
         for tag, fig in (report.figures if isinstance(report, EvalReport) else {}).items():
             self.log_figure(tag, fig, step)
+        for tag, video in (report.videos if isinstance(report, EvalReport) else {}).items():
+            self.log_video(tag, video, step)
 
     def log_sb3(self, step: int, key_values: Mapping[str, Any], excluded: Mapping[str, Any] | None = None) -> None:
         """Scalars recorded by SB3's logger (its names are our names); non-scalars and console-only keys are skipped."""
@@ -190,6 +208,18 @@ class Monitor:
             self.writer.add_figure(tag, fig, int(step), close=True)
         else:
             self.writer.add_image(tag, fig, int(step), dataformats="HWC")
+
+    def log_video(self, tag: str, video: EpisodeVideo, step: int) -> None:
+        """An animated GIF as an image summary: what ``SummaryWriter.add_video`` writes, without moviepy.
+
+        ``add_video`` encodes its GIF with moviepy (not a dependency); the summary it writes is an image
+        whose encoded bytes are a GIF, which is what this writes from the GIF :mod:`latentrl.render` made.
+        """
+        from tensorboard.compat.proto.summary_pb2 import Summary
+
+        image = Summary.Image(height=int(video.height), width=int(video.width), colorspace=3,
+                              encoded_image_string=bytes(video.gif))
+        self.writer._get_file_writer().add_summary(Summary(value=[Summary.Value(tag=tag, image=image)]), int(step))
 
     def flush(self) -> None:
         """Push pending events to disk, so a running TensorBoard sees them."""

@@ -39,16 +39,27 @@ class EvalConfig:
     """With the env's foot lock: evaluations (these and ``latentrl eval`` of the checkpoints, which store it) pin
     a foot fully from this contact weight; None: the env's ``foot_lock_min_weight``. A card's figures taken with
     another value than training's are reproduced by the policy alone."""
+    video_every: int = 1
+    """Every this many evaluations (the first of each training process included), the first episode of the first
+    suite entry goes to TensorBoard as ``eval/episode``: an animated GIF at 10 frames/s with the scene and goals;
+    0: never."""
+    video_size: int = 160
+    """Width and height of that video in pixels (a multiple of 16, 64 to 640)."""
 
     def validate(self) -> None:
-        """Episodes and step budget are >= 1; the foot lock's weight in range."""
+        """Episodes and step budget are >= 1; the foot lock's weight in range; the video's cadence and size."""
         require(self.episodes >= 1, "episodes", f"must be >= 1, got {self.episodes}")
         require(self.max_steps >= 1, "max_steps", f"must be >= 1, got {self.max_steps}")
+        require(self.video_every >= 0, "video_every", f"must be >= 0 (0: no video), got {self.video_every}")
+        require(self.video_size % 16 == 0 and 64 <= self.video_size <= MAX_VIDEO_SIZE, "video_size",
+                f"must be a multiple of 16 from 64 to {MAX_VIDEO_SIZE}, got {self.video_size}")
         if self.foot_lock_min_weight is not None:
             problem = lock_min_weight_problem(self.foot_lock_min_weight)
             require(problem is None, "foot_lock_min_weight", str(problem))
 
 
+MAX_VIDEO_SIZE = 640
+"""Largest ``eval.video_size``: a bigger GIF every evaluation would swell the events file."""
 MAX_EPISODES = 1 << 16
 """Episodes per path, at most (they run in parallel, one env each)."""
 MAX_EVAL_STEPS = 100_000

@@ -219,8 +219,8 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
     for file in files:
         load_joint_goals(file)
-    return training_hook(lambda act, settings: run_suites(act, motion, files, settings), env_cfg, eval_cfg, device,
-                         success="success")
+    return training_hook(lambda act, settings, sink=None: run_suites(act, motion, files, settings, sink=sink),
+                         env_cfg, eval_cfg, device, success="success")
 
 
 # --------------------------------------------------------------------------- figure

@@ -185,4 +185,5 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
     for file in files:
         load_timelines(file)
-    return training_hook(lambda act, settings: run_suites(act, motion, files, settings), env_cfg, eval_cfg, device)
+    return training_hook(lambda act, settings, sink=None: run_suites(act, motion, files, settings, sink=sink),
+                         env_cfg, eval_cfg, device)

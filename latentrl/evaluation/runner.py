@@ -43,6 +43,7 @@ from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import collect_returns, end_of, rollout
 from latentrl.evaluation.results import EpisodeResult, PathResult, SuiteResult, frames_after
 from latentrl.evaluation.skills import judge_clip
+from latentrl.evaluation.video import recorder_for
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
@@ -287,6 +288,7 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
         make_env(motion, paths, 1, settings)  # unknown prompts fail here (TextError), before training starts
     observe_next = getattr(env_cfg, "task", "reach") == "path" and bool(getattr(env_cfg, "observe_next", False))
     target = getattr(eval_cfg, "success_target", None)
+    recorder = recorder_for(eval_cfg)
 
     def evaluate(policy: torch.nn.Module):
         from latentrl.evaluation.plots import paths_figure
@@ -295,7 +297,8 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
         with collect_returns() as returns:
             suites = run_suites(policy_fn(policy, settings.deterministic), motion, files, settings,
-                                observe_next=observe_next, text=eval_cfg.text)
+                                observe_next=observe_next, text=eval_cfg.text,
+                                sink=recorder.sink if recorder.start() else None)
         paths = [p for s in suites for p in s.paths]
         metrics = {k: v["mean"] for k, v in pooled_metrics(paths).items() if np.isfinite(v["mean"])}
         if returns:
@@ -304,7 +307,7 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
         if np.isfinite(match):
             metrics["segment_skill_match"] = match
         stop = target is not None and metrics["success_rate"] >= target
-        return EvalReport(metrics, {EVAL_TRAJECTORIES: paths_figure(suites)}, stop)
+        return EvalReport(metrics, {EVAL_TRAJECTORIES: paths_figure(suites)}, stop, recorder.videos())
 
     return evaluate
 

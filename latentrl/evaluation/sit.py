@@ -127,8 +127,8 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
     for file in files:
         load_seats(file)
-    return training_hook(lambda act, settings: run_suites(act, motion, files, settings), env_cfg, eval_cfg, device,
-                         success="getup_success")
+    return training_hook(lambda act, settings, sink=None: run_suites(act, motion, files, settings, sink=sink),
+                         env_cfg, eval_cfg, device, success="getup_success")
 
 
 def seat_suite(count: int = 12, seed: int = 20261128) -> list[SeatSpec]:

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from latentrl.evaluation.metrics import mean_ci95
+from latentrl.evaluation.video import recorder_for, takes_sink
 
 FORMAT = "latentrl.eval.task/1"
 """``report.json`` format of the Joystick and TimedPath evaluations."""
@@ -182,6 +183,7 @@ def training_hook(run: Callable[[Callable, Any], list], env_cfg: Any, eval_cfg: 
     settings.take_eval_config(eval_cfg)
     settings.validate()
     target = getattr(eval_cfg, "success_target", None)
+    recorder = recorder_for(eval_cfg) if takes_sink(run) else None
 
     def evaluate(policy: torch.nn.Module):
         from latentrl.evaluation.episodes import collect_returns
@@ -189,12 +191,14 @@ def training_hook(run: Callable[[Callable, Any], list], env_cfg: Any, eval_cfg: 
         from latentrl.monitor import EvalReport
 
         with collect_returns() as returns:
-            suites = run(policy_fn(policy, settings.deterministic), settings)
+            act = policy_fn(policy, settings.deterministic)
+            due = recorder is not None and recorder.start()
+            suites = run(act, settings, sink=recorder.sink) if due else run(act, settings)
         pooled = aggregate([ep for _, _, results in suites for r in results for ep in r.episodes])
         metrics = {k: v["mean"] for k, v in pooled.items() if math.isfinite(v["mean"])}
         if returns:
             metrics["mean_reward"] = sum(returns) / len(returns)
         stop = target is not None and success is not None and metrics.get(success, 0.0) >= target
-        return EvalReport(metrics, {}, stop)
+        return EvalReport(metrics, {}, stop, recorder.videos() if recorder is not None else {})
 
     return evaluate

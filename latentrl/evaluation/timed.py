@@ -143,5 +143,6 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
     for file in files:
         load_timed_paths(file)
     observe_next = bool(getattr(env_cfg, "observe_next", False))
-    return training_hook(lambda act, settings: run_suites(act, motion, files, settings, observe_next=observe_next),
+    return training_hook(lambda act, settings, sink=None: run_suites(act, motion, files, settings,
+                                                                    observe_next=observe_next, sink=sink),
                          env_cfg, eval_cfg, device, success="success")
