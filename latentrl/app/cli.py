@@ -437,13 +437,16 @@ def _viewer_commands(sub) -> None:
     def server_flags(p) -> None:
         p.add_argument("--host", default="127.0.0.1", help="address to listen on (default: this machine only)")
         p.add_argument("--port", type=_port, default=8080, help="port to listen on (default 8080; 0 = any free port)")
+        p.add_argument("--skeleton", action="store_true",
+                       help="also draw the skeleton (lines and joints) inside the capsule body; a checkbox switches it")
 
     view = sub.add_parser("view", help="browser viewer for a motion .npz, an evaluation folder or a training run")
     view.add_argument("path", metavar="PATH", help="motion .npz, eval folder (report.json), run folder or .npz folder")
     server_flags(view)
     view.add_argument("--record", metavar="FILE", help="also draw every frame played into this .gif or .mp4 when the "
                                                        "viewer stops (MP4 needs latentrl[video])")
-    view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port, record=a.record))
+    view.set_defaults(func=lambda a: _viewer("view_command", a.path, host=a.host, port=a.port, record=a.record,
+                                             skeleton=a.skeleton))
 
     play = sub.add_parser("play", help="steer a policy live in the browser: clicks set a reach/path policy's goal "
                                        "and waypoints, arrows or WASD a joystick policy's heading and speed")
@@ -456,12 +459,16 @@ def _viewer_commands(sub) -> None:
     play.add_argument("--text", help="prompt to start with (default: the policy's training text)")
     play.add_argument("--deterministic", action="store_true", help="start with the policy's mean action")
     play.add_argument("--seed", type=_seed, default=0, help="seed of the start pose and the action noise")
+    play.add_argument("--scene", metavar="SCENE", help="play among objects: a latentrl.scene/1 file or a name in "
+                                                        "tasks/scenes (default: the policy's training scene, else the "
+                                                        "bare floor); ctrl-click drops boxes into it")
     server_flags(play)
     play.add_argument("--record", metavar="FILE", help="also draw every frame shown into this .gif or .mp4 when the "
                                                        "viewer stops (MP4 needs latentrl[video])")
     play.set_defaults(func=lambda a: _viewer(
         "play_command", a.policy, host=a.host, port=a.port, motion=a.motion, device=a.device, text=a.text,
-        deterministic=a.deterministic, seed=a.seed, allow_motion_mismatch=a.allow_motion_mismatch, record=a.record))
+        deterministic=a.deterministic, seed=a.seed, allow_motion_mismatch=a.allow_motion_mismatch, record=a.record,
+        scene=a.scene, skeleton=a.skeleton))
 
 
 def _viewer(name: str, *args, **kwargs) -> int:

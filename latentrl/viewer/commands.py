@@ -18,10 +18,12 @@ that also observes the next waypoint is refused), joystick policies by the keybo
 
 
 def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
-                 record: str | Path | None = None) -> int:
+                 record: str | Path | None = None, skeleton: bool = False) -> int:
     """Show a motion ``.npz``, an evaluation folder, a run's latest evaluation or a folder of motions.
 
+    The character is a capsule body among the objects of the scene its motion file carries.
     ``record``: a .gif or .mp4 that gets every frame played, drawn when the server stops.
+    ``skeleton``: draw the skeleton too from the start (a checkbox on the page switches it).
     """
     from latentrl.viewer.record import Recorder, check_record
     from latentrl.viewer.server import require_viser, serve_until_interrupted, start_server
@@ -34,7 +36,7 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
     from latentrl.viewer.playback import Player
 
     recorder = Recorder(record, "view") if record else None
-    player = Player(server, source, recorder)
+    player = Player(server, source, recorder, skeleton=skeleton)
     player.start()
     code = serve_until_interrupted(server, "view", host, player.stop)
     player.thread.join(2)
@@ -45,15 +47,19 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
 
 def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str | None = None,
                  device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
-                 allow_motion_mismatch: bool = False, record: str | Path | None = None) -> int:
+                 allow_motion_mismatch: bool = False, record: str | Path | None = None, scene: str | None = None,
+                 skeleton: bool = False) -> int:
     """Steer a trained policy live in the browser, and pick its text from a list.
 
-    Clicks set a reach/path policy's goal and waypoints; keys set a joystick policy's heading and speed.
+    Clicks set a reach/path policy's goal and waypoints; keys set a joystick policy's heading and speed;
+    a ctrl-click (cmd-click) drops a box into the scene.
 
     ``policy`` is a file or a shipped policy's name (``reach_walk_default``). The text list is ``text``
     (if given), the policy's training texts, then every prompt the motion model's text table knows; the
     first is where the page starts. ``motion`` None: the model named in the policy's stored config.
     ``record``: a .gif or .mp4 that gets every frame shown, drawn when the server stops.
+    ``scene``: a ``latentrl.scene/1`` file or a name in ``tasks/scenes`` to play in (default: the policy's
+    training scene when it has a fixed one, else the bare floor). ``skeleton``: draw the skeleton too.
     """
     import torch
 
@@ -76,6 +82,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     if text is not None and prompt_problem(text):  # an empty --text would fall back to the default silently
         raise ConfigError(f"--text: {prompt_problem(text)}")
     check_record(record)
+    world = play_scene(scene)
     require_viser()
     check_port(host, port)  # before the models load
     from latentrl.evaluation.trained import trained_motion
@@ -92,7 +99,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     model = load_motion_model(motion, device=device)
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)
-    env = play_env(loaded.checkpoint, model, text, device, task)
+    env = play_env(loaded.checkpoint, model, text, device, task, world)
     if task != "joystick" and loaded.policy.action_dim == env.single_action_space.shape[0] and \
             loaded.policy.obs_dim == env.single_observation_space.shape[0] + 4:
         raise CheckpointError(f"{policy}: this {task} policy also observes the next waypoint; play steers one "
@@ -101,13 +108,37 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     server = start_server(host, port, label=f"latentrl play {policy.name}", command="play")
     how = ("Arrows or WASD steer: up/W faster, down/S slower, left/A and right/D turn, space stops"
            if task == "joystick" else "Click on the floor to set the goal, shift-click to add waypoints")
+    how += "; ctrl-click (cmd-click) drops a box"
     title = f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n{how}; pick the text below."
     recorder = Recorder(record, "play") if record else None
     controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
-                                seed=seed, recorder=recorder)
+                                seed=seed, recorder=recorder, skeleton=skeleton)
     controller.start()
     code = serve_until_interrupted(server, "play", host, controller.stop)
     controller.thread.join(2)
     if recorder is not None:
         recorder.write()
     return code
+
+
+def play_scene(value: str | None):
+    """The :class:`~latentrl.scenes.Scene` of ``play --scene`` (None without one); one-line error for a bad one.
+
+    A file path or a name in ``tasks/scenes``, read by the scene file reader (every field checked).
+    """
+    if value is None:
+        return None
+    from latentrl.envs.scene import resolve_scene
+    from latentrl.errors import LatentRLError
+    from latentrl.scenes.scene import Scene
+
+    if value == "random_obstacles":
+        raise ConfigError("--scene: play takes a scene file (random obstacles are drawn per episode by eval and "
+                          "train)")
+    try:
+        scene = resolve_scene(value)
+    except LatentRLError as exc:
+        raise ConfigError(f"--scene: {str(exc).removeprefix('scene: ')}") from None
+    if not isinstance(scene, Scene):
+        raise ConfigError(f"--scene: expected a latentrl.scene/1 file, got {value!r:.80}")
+    return scene

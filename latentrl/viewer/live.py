@@ -2,6 +2,8 @@
 
 :class:`SteeredReachEnv` is ``ReachLocation`` with one env whose goal and text come from the user
 instead of the sampler: a click sets the goal, shift-clicks append waypoints followed in order.
+Both steered envs always hold a scene (``--scene``, the policy's training scene, or an empty one), so a
+ctrl-click (cmd-click on macOS) can drop a box into it while the policy walks (:meth:`LiveController.drop_box`).
 :class:`SteeredJoystickEnv` is ``Joystick`` whose heading and speed command comes from the keyboard
 (arrows or WASD, through Viser's hotkey commands). :class:`LiveController` steps it with the policy
 whenever fewer than one primitive of frames is waiting, and shows the frames at the motion's own
@@ -22,8 +24,11 @@ import torch
 
 from latentrl.envs.joystick import JoystickEnv, heading_deg, world_angle
 from latentrl.envs.reach import ReachLocationEnv
+from latentrl.errors import LatentRLError
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.scenes.scene import Box, Scene
+from latentrl.scenes.spec import MAX_OBJECTS
 from latentrl.viewer.guard import choice, complain, vector
 from latentrl.viewer.markup import plain
 from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
@@ -42,6 +47,12 @@ KEY_SPEED_STEP = 0.1
 KEY_ACTIONS = {"arrowleft": "left", "A": "left", "arrowright": "right", "D": "right",
                "arrowup": "faster", "W": "faster", "arrowdown": "slower", "S": "slower", "space": "stop"}
 """Keys ``latentrl play`` takes for a joystick policy (Viser hotkey names) and what each does."""
+DROP_MODIFIER = "cmd/ctrl"
+"""The modifier of a click that drops a box (Viser's name: Ctrl, or Cmd on macOS)."""
+DROP_BOX_SIZE = (0.6, 0.6, 1.0)
+"""A dropped box's size (x, y, z), metres: a waist-high crate the body must walk around."""
+DROP_CLEARANCE_M = 0.6
+"""A box is not dropped with its centre closer than this to the pelvis (it would land on the body)."""
 TRAIL_FRAMES = 6000
 START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
 """Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
@@ -164,8 +175,24 @@ def floor_point(origin: Sequence[float], direction: Sequence[float], floor: floa
     return o + t * d if t > 0 else None
 
 
+def training_scene(env_cfg: Mapping[str, Any]) -> Scene | None:
+    """The fixed scene a policy was trained in (its stored ``env.scene``), or None.
+
+    None also for random obstacles (drawn per episode) and for a scene file this machine cannot find.
+    """
+    from latentrl.envs.scene import resolve_scene
+
+    if env_cfg.get("scene") is None:
+        return None
+    try:
+        found = resolve_scene(env_cfg["scene"])
+    except LatentRLError:
+        return None
+    return found if isinstance(found, Scene) else None
+
+
 def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str,
-             task: str = "reach") -> SteeredReachEnv | SteeredJoystickEnv:
+             task: str = "reach", scene: Scene | None = None) -> SteeredReachEnv | SteeredJoystickEnv:
     """The env of ``latentrl play``: one steered env that steps the motion as the policy's training env.
 
     ``task`` 'joystick' gives a :class:`SteeredJoystickEnv` (the policy's trained speed range bounds the
@@ -173,17 +200,21 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
 
     Its texts are ``text``, the training texts and the prompts the model knows; its
     :class:`~latentrl.envs.settings.StepSettings` are the checkpoint's (:func:`stored_step_settings`).
+    Its scene is ``scene`` (``--scene``), else the policy's fixed training scene, else an empty one (boxes can
+    be dropped into any); the policy observes it (``scene_rays``) only when it was trained with a scene, as
+    ``latentrl eval --scene`` does. An empty scene steps exactly as the flat floor.
     """
     env_cfg = (checkpoint.get("config") or {}).get("env") or {}
     prompts = list(getattr(model.text_encoder, "prompts", None) or [])
     texts = list(dict.fromkeys([*([text] if text else []), *(env_cfg.get("texts") or []), *prompts])) or ["walk"]
     settings = stored_step_settings(checkpoint.get("config"))
+    world = scene if scene is not None else (training_scene(env_cfg) or Scene())
+    common = dict(motion=model, texts=texts, device=device, max_episode_steps=10**9, autoreset_mode="Disabled",
+                  scene=world, observe_scene=env_cfg.get("scene") is not None, **settings.step_kwargs())
     if task == "joystick":
         speeds = tuple((env_cfg.get("joystick") or {}).get("speed_range") or (0.7, 1.4))
-        return SteeredJoystickEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
-                                  autoreset_mode="Disabled", speed_range=speeds, **settings.step_kwargs())
-    return SteeredReachEnv(1, motion=model, texts=texts, device=device, max_episode_steps=10**9,
-                           autoreset_mode="Disabled", **settings.step_kwargs())
+        return SteeredJoystickEnv(1, speed_range=speeds, **common)
+    return SteeredReachEnv(1, **common)
 
 
 class LiveController:
@@ -203,10 +234,11 @@ class LiveController:
         deterministic: start with the policy's mean action instead of sampling it.
         seed: seed of the env (seed pose) and of action sampling.
         recorder: keeps the frames shown for ``--record`` (None: nothing kept).
+        skeleton: draw the skeleton as well as the body from the start (``--skeleton``).
     """
 
     def __init__(self, server: Any, env: SteeredReachEnv | SteeredJoystickEnv, policy: Any, title: str, text: str,
-                 deterministic: bool = False, seed: int = 0, recorder: Any = None):
+                 deterministic: bool = False, seed: int = 0, recorder: Any = None, skeleton: bool = False):
         self.server, self.env, self.policy, self.seed = server, env, policy, seed
         self.recorder = recorder
         """A :class:`~latentrl.viewer.record.Recorder` that keeps every frame shown (``--record``), or None."""
@@ -224,19 +256,28 @@ class LiveController:
         self.gen_fps = 0.0
         self.show_fps = 0.0
         self.message = self._idle_message()
-        self.scene = SkeletonScene(server)
+        self.dropped = 0
+        """Boxes dropped by hand: the last this many objects of the env's scene."""
+        self.scene = SkeletonScene(server, skeleton=skeleton)
+        self.scene.set_scene(self.world())
         self.scene.set_floor(np.zeros(2), 40.0)
         gui = server.gui
         gui.add_markdown(title)
         self.text = gui.add_dropdown("text", list(env.texts), initial_value=text)
         self.deterministic = gui.add_checkbox("mean action", deterministic)
         self.follow = gui.add_checkbox("follow camera", True)
-        self.show_body = gui.add_checkbox("skeleton", True)
+        self.show_body = gui.add_checkbox("body", True)
+        self.show_skeleton = gui.add_checkbox("skeleton", bool(skeleton))
         self.reset_button = gui.add_button("Reset")
+        self.clear_button = gui.add_button("Remove dropped boxes")
         self.status = gui.add_markdown("")
         self.text.on_update(lambda event: self._set_text(self.text.value))
-        self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
+        self.show_body.on_update(lambda event: self._set_visible(self.scene.set_body_visible, self.show_body))
+        self.show_skeleton.on_update(lambda event: self._set_visible(self.scene.set_skeleton_visible,
+                                                                     self.show_skeleton))
         self.reset_button.on_click(lambda event: self.reset())
+        self.clear_button.on_click(lambda event: self.clear_boxes())
+        server.scene.on_click(modifier=DROP_MODIFIER)(lambda event: self._drop_clicked(event))
         if self.joystick:
             self.keys = {}
             for key, what in KEY_ACTIONS.items():
@@ -266,8 +307,84 @@ class LiveController:
 
     def _idle_message(self) -> str:
         if self.joystick:
-            return "arrows or WASD: up/W faster, down/S slower, left/A and right/D turn; space stops"
-        return "click on the floor to set a goal; shift-click adds waypoints"
+            return "arrows or WASD: up/W faster, down/S slower, left/A and right/D turn; space stops; " \
+                   "ctrl-click drops a box"
+        return "click on the floor to set a goal; shift-click adds waypoints; ctrl-click drops a box"
+
+    def _set_visible(self, setter: Any, checkbox: Any) -> None:
+        """Show or hide the body or the skeleton as a checkbox says (a client may send any value)."""
+        if not isinstance(checkbox.value, bool):
+            complain("play", f"ignored {checkbox.label} {str(checkbox.value)[:40]!r}: expected true or false")
+            return
+        with self.lock:
+            setter(checkbox.value)
+
+    def world(self) -> Scene | None:
+        """The env's scene as objects now (None: an env built without one, where no box can be dropped)."""
+        scene = getattr(self.env, "scene", None)
+        return None if scene is None or scene.random else scene.spec
+
+    def _floor_click(self, event: Any) -> np.ndarray | None:
+        """Where a click's ray meets the floor, or None (and one line for a malformed ray)."""
+        origin = vector(event.ray_origin, 3, MAX_RAY_COORD_M)
+        direction = vector(event.ray_direction, 3, MAX_RAY_COORD_M)
+        if origin is None or direction is None:
+            ray = f"{str(event.ray_origin)[:60]}, {str(event.ray_direction)[:60]}"
+            complain("play", f"ignored a click: its ray ({ray}) is not two vectors of 3 finite numbers")
+            return None
+        point = floor_point(origin, direction, self.env.floor_height)
+        if point is None or not np.isfinite(point).all():
+            return None
+        return point
+
+    def _drop_clicked(self, event: Any) -> None:
+        point = self._floor_click(event)
+        if point is not None:
+            self.drop_box(point[:2])
+
+    def drop_box(self, xy: Sequence[float]) -> bool:
+        """Drop a :data:`DROP_BOX_SIZE` box on the floor at ``xy`` into the env's scene; whether it was dropped.
+
+        From the next step on the policy's scene observation (when it has one), the collision term and the
+        floor snap see it. Refused (with a status message) beyond the goal distance bound, within
+        :data:`DROP_CLEARANCE_M` of the pelvis, past :data:`~latentrl.scenes.spec.MAX_OBJECTS` objects, or in
+        an env without a fixed scene.
+        """
+        with self.lock:
+            world = self.world()
+            if world is None:
+                self.message = "box ignored: this env has no scene to drop it into"
+                return False
+            if not self._near(xy):
+                return False
+            pelvis = self.pelvis()
+            if not float(np.hypot(xy[0] - pelvis[0], xy[1] - pelvis[1])) >= DROP_CLEARANCE_M:
+                self.message = f"box ignored: within {DROP_CLEARANCE_M} m of the body"
+                return False
+            if len(world.objects) >= MAX_OBJECTS:
+                self.message = f"box ignored: the scene holds {MAX_OBJECTS} objects already"
+                return False
+            box = Box((float(xy[0]), float(xy[1])), DROP_BOX_SIZE)
+            world = Scene((*world.objects, box), world.floor_height)
+            self.env.scene.replace(world)
+            self.dropped += 1
+            self.scene.set_scene(world, self.dropped)
+            self.message = f"dropped a box at ({xy[0]:.2f}, {xy[1]:.2f})" + (
+                "" if self.env.observe_scene else "; this policy was trained without a scene and does not see it")
+        print(f"latentrl play: box dropped at ({xy[0]:.2f}, {xy[1]:.2f})", flush=True)
+        return True
+
+    def clear_boxes(self) -> None:
+        """Take the dropped boxes out of the env's scene again (the scene's own objects stay)."""
+        with self.lock:
+            world = self.world()
+            if world is None or not self.dropped:
+                return
+            world = Scene(world.objects[: len(world.objects) - self.dropped], world.floor_height)
+            self.env.scene.replace(world)
+            self.dropped = 0
+            self.scene.set_scene(world)
+            self.message = "dropped boxes removed"
 
     def press(self, key: Any) -> None:
         """Apply one key of :data:`KEY_ACTIONS` to the joystick command; anything else is ignored with one line."""
@@ -293,14 +410,8 @@ class LiveController:
             self.message = f"heading {heading:.0f}°, speed {speed:.1f} m/s"
 
     def _clicked(self, event: Any, append: bool = False) -> None:
-        origin = vector(event.ray_origin, 3, MAX_RAY_COORD_M)
-        direction = vector(event.ray_direction, 3, MAX_RAY_COORD_M)
-        if origin is None or direction is None:
-            ray = f"{str(event.ray_origin)[:60]}, {str(event.ray_direction)[:60]}"
-            complain("play", f"ignored a click: its ray ({ray}) is not two vectors of 3 finite numbers")
-            return
-        point = floor_point(origin, direction, self.env.floor_height)
-        if point is None or not np.isfinite(point).all():
+        point = self._floor_click(event)
+        if point is None:
             return
         if append:
             self.add_waypoint(point[:2])
@@ -421,18 +532,29 @@ class LiveController:
             else:
                 self.follower.reset()
 
+    def scene_line(self) -> str:
+        """The status line on the scene: its objects, the dropped boxes, whether the policy sees them."""
+        world = self.world()
+        if world is None or not world.objects:
+            return ""
+        seen = "the policy sees them" if self.env.observe_scene else "the policy was trained without a scene"
+        dropped = f", {self.dropped} dropped" if self.dropped else ""
+        return f"  \nscene: {len(world.objects)} objects{dropped} ({seen})"
+
     def status_text(self) -> str:
-        """The status panel: message, pelvis, goal, distance and generation speed (markdown)."""
+        """The status panel: message, pelvis, goal, distance, scene and generation speed (markdown)."""
         p = self.pelvis()
         if self.joystick:
             heading, speed = self.env.command
-            return (f"{self.message}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ncommand: heading {heading:.0f}° "
-                    f"(0 = +y, counter-clockwise), speed {speed:.1f} m/s  \ntext: **{plain(self.env.text)}**  \n"
+            return (f"{self.message}{self.scene_line()}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \n"
+                    f"command: heading {heading:.0f}° (0 = +y, counter-clockwise), speed {speed:.1f} m/s  \n"
+                    f"text: **{plain(self.env.text)}**  \n"
                     f"generation: {self.gen_fps:.0f} frames/s (policy + motion model)  \n"
                     f"display: {self.show_fps:.0f} frames/s")
         goal = "none" if self.goal is None else f"({self.goal[0]:.2f}, {self.goal[1]:.2f}) m"
         dist = "–" if self.goal is None else f"{np.hypot(*(self.goal[:2] - p[:2])):.2f} m"
-        return (f"{self.message}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ngoal: {goal}  \ndistance: {dist}  \n"
+        return (f"{self.message}{self.scene_line()}  \npelvis: ({p[0]:.2f}, {p[1]:.2f}) m  \ngoal: {goal}  \n"
+                f"distance: {dist}  \n"
                 f"text: **{plain(self.env.text)}**  \ngeneration: {self.gen_fps:.0f} frames/s (policy + motion model)"
                 f"  \ndisplay: {self.show_fps:.0f} frames/s")
 

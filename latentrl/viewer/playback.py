@@ -11,6 +11,7 @@ import numpy as np
 from latentrl.motion.skeleton import PELVIS
 from latentrl.viewer.guard import choice, complain, number
 from latentrl.viewer.markup import plain
+from latentrl.viewer.objects import scene_points
 from latentrl.viewer.scene import SkeletonScene, floor_extent, frame_camera
 from latentrl.viewer.sources import Clip, Source, metrics_table
 
@@ -60,15 +61,32 @@ class CameraFollower:
                 cam.position = tuple(float(v) for v in target + offset)
 
 
+def clip_scene(clip: Clip, path: Any) -> Any:
+    """The :class:`~latentrl.scenes.Scene` a clip carries, or None (and one line saying why for a bad one).
+
+    A motion whose scene text does not read as ``latentrl.scene/1`` still plays, on the bare floor.
+    """
+    if clip.scene is None:
+        return None
+    from latentrl.errors import LatentRLError
+    from latentrl.scenes.spec import scene_from_json
+
+    try:
+        return scene_from_json(clip.scene, f"{path}: scene")
+    except LatentRLError as exc:
+        complain("view", f"drawing no scene: {exc}")
+        return None
+
+
 class Player:
     """Plays the clips of a :class:`~latentrl.viewer.sources.Source` in a Viser server (a thread at 30 Hz)."""
 
-    def __init__(self, server: Any, source: Source, recorder: Any = None):
+    def __init__(self, server: Any, source: Source, recorder: Any = None, skeleton: bool = False):
         self.server, self.source = server, source
         self.recorder = recorder
         """A :class:`~latentrl.viewer.record.Recorder` that keeps every frame played (``--record``), or None."""
         self.lock = threading.Lock()
-        self.scene = SkeletonScene(server)
+        self.scene = SkeletonScene(server, skeleton=skeleton)
         self.clip: Clip | None = None
         self.frame = 0.0
         self.playing = True
@@ -82,7 +100,8 @@ class Player:
         self.slider = gui.add_slider("frame", 0, 1, 1, 0)
         self.speed = gui.add_dropdown("speed", SPEEDS, initial_value="1")
         self.follow = gui.add_checkbox("follow camera", False)
-        self.show_body = gui.add_checkbox("skeleton", True)
+        self.show_body = gui.add_checkbox("body", True)
+        self.show_skeleton = gui.add_checkbox("skeleton", bool(skeleton))
         self.status = gui.add_markdown("")
         self.rate = 1.0
         """Playback speed, a checked copy of the speed dropdown (a client may send any string)."""
@@ -90,7 +109,9 @@ class Player:
         self.play.on_click(lambda event: self.toggle())
         self.slider.on_update(self._scrubbed)
         self.speed.on_update(self._speed_changed)
-        self.show_body.on_update(lambda event: self.scene.set_body_visible(self.show_body.value))
+        self.show_body.on_update(lambda event: self._set_visible(self.scene.set_body_visible, self.show_body))
+        self.show_skeleton.on_update(lambda event: self._set_visible(self.scene.set_skeleton_visible,
+                                                                     self.show_skeleton))
         self.stop = threading.Event()
         self.select(labels[0])
         self.thread = threading.Thread(target=self._run, name="latentrl-view", daemon=True)
@@ -108,7 +129,12 @@ class Player:
             self.follower.reset()
             self.metrics.content = metrics_table(entry.metrics)
             self.slider.max = max(clip.frames - 1, 1)
-            self.scene.set_floor(*floor_extent(clip.joints, clip.waypoints))
+            world = clip_scene(clip, entry.path)
+            self.scene.set_scene(world)
+            around = scene_points(world)
+            if clip.waypoints is not None:
+                around = np.concatenate((around, np.asarray(clip.waypoints, dtype=np.float32)))
+            self.scene.set_floor(*floor_extent(clip.joints, around))
             self.scene.set_waypoints(clip.waypoints)
             self.scene.set_targets(clip.targets, clip.keyframes())
             move_cameras(self.server, *frame_camera(clip.joints, clip.waypoints))
@@ -121,6 +147,14 @@ class Player:
             if self.playing and self.clip is not None and self.frame >= self.clip.frames - 1:
                 self.frame = 0.0
             self.play.label = "Pause" if self.playing else "Play"
+
+    def _set_visible(self, setter: Any, checkbox: Any) -> None:
+        """Show or hide the body or the skeleton as a checkbox says (a client may send any value)."""
+        if not isinstance(checkbox.value, bool):
+            complain("view", f"ignored {checkbox.label} {str(checkbox.value)[:40]!r}: expected true or false")
+            return
+        with self.lock:
+            setter(checkbox.value)
 
     def _picked(self, event: Any) -> None:
         label = choice(self.picker.value, [e.label for e in self.source.entries])

@@ -1,8 +1,11 @@
-"""The 3D scene both commands draw in Viser: floor grid, skeleton, contact-coloured feet, pelvis trail, goals.
+"""The 3D scene both commands draw in Viser: a shaded floor, objects, the character, its trail and goals.
+
+The character is a capsule body, a skeleton as an option, its feet coloured by contact.
 
 The geometry (bone segments, colours, contact weights, the camera that frames a motion) is plain
-numpy in functions of this module, tested without a browser; :class:`SkeletonScene` only hands
-those arrays to Viser's scene handles. World frame: latentrl's (metres, z up, floor at z = 0).
+numpy in functions of this module, :mod:`latentrl.viewer.body` and :mod:`latentrl.viewer.objects`, tested
+without a browser; :class:`SkeletonScene` only hands those arrays to Viser's scene handles. World frame:
+latentrl's (metres, z up, floor at the scene's floor height, 0 without a scene).
 """
 
 from __future__ import annotations
@@ -16,13 +19,19 @@ from latentrl.render import (  # the colours of the rendered GIFs and MP4s, so b
     AIRBORNE,
     CENTRE,
     CONTACT,
+    FLOOR_DARK,
+    FLOOR_LIGHT,
     GOAL,
     LEFT,
     RIGHT,
+    SHADOW,
     TRAIL,
     WAYPOINT,
     side_colour,
 )
+from latentrl.scenes.scene import Scene
+from latentrl.viewer.body import CapsuleBody
+from latentrl.viewer.objects import SceneObjects
 
 CONTACT_HEIGHT_M = 0.03
 """DART's skate threshold: a foot joint counts fully in contact at the floor, not at all 3 cm above it."""
@@ -41,17 +50,17 @@ def bone_segments(joints: np.ndarray) -> np.ndarray:
     return np.asarray(joints, dtype=np.float32)[BONES]
 
 
-def contact_weights(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+def contact_weights(joints: np.ndarray, floor: np.ndarray | float = 0.0) -> np.ndarray:
     """(..., 22, 3) -> (..., 2) how much each foot (left, right) touches the floor, in [0, 1].
 
-    The weight of DART's skate metric, ``2 - 2^clamp(h / 3 cm, 0, 1)`` with h the foot joint's height:
-    1 on the floor, 0 from 3 cm up.
+    The weight of DART's skate metric, ``2 - 2^clamp(h / 3 cm, 0, 1)`` with h the foot joint's height
+    above ``floor`` (one z, or the ground z under each foot): 1 on the ground, 0 from 3 cm up.
     """
     heights = np.asarray(joints, dtype=np.float32)[..., list(FOOT_JOINTS), 2] - floor
     return 2.0 - np.power(2.0, np.clip(heights / CONTACT_HEIGHT_M, 0.0, 1.0))
 
 
-def joint_colours(joints: np.ndarray, floor: float = 0.0) -> np.ndarray:
+def joint_colours(joints: np.ndarray, floor: np.ndarray | float = 0.0) -> np.ndarray:
     """(22, 3) joints -> (22, 3) uint8 colours: side colours, feet and ankles from grey (air) to green (contact)."""
     colours = np.array([side_colour(j) for j in range(len(JOINT_NAMES))], dtype=np.float32)
     weights = contact_weights(joints, floor)
@@ -101,24 +110,46 @@ def floor_extent(joints: np.ndarray, waypoints: np.ndarray | None = None, margin
     return centre, max(size, 2 * margin)
 
 
+FLOOR_SHADOW = 0.35
+"""Opacity of the shadows the body and objects cast on the floor (0: none, 1: black)."""
+
+
 class SkeletonScene:
     """Scene nodes of one character in a Viser server; every update is one property assignment.
 
+    The character is a capsule body (:class:`~latentrl.viewer.body.CapsuleBody`) and, as an option, the
+    skeleton of line segments and joint dots; both can be shown at once (the body then turns half
+    transparent so the skeleton shows through). A hidden one is not updated while hidden.
+
     Args:
         server: a ``viser.ViserServer``.
+        skeleton: draw the skeleton from the start (``--skeleton``).
+        body: draw the capsule body from the start.
     """
 
-    def __init__(self, server: Any):
+    def __init__(self, server: Any, skeleton: bool = False, body: bool = True):
         self.server = server
         scene = server.scene
         scene.set_up_direction("+z")
+        scene.configure_default_lights(enabled=True, cast_shadow=True)
         self.grid = scene.add_grid("/floor", 20.0, 20.0, plane="xy", cell_size=0.5, section_size=1.0,
-                                   shadow_opacity=0.0)
+                                   cell_color=FLOOR_DARK, section_color=SHADOW, plane_color=FLOOR_LIGHT,
+                                   plane_opacity=1.0, shadow_opacity=FLOOR_SHADOW)
         zeros = np.zeros((len(JOINT_NAMES), 3), dtype=np.float32)
-        self.body = scene.add_frame("/body", show_axes=False)
+        self.pose = zeros
+        """The (22, 3) joints shown now."""
+        self.world: Scene | None = None
+        """The scene drawn (None: the bare floor)."""
+        self.floor_height = 0.0
+        self._terrain: Any = None
+        self.objects = SceneObjects(server)
+        self.character = CapsuleBody(server)
+        self.character.visible = bool(body)
+        self.body = scene.add_frame("/body", show_axes=False, visible=bool(skeleton))
         self.bones = scene.add_line_segments("/body/bones", bone_segments(zeros), BONE_COLOURS, thickness=0.05)
         self.joints = scene.add_point_cloud("/body/joints", zeros, joint_colours(zeros), point_size=0.07,
                                             point_shape="circle", precision="float32", point_shading="flat")
+        self.character.see_through(bool(skeleton) and bool(body))
         self.trail = scene.add_line_segments("/trail", trail_segments(zeros[:1]), TRAIL, thickness=0.025)
         self.path = scene.add_line_segments("/path", trail_segments(zeros[:1]), (200, 200, 210), thickness=0.012,
                                             visible=False)
@@ -128,10 +159,33 @@ class SkeletonScene:
         self.ghosts: dict[int, Any] = {}
         self.targets: Any = None
 
+    def set_scene(self, scene: Scene | None, dropped: int = 0) -> None:
+        """Draw ``scene``'s objects (None: none) and put the floor at its floor height.
+
+        ``dropped``: its last this many objects were dropped by hand (drawn in another colour).
+        """
+        from latentrl.scenes.scene import SceneBatch
+
+        self.world = scene
+        self.objects.show(scene, dropped)
+        self.floor_height = 0.0 if scene is None else float(scene.floor_height)
+        self._terrain = SceneBatch.from_scenes([scene]) if scene is not None and scene.objects else None
+        pos = self.grid.position
+        self.grid.position = (float(pos[0]), float(pos[1]), self.floor_height)
+
+    def ground_under_feet(self, joints: np.ndarray) -> np.ndarray:
+        """(2,) the terrain z under the left and right foot (a tread or box top, else the floor)."""
+        if self._terrain is None:
+            return np.full(2, self.floor_height, dtype=np.float32)
+        import torch
+
+        feet = torch.as_tensor(np.asarray(joints, dtype=np.float64)[None, list(FOOT_JOINTS), :2])
+        return self._terrain.height(feet.to(self._terrain.floor_height.dtype))[0].numpy().astype(np.float32)
+
     def set_floor(self, centre_xy: np.ndarray, size: float) -> None:
         """Centre the floor grid at ``centre_xy`` with sides of ``size`` metres."""
         self.grid.width = self.grid.height = float(size)
-        self.grid.position = (float(centre_xy[0]), float(centre_xy[1]), 0.0)
+        self.grid.position = (float(centre_xy[0]), float(centre_xy[1]), self.floor_height)
 
     def set_waypoints(self, waypoints: np.ndarray | None) -> None:
         """Numbered markers for a path's waypoints (replacing any previous path)."""
@@ -141,32 +195,38 @@ class SkeletonScene:
         if waypoints is None or not len(waypoints):
             self.path.visible = False
             return
+        z = self.floor_height
         for i, w in enumerate(np.asarray(waypoints, dtype=np.float32)):
             self.waypoints.append(self.server.scene.add_icosphere(f"/waypoints/{i}", radius=0.08, color=WAYPOINT,
-                                                                  position=(float(w[0]), float(w[1]), 0.08)))
+                                                                  position=(float(w[0]), float(w[1]), z + 0.08)))
             self.waypoints.append(self.server.scene.add_label(f"/waypoint_labels/{i}", str(i),
-                                                              position=(float(w[0]), float(w[1]), 0.3)))
+                                                              position=(float(w[0]), float(w[1]), z + 0.3)))
         start = np.zeros((1, 3), dtype=np.float32)
-        self.path.points = trail_segments(np.concatenate((start, waypoints)), height=0.005, stride=1)
+        self.path.points = trail_segments(np.concatenate((start, waypoints)), height=z + 0.005, stride=1)
         self.path.visible = True
 
     def show_pose(self, joints: np.ndarray) -> None:
-        """Draw one frame's (22, 3) joints."""
+        """Draw one frame's (22, 3) joints (the body, and the skeleton when it is shown)."""
         joints = np.asarray(joints, dtype=np.float32)
-        self.bones.points = bone_segments(joints)
-        self.joints.points = joints
-        self.joints.colors = joint_colours(joints)
+        self.pose = joints
+        ground = self.ground_under_feet(joints)
+        if self.character.visible:
+            self.character.show(joints, ground)
+        if self.body.visible:
+            self.bones.points = bone_segments(joints)
+            self.joints.points = joints
+            self.joints.colors = joint_colours(joints, ground)
 
     def show_trail(self, pelvis: np.ndarray) -> None:
         """(T, 3) pelvis positions so far (at least one)."""
-        self.trail.points = trail_segments(pelvis)
+        self.trail.points = trail_segments(pelvis, height=self.floor_height + 0.01)
 
     def show_goal(self, goal: np.ndarray | None) -> None:
         """Show the goal marker at ``goal`` (world metres), or hide it for None."""
         if goal is None:
             self.goal.visible = False
             return
-        self.goal.position = (float(goal[0]), float(goal[1]), 0.12)
+        self.goal.position = (float(goal[0]), float(goal[1]), self.floor_height + 0.12)
         self.goal.visible = True
 
     def set_targets(self, targets: np.ndarray | None, keyframes: dict[int, np.ndarray] | None = None) -> None:
@@ -199,6 +259,14 @@ class SkeletonScene:
             colour = np.asarray(TARGET_ON if f == frame else TARGET_DIM, dtype=np.uint8)
             ghost.colors = np.broadcast_to(colour, np.asarray(ghost.points).shape).copy()
 
-    def set_body_visible(self, visible: bool) -> None:
-        """Show or hide the skeleton."""
+    def set_skeleton_visible(self, visible: bool) -> None:
+        """Show or hide the skeleton (lines and joint dots)."""
         self.body.visible = bool(visible)
+        self.character.see_through(self.body.visible and self.character.visible)
+        self.show_pose(self.pose)
+
+    def set_body_visible(self, visible: bool) -> None:
+        """Show or hide the capsule body."""
+        self.character.visible = bool(visible)
+        self.character.see_through(self.body.visible and self.character.visible)
+        self.show_pose(self.pose)

@@ -47,6 +47,8 @@ class Clip:
     """(K, 3) world positions of an optimized motion's point targets (``latentrl optimize``), or None."""
     target_frames: np.ndarray | None = None
     """(K,) the motion frame each target is for."""
+    scene: str | None = None
+    """The scene the motion moves in, ``latentrl.scene/1`` JSON text as the file carries it, or None."""
 
     @property
     def frames(self) -> int:
@@ -123,7 +125,7 @@ def load_clip(path: str | Path, waypoints: np.ndarray | None = None) -> Clip:
         goals = per_frame_goals(motion.goals, frames, motion.primitive)
     if waypoints is None and motion.waypoints is not None and np.asarray(motion.waypoints).size:
         waypoints = np.asarray(motion.waypoints, dtype=np.float32).reshape(-1, 3)
-    return Clip(joints, motion.fps, motion.texts, goals, waypoints)
+    return Clip(joints, motion.fps, motion.texts, goals, waypoints, scene=motion.scene)
 
 
 def motion_metrics(clip: Clip) -> dict[str, float]:

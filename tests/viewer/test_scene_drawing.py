@@ -1,0 +1,241 @@
+"""What the viewer draws: a capsule body that follows the motion, a scene's objects, boxes dropped in ``play``.
+
+In-process Viser servers (and a raw WebSocket client for the ctrl-click), no browser: the node poses are
+checked against the motion's joints and the scene's primitives, and a dropped box against the env's SDF and
+its scene observation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from latentrl.render import save_motion_npz
+from latentrl.scenes import Box, Cylinder, Scene, Seat, Stairs, scene_to_dict, scene_to_json
+from tests.viewer.conftest import walking
+from tests.viewer.test_security import RawClient, wait_for
+
+SCENE = Scene((Box((1.0, 2.0), (0.6, 0.4, 1.0), 30.0), Cylinder((-1.0, 3.0), 0.25, 1.2),
+               Seat((0.0, 4.0), (0.5, 0.5), 0.45, -90.0), Stairs((2.0, 0.0), 90.0, 1.2, 0.15, 0.3, 3)))
+"""One of each object type: 1 box, 1 cylinder, 1 seat and 3 steps, 6 meshes."""
+
+
+@pytest.fixture
+def server(monkeypatch):
+    pytest.importorskip("viser")
+    from latentrl.viewer import guard
+    from latentrl.viewer.server import start_server
+
+    monkeypatch.setattr(guard, "_window", {"start": -float("inf"), "lines": 0})
+    srv = start_server("127.0.0.1", 0, "test", "play")
+    yield srv
+    srv.stop()
+
+
+def rotate(wxyz: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate (3,) ``v`` by the unit quaternion ``wxyz``."""
+    w, u = wxyz[0], np.asarray(wxyz[1:], dtype=np.float64)
+    return v + 2 * np.cross(u, np.cross(u, v) + w * v)
+
+
+def assert_body_on(body, joints: np.ndarray) -> None:
+    """Joint spheres at the joints, each bone's tube from its parent joint to its child joint."""
+    from latentrl.viewer.body import BONE_RADII, BONES
+
+    assert np.allclose(body.spheres.batched_positions, joints, atol=1e-6)
+    centres, wxyzs, scales = (np.asarray(x, dtype=np.float64) for x in (
+        body.tubes.batched_positions, body.tubes.batched_wxyzs, body.tubes.batched_scales))
+    assert centres.shape == (21, 3) and wxyzs.shape == (21, 4)
+    for b, (a, c) in enumerate(BONES):
+        tip = centres[b] + rotate(wxyzs[b], np.array([0.0, 0.0, 0.5 * scales[b, 2]]))
+        assert np.allclose(tip, joints[c], atol=1e-5), (b, tip, joints[c])
+        assert np.allclose(centres[b], (joints[a] + joints[c]) / 2, atol=1e-6)
+    assert np.allclose(scales[:, :2], np.stack((BONE_RADII, BONE_RADII), 1))
+
+
+def test_the_capsule_body_follows_the_motion_and_its_feet_turn_green(server):
+    from latentrl.motion.skeleton import FOOT_JOINTS
+    from latentrl.render import CONTACT, LEFT
+    from latentrl.viewer.body import BONES
+    from latentrl.viewer.scene import SkeletonScene
+
+    scene = SkeletonScene(server)
+    assert scene.character.visible and not scene.body.visible  # body by default, skeleton on request
+    joints = walking(10)
+    for frame in (0, 9):
+        scene.show_pose(joints[frame])
+        assert_body_on(scene.character, joints[frame])
+    left_foot_bone = int(np.nonzero(BONES[:, 1] == FOOT_JOINTS[0])[0][0])
+    assert joints[9, FOOT_JOINTS[0], 2] < 0.01  # on the floor: the contact colour
+    assert np.abs(scene.character.tubes.batched_colors[left_foot_bone].astype(int) - CONTACT).max() <= 12
+    lifted = joints[9].copy()
+    lifted[:, 2] += 0.5
+    scene.show_pose(lifted)
+    assert tuple(scene.character.tubes.batched_colors[left_foot_bone]) == LEFT  # in the air: its side's colour
+    scene.set_skeleton_visible(True)  # the skeleton catches up with the pose it missed while hidden
+    assert np.allclose(scene.joints.points, lifted) and scene.character.tubes.opacity is not None
+    scene.set_body_visible(False)
+    assert not scene.character.visible and scene.character.tubes.opacity is None
+
+
+def test_object_meshes_are_the_scene_primitives():
+    from latentrl.scenes.scene import SceneBatch
+    from latentrl.viewer.objects import object_meshes
+
+    meshes = object_meshes(SCENE)
+    assert [m.kind for m in meshes] == ["box", "cylinder", "box", "box", "box", "box"]
+    assert [m.object_index for m in meshes] == [0, 1, 2, 3, 3, 3]
+    box, cylinder, seat = meshes[0], meshes[1], meshes[2]
+    assert np.allclose(box.centre, (1.0, 2.0, 0.5)) and np.allclose(box.size, (0.6, 0.4, 1.0))
+    assert math.isclose(box.yaw, math.radians(30))
+    assert np.allclose(cylinder.centre, (-1.0, 3.0, 0.6)) and np.allclose(cylinder.size, (0.25, 0.25, 1.2))
+    assert np.allclose(seat.size, (0.5, 0.5, 0.45))
+    steps = meshes[3:]
+    assert np.allclose([s.size[2] for s in steps], (0.15, 0.30, 0.45))  # each step from the floor up
+    # every mesh's centre is inside the scene's SDF and its top face is where the terrain height says
+    batch = SceneBatch.from_scenes([SCENE])
+    centres = torch.tensor([m.centre for m in meshes], dtype=torch.float32)
+    assert (batch.sdf(centres[None]) < 0).all()
+    tops = batch.height(centres[None, :, :2])[0]
+    assert torch.allclose(tops[[0, 2, 3, 4, 5]], torch.tensor([1.0, 0.45, 0.15, 0.30, 0.45]), atol=1e-6)
+
+
+def test_view_draws_the_scene_a_motion_carries(server, tmp_path):
+    from latentrl.viewer.objects import yaw_wxyz
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    joints = walking(40)
+    path = save_motion_npz(tmp_path / "walk.npz", joints, texts=["walk"] * 40, scene=scene_to_json(SCENE))
+    player = Player(server, open_source(path), skeleton=True)
+    nodes = player.scene.objects.nodes
+    assert len(nodes) == 6 and player.scene.body.visible
+    assert np.allclose(nodes[0].position, (1.0, 2.0, 0.5)) and np.allclose(nodes[0].dimensions, (0.6, 0.4, 1.0))
+    assert np.allclose(nodes[0].wxyz, yaw_wxyz(math.radians(30)))
+    assert np.allclose(nodes[1].position, (-1.0, 3.0, 0.6)) and math.isclose(nodes[1].radius, 0.25)
+    assert math.isclose(nodes[1].height, 1.2)
+    for frame in (5, 31):
+        player.frame = float(frame)
+        player._draw()
+        assert_body_on(player.scene.character, joints[frame])
+        assert np.allclose(player.scene.joints.points, joints[frame])
+    bare = save_motion_npz(tmp_path / "bare.npz", joints, texts=["walk"] * 40)
+    player.source = open_source(bare)
+    player.select(player.source.entries[0].label)
+    assert player.scene.objects.nodes == [] and player.scene.world is None
+
+
+def test_view_of_a_bad_scene_plays_on_the_bare_floor(server, tmp_path, capsys):
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    bad = scene_to_dict(SCENE)
+    bad["objects"][0]["size"] = [0.6, -1.0, 1.0]
+    import json
+
+    path = save_motion_npz(tmp_path / "walk.npz", walking(20), texts=["walk"] * 20, scene=json.dumps(bad))
+    player = Player(server, open_source(path))
+    assert player.scene.objects.nodes == [] and player.clip.frames == 20
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "objects[0].size[1]" in err[0] and "drawing no scene" in err[0], err
+
+
+def scene_controller(server, tiny_model, trained_scene: Scene | None, scene: Scene | None = None):
+    """``play``'s env and controller on the tiny model, for a policy trained in ``trained_scene`` (None: flat)."""
+    from latentrl.ppo.config import PolicyConfig
+    from latentrl.ppo.policy import ActorCritic
+    from latentrl.viewer.live import LiveController, play_env
+
+    config = {"env": {"texts": ["walk"], **({"scene": scene_to_dict(trained_scene)} if trained_scene else {})}}
+    env = play_env({"config": config}, tiny_model, None, "cpu", "reach", scene)
+    torch.manual_seed(0)
+    policy = ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
+                         PolicyConfig(latent_dim=32), env.metadata["observation_layout"])
+    return LiveController(server, env, policy, "test", "walk", seed=0)
+
+
+def test_a_ctrl_click_drops_a_box_the_env_collides_with_and_the_policy_sees(server, tiny_model, capsys):
+    from latentrl.envs.scene import NUM_RAYS, RAY_RANGE_M
+    from latentrl.viewer.live import DROP_BOX_SIZE
+
+    live = scene_controller(server, tiny_model, trained_scene=Scene())  # trained among objects: it sees them
+    env = live.env
+    assert env.observe_scene and env.scene is not None and live.scene.objects.nodes == []
+    pelvis = live.pelvis()
+    forward = env.history_world()[0, -1, 0, :2]  # the rays are cast from the pelvis; put the box 2 m ahead
+    rays_before = env.scene.rays(env.history_world())[0]
+    assert torch.allclose(rays_before, torch.full((NUM_RAYS,), RAY_RANGE_M))
+    drop = pelvis[:2] + np.array([0.0, 2.0])
+    client = RawClient(server.get_port())
+    try:
+        client.send(type="ScenePointerMessage", event_type="click", ray_origin=(float(drop[0]), float(drop[1]), 3.0),
+                    ray_direction=(0.0, 0.0, -1.0), screen_pos=[[0.5, 0.5]], modifier="cmd/ctrl")
+        wait_for(lambda: live.dropped == 1, "a ctrl-click drops a box")
+        with live.lock:  # the click's callback holds it until the box is drawn
+            pass
+    finally:
+        client.close()
+    assert live.goal is None, "the ctrl-click set no goal"
+    (box,) = env.scene.spec.objects
+    assert np.allclose(box.center, drop) and box.size == DROP_BOX_SIZE
+    inside = torch.tensor([[[drop[0], drop[1], 0.5]]], dtype=torch.float32)
+    assert float(env.scene.batch.sdf(inside)) < 0  # the env collides with it
+    assert len(live.scene.objects.nodes) == 1 and np.allclose(live.scene.objects.nodes[0].position[:2], drop)
+    rays = env.scene.rays(env.history_world())[0]
+    assert float(rays.min()) < 2.0 - DROP_BOX_SIZE[1] / 2 + 0.05 and float(rays.min()) > 1.0, (rays, forward)
+    obs, *_ = env.step(torch.zeros(1, env.single_action_space.shape[0]))  # and steps on with the new scene
+    start, stop = env.observation_layout["scene_rays"]
+    assert float(obs[0, start:stop].min()) < RAY_RANGE_M
+    assert "1 objects, 1 dropped (the policy sees them)" in live.status_text()
+    assert "box dropped at" in capsys.readouterr().out
+    live.clear_boxes()
+    assert env.scene.spec.objects == () and live.scene.objects.nodes == [] and live.dropped == 0
+
+
+def test_play_scene_flag_and_drop_bounds(server, tiny_model):
+    live = scene_controller(server, tiny_model, trained_scene=None, scene=SCENE)
+    env = live.env
+    assert not env.observe_scene, "a policy trained on the flat floor gets no scene observation"
+    assert env.scene.spec == SCENE and len(live.scene.objects.nodes) == 6
+    pelvis = live.pelvis()
+    assert not live.drop_box(pelvis[:2] + 0.1) and "within" in live.message and live.dropped == 0
+    assert not live.drop_box((pelvis[0] + 80.0, pelvis[1])) and "more than 50 m" in live.message
+    assert live.drop_box((pelvis[0] - 2.0, pelvis[1])) and "does not see it" in live.message
+    assert len(env.scene.spec.objects) == 5 and len(live.scene.objects.nodes) == 7
+    live.clear_boxes()
+    assert env.scene.spec == SCENE and len(live.scene.objects.nodes) == 6
+
+
+def test_a_flat_policy_plays_in_an_empty_scene_as_on_the_flat_floor(server, tiny_model):
+    """play gives every env a scene so boxes can be dropped; empty, it observes and steps as the flat env."""
+    from latentrl.viewer.live import SteeredReachEnv
+
+    live = scene_controller(server, tiny_model, trained_scene=None)
+    assert live.env.scene is not None and live.env.scene.spec == Scene()
+    flat = SteeredReachEnv(1, motion=tiny_model, texts=list(live.env.texts), max_episode_steps=10**9,
+                            autoreset_mode="Disabled")
+    assert live.env.single_observation_space.shape == flat.single_observation_space.shape
+    flat.set_text("walk")  # as the controller did
+    o1, _ = live.env.reset(seed=3)
+    o2, _ = flat.reset(seed=3)
+    a = torch.randn(1, flat.single_action_space.shape[0], generator=torch.Generator().manual_seed(0))
+    assert torch.equal(o1, o2)
+    live.env.set_goal((0.5, 2.0))
+    flat.set_goal((0.5, 2.0))
+    for _ in range(3):
+        assert torch.equal(live.env.step(a)[0], flat.step(a)[0])
+
+
+def test_play_scene_flag_refuses_bad_files_in_one_line(capsys, tmp_path):
+    from tests.viewer.test_commands import one_line_error
+
+    pytest.importorskip("viser")
+    one_line_error(capsys, ["play", "reach_walk_default", "--scene", str(tmp_path / "none.json")],
+                   "--scene: scene file not found")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "latentrl.scene/1", "objects": [{"type": "box", "center": [0, 1], "size": [1, 0, 1]}]}')
+    one_line_error(capsys, ["play", "reach_walk_default", "--scene", str(bad)], "objects[0].size[1]")
+    one_line_error(capsys, ["play", "reach_walk_default", "--scene", "random_obstacles"], "takes a scene file")
