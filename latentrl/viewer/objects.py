@@ -14,10 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from latentrl.scenes.scene import Box, Cylinder, Scene, Seat, Stairs
+from latentrl.render import SCENE_COLOURS
+from latentrl.scenes.scene import Scene
 
-COLOURS = {Box: (168, 152, 136), Cylinder: (150, 162, 178), Seat: (118, 152, 110), Stairs: (186, 180, 168)}
-"""Colour of each object type (RGB 0-255): boxes warm grey, pillars blue-grey, seats green, stairs stone."""
+COLOURS = SCENE_COLOURS
+"""Colour of each object type (RGB 0-255), the rendered videos' own: boxes warm grey, pillars blue-grey, seats
+green, stairs stone."""
 DROPPED = (214, 132, 70)
 """Boxes dropped by hand in ``latentrl play``: orange-brown, to tell them from the scene file's."""
 

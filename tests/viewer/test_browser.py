@@ -189,6 +189,25 @@ def test_view_draws_a_sampled_motion(browser, tmp_path):
         keep(browser, "viewer_view.png")
 
 
+def test_view_draws_the_scene_of_a_motion(browser, tmp_path):
+    """A motion carrying a scene: its objects are drawn (the green seat's pixels show in the scene)."""
+    from latentrl.render import save_motion_npz
+    from latentrl.scenes import Box, Cylinder, Scene, Seat, Stairs, scene_to_json
+    from tests.viewer.conftest import walking
+
+    scene = Scene((Stairs((1.4, 0.2), 90.0, 1.0, 0.15, 0.3, 4), Box((-1.2, 1.0), (0.6, 0.6, 1.0), 20.0),
+                   Cylinder((-0.8, 2.8), 0.25, 1.2), Seat((0.2, 3.2), (0.6, 0.6), 0.45, -90.0)))
+    motion = save_motion_npz(tmp_path / "walk.npz", walking(50), texts=["walk"] * 50, scene=scene_to_json(scene))
+    with serve("view", str(motion)) as (url, _):
+        open_page(browser, url, "frame ")
+        click_control(browser, "Pause", "button")
+        shot = still_screenshot(browser)
+        r, g, b = shot[:, : panel_left(browser)].reshape(-1, 3).T
+        green = (g > r + 20) & (g > b + 25)
+        assert green.sum() > 300, f"the seat is not drawn: {green.sum()} green pixels"
+        keep(browser, "viewer_scene.png")
+
+
 def status(driver) -> dict[str, np.ndarray]:
     text = page_text(driver)
     found = {k: re.search(rf"{k}: \(([-\d.]+), ([-\d.]+)\)", text) for k in ("pelvis", "goal")}
