@@ -259,7 +259,7 @@ class LiveController:
         self.dropped = 0
         """Boxes dropped by hand: the last this many objects of the env's scene."""
         self.scene = SkeletonScene(server, skeleton=skeleton)
-        self.scene.set_scene(self.world())
+        self._show_world(self.world())
         self.scene.set_floor(np.zeros(2), 40.0)
         gui = server.gui
         gui.add_markdown(title)
@@ -324,6 +324,12 @@ class LiveController:
         scene = getattr(self.env, "scene", None)
         return None if scene is None or scene.random else scene.spec
 
+    def _show_world(self, world: Scene | None) -> None:
+        """Draw ``world`` on the page (dropped boxes in their colour) and in the recording."""
+        self.scene.set_scene(world, self.dropped)
+        if self.recorder is not None:
+            self.recorder.set_scene(world if world is not None and world.objects else None)
+
     def _floor_click(self, event: Any) -> np.ndarray | None:
         """Where a click's ray meets the floor, or None (and one line for a malformed ray)."""
         origin = vector(event.ray_origin, 3, MAX_RAY_COORD_M)
@@ -368,7 +374,7 @@ class LiveController:
             world = Scene((*world.objects, box), world.floor_height)
             self.env.scene.replace(world)
             self.dropped += 1
-            self.scene.set_scene(world, self.dropped)
+            self._show_world(world)
             self.message = f"dropped a box at ({xy[0]:.2f}, {xy[1]:.2f})" + (
                 "" if self.env.observe_scene else "; this policy was trained without a scene and does not see it")
         print(f"latentrl play: box dropped at ({xy[0]:.2f}, {xy[1]:.2f})", flush=True)
@@ -383,7 +389,7 @@ class LiveController:
             world = Scene(world.objects[: len(world.objects) - self.dropped], world.floor_height)
             self.env.scene.replace(world)
             self.dropped = 0
-            self.scene.set_scene(world)
+            self._show_world(world)
             self.message = "dropped boxes removed"
 
     def press(self, key: Any) -> None:

@@ -131,6 +131,8 @@ class Player:
             self.slider.max = max(clip.frames - 1, 1)
             world = clip_scene(clip, entry.path)
             self.scene.set_scene(world)
+            if self.recorder is not None:
+                self.recorder.set_scene(world)
             around = scene_points(world)
             if clip.waypoints is not None:
                 around = np.concatenate((around, np.asarray(clip.waypoints, dtype=np.float32)))

@@ -47,6 +47,13 @@ class Recorder:
         self.lock = threading.Lock()
         self.frames: collections.deque = collections.deque(maxlen=int(max_frames))
         self.goals: list[np.ndarray] = []
+        self.scene = None
+        """The :class:`~latentrl.scenes.Scene` drawn around the body (the last one the page showed), or None."""
+
+    def set_scene(self, scene) -> None:
+        """Draw ``scene`` (the page's objects now, dropped boxes included; None: none) in the recording."""
+        with self.lock:
+            self.scene = scene
 
     def add(self, joints: np.ndarray, text: str = "", goal: np.ndarray | None = None) -> None:
         """Keep one shown pose (22, 3), the text it was generated with and the goal on screen (or None)."""
@@ -60,14 +67,14 @@ class Recorder:
         from latentrl.render import render_video
 
         with self.lock:
-            frames, goals = list(self.frames), list(self.goals)
+            frames, goals, scene = list(self.frames), list(self.goals), self.scene
         if not frames:
             print(f"latentrl {self.command}: nothing was played, {self.path} not written", flush=True)
             return None
         joints = np.stack([f[0] for f in frames])
         print(f"latentrl {self.command}: drawing {len(frames)} frames into {self.path} ...", flush=True)
         render_video(self.path, joints, FPS, texts=[f[1] for f in frames], title=f"latentrl {self.command}",
-                     goals=np.stack(goals) if goals else None)
+                     goals=np.stack(goals) if goals else None, scene=scene)
         print(f"latentrl {self.command}: wrote {self.path.resolve()} ({len(frames)} frames, "
               f"{len(frames) / FPS:.1f} s)", flush=True)
         return self.path

@@ -110,7 +110,10 @@ def test_view_draws_the_scene_a_motion_carries(server, tmp_path):
 
     joints = walking(40)
     path = save_motion_npz(tmp_path / "walk.npz", joints, texts=["walk"] * 40, scene=scene_to_json(SCENE))
-    player = Player(server, open_source(path), skeleton=True)
+    from latentrl.viewer.record import Recorder
+
+    player = Player(server, open_source(path), Recorder(tmp_path / "view.gif", "view"), skeleton=True)
+    assert player.recorder.scene == SCENE  # --record draws it too
     nodes = player.scene.objects.nodes
     assert len(nodes) == 6 and player.scene.body.visible
     assert np.allclose(nodes[0].position, (1.0, 2.0, 0.5)) and np.allclose(nodes[0].dimensions, (0.6, 0.4, 1.0))
@@ -143,7 +146,7 @@ def test_view_of_a_bad_scene_plays_on_the_bare_floor(server, tmp_path, capsys):
     assert len(err) == 1 and "objects[0].size[1]" in err[0] and "drawing no scene" in err[0], err
 
 
-def scene_controller(server, tiny_model, trained_scene: Scene | None, scene: Scene | None = None):
+def scene_controller(server, tiny_model, trained_scene: Scene | None, scene: Scene | None = None, recorder=None):
     """``play``'s env and controller on the tiny model, for a policy trained in ``trained_scene`` (None: flat)."""
     from latentrl.ppo.config import PolicyConfig
     from latentrl.ppo.policy import ActorCritic
@@ -154,7 +157,7 @@ def scene_controller(server, tiny_model, trained_scene: Scene | None, scene: Sce
     torch.manual_seed(0)
     policy = ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
                          PolicyConfig(latent_dim=32), env.metadata["observation_layout"])
-    return LiveController(server, env, policy, "test", "walk", seed=0)
+    return LiveController(server, env, policy, "test", "walk", seed=0, recorder=recorder)
 
 
 def test_a_ctrl_click_drops_a_box_the_env_collides_with_and_the_policy_sees(server, tiny_model, capsys):
@@ -239,3 +242,27 @@ def test_play_scene_flag_refuses_bad_files_in_one_line(capsys, tmp_path):
     bad.write_text('{"format": "latentrl.scene/1", "objects": [{"type": "box", "center": [0, 1], "size": [1, 0, 1]}]}')
     one_line_error(capsys, ["play", "reach_walk_default", "--scene", str(bad)], "objects[0].size[1]")
     one_line_error(capsys, ["play", "reach_walk_default", "--scene", "random_obstacles"], "takes a scene file")
+
+
+def test_a_play_recording_draws_the_scene_with_the_dropped_boxes(server, tiny_model, tmp_path):
+    from PIL import Image
+
+    from latentrl.viewer.record import Recorder
+
+    recorder = Recorder(tmp_path / "play.gif", "play")
+    live = scene_controller(server, tiny_model, trained_scene=None, recorder=recorder)
+    assert recorder.scene is None  # an empty scene: nothing to draw
+    pelvis = live.pelvis()
+    assert live.drop_box((pelvis[0], pelvis[1] + 1.2))
+    assert recorder.scene == live.env.scene.spec and len(recorder.scene.objects) == 1
+    live.set_goal((pelvis[0] + 1.0, pelvis[1]))
+    for _ in range(2):
+        live._generate()
+        while live.frames:
+            live._show_next()
+    with_box = recorder.write()
+    recorder.path = tmp_path / "bare.gif"
+    recorder.set_scene(None)
+    bare = recorder.write()
+    a, b = (np.asarray(Image.open(p).convert("RGB"), dtype=np.int16) for p in (with_box, bare))
+    assert (np.abs(a - b).max(axis=-1) > 40).sum() > 200, "the recording does not show the dropped box"
