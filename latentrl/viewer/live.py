@@ -211,6 +211,9 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     world = scene if scene is not None else (training_scene(env_cfg) or Scene())
     common = dict(motion=model, texts=texts, device=device, max_episode_steps=10**9, autoreset_mode="Disabled",
                   scene=world, observe_scene=env_cfg.get("scene") is not None, **settings.step_kwargs())
+    if env_cfg.get("scene") is not None and env_cfg.get("height_grid"):  # a grid is observed with the scene
+        common.update(height_grid=int(env_cfg["height_grid"]),
+                      height_grid_spacing=float(env_cfg.get("height_grid_spacing") or 0.25))
     if task == "joystick":
         speeds = tuple((env_cfg.get("joystick") or {}).get("speed_range") or (0.7, 1.4))
         return SteeredJoystickEnv(1, speed_range=speeds, **common)

@@ -266,3 +266,14 @@ def test_a_play_recording_draws_the_scene_with_the_dropped_boxes(server, tiny_mo
     bare = recorder.write()
     a, b = (np.asarray(Image.open(p).convert("RGB"), dtype=np.int16) for p in (with_box, bare))
     assert (np.abs(a - b).max(axis=-1) > 40).sum() > 200, "the recording does not show the dropped box"
+
+
+def test_play_observes_as_the_policy_was_trained(tiny_model):
+    """A policy trained among objects with a height grid gets both groups; a flat one neither."""
+    from latentrl.viewer.live import play_env
+
+    trained = {"env": {"texts": ["walk"], "scene": scene_to_dict(SCENE), "height_grid": 3}}
+    layout = play_env({"config": trained}, tiny_model, None, "cpu").observation_layout
+    assert "scene_rays" in layout and layout["scene_height_grid"][1] - layout["scene_height_grid"][0] == 9
+    flat = play_env({"config": {"env": {"texts": ["walk"]}}}, tiny_model, None, "cpu", "joystick", SCENE)
+    assert "scene_rays" not in flat.observation_layout and flat.scene.spec == SCENE
