@@ -51,6 +51,13 @@ MAX_ENTRIES = 1_000
 MAX_GOALS = 1_000
 MAX_TIME_S = 3600.0
 MAX_COORD_M = 10_000.0
+PATH_ACCEL = 1.0
+"""m/s^2: how fast the velocity of a run of near goals turns toward its wanted speed and heading (a walk from
+rest reaches 1 m/s in a second)."""
+RUN_LOST_M = 0.5
+"""A run of near goals ends early when a goal is missed by more than this (metres): the next goal starts afresh
+from the body."""
+MAX_RUN = 1_000
 _ENTRY_FIELDS = ("text", "goals")
 _GOAL_FIELDS = ("joint", "target", "time")
 
@@ -157,15 +164,23 @@ class ReachJointConfig:
     radius: float = 0.1
     """A goal succeeds when its joint is within this many metres at the goal time."""
     near_share: float = 0.25
-    """Share of goals drawn within one step (0.267 s) of their start; the rest lie ``far_time`` ahead."""
+    """Share of fresh goals that start a run of near goals (each within one step, 0.267 s); the rest lie
+    ``far_time`` ahead."""
+    near_run: list[int] = field(default_factory=lambda: [1, 1])
+    """Near goals per run, uniform in [min, max]: targets along a path whose velocity starts at the body's and
+    turns toward a wanted speed and heading, each due at most 8 frames after the previous (feet: runs of 1)."""
+    turn_deg_s: float = 30.0
+    """A run's heading turns at a rate uniform in +/- this, degrees per second."""
     far_time: list[float] = field(default_factory=lambda: [1.0, 4.0])
     """Lead time of the other goals, uniform in [min, max] seconds."""
     distance: list[float] = field(default_factory=lambda: [0.0, 5.0])
-    """Horizontal distance from the joint to its target, uniform in [min, max] metres, capped by ``max_speed``."""
+    """Horizontal distance from the joint to a far target, uniform in [min, max] metres, capped by ``max_speed``."""
     max_speed: float = 1.2
-    """A goal lies at most this many m/s x its lead time away (walking); asap goals are timed at this speed."""
+    """A goal lies at most this many m/s x its lead time away (walking; the speed of a run of near goals at most);
+    asap goals are timed at this speed."""
     angle_deg: float = 90.0
-    """Targets lie within +/- this angle of the body's forward axis."""
+    """Far targets, and the heading a run of near goals turns to, lie within +/- this angle of the body's forward
+    axis."""
     height_offset: list[float] = field(default_factory=lambda: [0.0, 0.0])
     """3-D targets sit this much (uniform in [min, max] metres) above the joint's height when drawn."""
     planar: list[str] = field(default_factory=list)
@@ -191,6 +206,12 @@ class ReachJointConfig:
             require(isinstance(pair, list) and len(pair) == 2 and all(map(is_finite_number, pair))
                     and low <= pair[0] <= pair[1], name,
                     f"must be [min, max] with {low:.3g} <= min <= max, got {pair!r}")
+        require(isinstance(self.near_run, list) and len(self.near_run) == 2
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in self.near_run)
+                and 1 <= self.near_run[0] <= self.near_run[1] <= MAX_RUN, "near_run",
+                f"must be [min, max] goals with 1 <= min <= max <= {MAX_RUN}, got {self.near_run!r}")
+        require(is_finite_number(self.turn_deg_s) and 0 <= self.turn_deg_s <= 360, "turn_deg_s",
+                f"must be degrees per second in [0, 360], got {self.turn_deg_s!r}")
         require(self.far_time[1] <= MAX_TIME_S, "far_time", f"must end by {MAX_TIME_S:g} s, got {self.far_time!r}")
         require(is_finite_number(self.max_speed) and self.max_speed > 0, "max_speed",
                 f"must be m/s > 0, got {self.max_speed!r}")
@@ -207,6 +228,7 @@ class ReachJointConfig:
             require(found is not None, "goals", f"joint-goal file not found: {self.goals}")
             goals = str(found)
         return {"joints": tuple(self.joints), "radius": self.radius, "near_share": self.near_share,
+                "near_run": tuple(self.near_run), "turn_deg_s": self.turn_deg_s,
                 "far_time": tuple(self.far_time), "distance": tuple(self.distance), "max_speed": self.max_speed,
                 "angle_deg": self.angle_deg, "height_offset": tuple(self.height_offset), "planar": tuple(self.planar),
                 "goals": goals}
@@ -220,8 +242,10 @@ class ReachJointEnv(LatentMotionVectorEnv):
     The motion model is driven as in :class:`~latentrl.envs.reach.ReachLocationEnv`. The goal is a joint
     (pelvis, left/right foot, left/right hand, head), a target and a goal time (module docstring). At the
     step that holds the goal time, the joint's error at that frame is measured (``infos["joint_error_m"]``)
-    and the next goal becomes current. Random goals (training) follow one another until truncation, each
-    drawn from the body at the time the previous one is due, a share ``near_share`` of them within one step;
+    and the next goal becomes current. Random goals (training) follow one another until truncation: a fresh
+    goal is drawn from the body when the previous one is due, a share ``near_share`` of them starting a run
+    of ``near_run`` near goals along a path (each due within one step of the previous, as the targets of a
+    file lie on a path: the body must keep up with them); the others lie ``far_time`` ahead;
     goals from a file (``goals=``) are an entry's goals in order, and the episode ends after its last.
 
     ## Observation Space
@@ -246,10 +270,10 @@ class ReachJointEnv(LatentMotionVectorEnv):
 
     ## Arguments
 
-    ``joints``, ``radius``, ``near_share``, ``far_time``, ``distance``, ``max_speed``, ``angle_deg``,
-    ``height_offset``, ``planar`` (:class:`ReachJointConfig`), ``goals`` (a joint-goal file or a list of
-    :class:`JointGoalEntry`; env ``i`` runs entry ``i % E``), ``time_left_clip`` (10 s); every other argument
-    is :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
+    ``joints``, ``radius``, ``near_share``, ``near_run``, ``turn_deg_s``, ``far_time``, ``distance``,
+    ``max_speed``, ``angle_deg``, ``height_offset``, ``planar`` (:class:`ReachJointConfig`), ``goals`` (a
+    joint-goal file or a list of :class:`JointGoalEntry`; env ``i`` runs entry ``i % E``), ``time_left_clip``
+    (10 s); every other argument is :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
     """
 
     goal_fields = (("goal_vec", 3), ("goal_dist", 1), ("joint", len(JOINTS)), ("planar", 1), ("time_left", 1))
@@ -262,6 +286,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
         joints: Sequence[str] = ("pelvis",),
         radius: float = 0.1,
         near_share: float = 0.25,
+        near_run: Sequence[int] = (1, 1),
+        turn_deg_s: float = 30.0,
         far_time: Sequence[float] = (1.0, 4.0),
         distance: Sequence[float] = (0.0, 5.0),
         max_speed: float = 1.2,
@@ -272,8 +298,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
         time_left_clip: float = 10.0,
         **kwargs,
     ):
-        section = ReachJointConfig(list(joints), radius, near_share, [float(v) for v in far_time],
-                                   [float(v) for v in distance], max_speed, angle_deg,
+        section = ReachJointConfig(list(joints), radius, near_share, list(near_run), turn_deg_s,
+                                   [float(v) for v in far_time], [float(v) for v in distance], max_speed, angle_deg,
                                    [float(v) for v in height_offset], list(planar))
         section.validate()
         require(time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {time_left_clip}")
@@ -282,6 +308,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self.entries: tuple[JointGoalEntry, ...] | None = tuple(goals) if goals is not None else None
         require(self.entries is None or len(self.entries) > 0, "goals", "give at least one entry")
         self.joints, self.radius, self.near_share = tuple(section.joints), float(radius), float(near_share)
+        self.near_run, self.turn = tuple(section.near_run), math.radians(float(turn_deg_s))
         self.far_time, self.distance = tuple(section.far_time), tuple(section.distance)
         self.max_speed, self.angle_deg = float(max_speed), float(angle_deg)
         self.height_offset, self.time_left_clip = tuple(section.height_offset), float(time_left_clip)
@@ -306,6 +333,12 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self._due = torch.zeros(n, dtype=torch.bool, device=dev)
         self._record = torch.full((n, width), math.nan, device=dev)  # each goal's error at its frame
         self._future = torch.zeros(n, FUTURE_LENGTH, 22, 3, device=dev)  # the step's new frames, for _score
+        # runs of near random goals: goals left after the current one, path velocity, wanted speed, heading, turn
+        self._run_left = torch.zeros(n, dtype=torch.long, device=dev)
+        self._run_vel = torch.zeros(n, 2, device=dev)
+        self._run_speed = torch.zeros(n, device=dev)
+        self._run_heading = torch.zeros(n, device=dev)
+        self._run_turn = torch.zeros(n, device=dev)
         if self.entries is not None:
             self._entry_tables()
 
@@ -348,22 +381,43 @@ class ReachJointEnv(LatentMotionVectorEnv):
         return last[torch.arange(len(idx), device=self.device), joint]
 
     def _sample_goals(self, idx: torch.Tensor) -> None:
-        """A random goal for envs ``idx`` (slot 0), drawn from the body now (:class:`ReachJointConfig`)."""
+        """The next random goal of envs ``idx`` (slot 0): the next of a run of near goals, else a fresh one."""
+        going = self._run_left[idx] > 0
+        if bool(going.any()):
+            self._next_in_run(idx[going])
+        if not bool(going.all()):
+            self._fresh_goals(idx[~going])
+
+    def _fresh_goals(self, idx: torch.Tensor) -> None:
+        """A goal drawn from the body now (:class:`ReachJointConfig`): the first of a run of near goals, or far."""
         m, dev = len(idx), self.device
         pick = self._draw[torch.randint(len(self._draw), (m,), generator=self._generator, device=dev)]
         joint = self._joint_ids[pick]
         near = torch.rand(m, generator=self._generator, device=dev) < self.near_share
         lo = torch.where(near, 1, goal_frame(self.far_time[0]))
         hi = torch.where(near, FUTURE_LENGTH, goal_frame(self.far_time[1]))
-        lead = lo + (torch.rand(m, generator=self._generator, device=dev) * (hi - lo + 1)).long().clamp(max=hi - lo)
+        lead = self._randint(lo, hi)
         cap = (self.max_speed * lead.float() / FPS).clamp(max=self.distance[1])
         low = torch.minimum(cap, torch.full_like(cap, self.distance[0]))
         dist = low + (cap - low) * torch.rand(m, generator=self._generator, device=dev)
-        forward, _ = body_forward(self.history_world(idx)[:, -1])
+        history = self.history_world(idx)
+        forward, _ = body_forward(history[:, -1])
         a = math.radians(self.angle_deg)
         angle = self._uniform(m, -a, a)
         start = self._joint_now(idx, joint)
         xy = start[:, :2] + rotate_xy(forward, angle) * dist[:, None]
+        # a near goal starts a run along a path: the body's velocity turning toward a wanted speed and heading
+        feet = (joint == JOINTS["left_foot"]) | (joint == JOINTS["right_foot"])
+        length = torch.where(feet, 1, self._randint(torch.full_like(lead, self.near_run[0]),
+                                                    torch.full_like(lead, self.near_run[1])))
+        self._run_left[idx] = torch.where(near, length - 1, 0)
+        pelvis = history[:, :, PELVIS, :2]
+        velocity = (pelvis[:, -1] - pelvis[:, -2]) * FPS
+        self._run_vel[idx] = velocity * (self.max_speed / velocity.norm(dim=-1, keepdim=True).clamp(min=self.max_speed))
+        self._run_speed[idx] = self._uniform(m, 0.0, self.max_speed)
+        self._run_heading[idx] = torch.atan2(forward[:, 1], forward[:, 0]) + angle
+        self._run_turn[idx] = self._uniform(m, -self.turn, self.turn)
+        xy = torch.where(near[:, None], start[:, :2] + self._run_step(idx, lead), xy)
         planar = self._flat[pick]
         z = torch.where(planar, self.floor_height, start[:, 2] + self._uniform(m, *self.height_offset))
         self._target[idx, 0] = torch.cat((xy, z[:, None]), dim=-1)
@@ -371,6 +425,37 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self._planar[idx, 0] = planar
         self._frame[idx, 0] = self._now_frame(idx) + lead
         self._gi[idx] = 0
+
+    def _next_in_run(self, idx: torch.Tensor) -> None:
+        """The next goal of a run: on the path from the previous target, due 1 to 8 frames after it and after now."""
+        now, before = self._now_frame(idx), self._frame[idx, 0]
+        gap = self._randint((now - before + 1).clamp(min=1), torch.full_like(now, FUTURE_LENGTH))
+        self._target[idx, 0, :2] = self._target[idx, 0, :2] + self._run_step(idx, gap)
+        self._frame[idx, 0] = before + gap
+        self._run_left[idx] -= 1
+
+    def _run_step(self, idx: torch.Tensor, frames: torch.Tensor) -> torch.Tensor:
+        """(M, 2) how far a run's path moves in ``frames`` (M,), its velocity updated.
+
+        The velocity turns toward the wanted speed and heading by at most :data:`PATH_ACCEL` x the time and
+        stays within ``max_speed``.
+        """
+        dt = frames.float() / FPS
+        heading = self._run_heading[idx] + self._run_turn[idx] * dt
+        self._run_heading[idx] = heading
+        want = torch.stack((torch.cos(heading), torch.sin(heading)), dim=-1) * self._run_speed[idx, None]
+        change = want - self._run_vel[idx]
+        most = (PATH_ACCEL * dt)[:, None]
+        change = change * (most / change.norm(dim=-1, keepdim=True).clamp(min=1e-9)).clamp(max=1.0)
+        velocity = self._run_vel[idx] + change
+        velocity = velocity * (self.max_speed / velocity.norm(dim=-1, keepdim=True).clamp(min=self.max_speed))
+        self._run_vel[idx] = velocity
+        return velocity * dt[:, None]
+
+    def _randint(self, low: torch.Tensor, high: torch.Tensor) -> torch.Tensor:
+        """Integers uniform in [low, high] per element (long tensors of one shape)."""
+        u = torch.rand(low.shape, generator=self._generator, device=self.device)
+        return low + (u * (high - low + 1)).long().clamp(max=high - low)
 
     def _activate(self, idx: torch.Tensor) -> None:
         """Give the current goals of envs ``idx`` that are asap their time: the distance at ``max_speed``."""
@@ -391,6 +476,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         if self.entries is None:
             self._text_idx[idx] = self._sample_texts(len(idx))
             self._count[idx] = 1
+            self._run_left[idx] = 0
             self._sample_goals(idx)
             return
         e = idx % len(self.entries)
@@ -451,6 +537,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         if self.entries is None:
             self._record[self._due, 0] = self._step_error[self._due]
             self._goals_ok += reached.long()
+            self._run_left[self._due & (self._step_error > RUN_LOST_M)] = 0
             if bool(self._due.any()):
                 self._sample_goals(self._due.nonzero()[:, 0])
             return torch.zeros_like(reached), reached

@@ -112,7 +112,7 @@ def test_random_goals_lie_in_their_time_distance_and_angle_ranges(tiny_model):
     start = history[torch.arange(64), goal["joint"]]
     dist = (goal["target"][:, :2] - start[:, :2]).norm(dim=-1)
     cap = (1.2 * lead.float() / FPS).clamp(max=3.0)
-    assert (dist <= cap + 1e-4).all() and (dist >= torch.minimum(cap, torch.tensor(0.2)) - 1e-4).all()
+    assert (dist <= cap + 1e-4).all() and (dist[~near] >= 0.2 - 1e-4).all()  # near goals: a path's step
     feet = goal["planar"]
     assert set(goal["joint"][feet].tolist()) <= {JOINTS["left_foot"], JOINTS["right_foot"]}
     assert (goal["target"][feet, 2] == 0).all()
@@ -125,7 +125,7 @@ def test_random_goals_lie_in_their_time_distance_and_angle_ranges(tiny_model):
     forward, _ = body_forward(history)
     to = torch.nn.functional.normalize(goal["target"][:, :2] - start[:, :2], dim=-1)
     cos = (to * forward[:, :2]).sum(-1)
-    assert (cos[dist > 1e-3] >= math.cos(math.radians(45)) - 1e-4).all()
+    assert (cos[~near] >= math.cos(math.radians(45)) - 1e-4).all()
 
 
 def test_a_new_goal_follows_each_due_one_and_the_rewards_read_the_joint_error(tiny_model):
@@ -139,6 +139,54 @@ def test_a_new_goal_follows_each_due_one_and_the_rewards_read_the_joint_error(ti
     err = infos["joint_error_m"]
     assert infos["reward/joint_arrival"] == pytest.approx(torch.exp(-err / 0.1), abs=1e-6)
     assert torch.isfinite(infos["reward/joint_dist"]).all()
+
+
+def test_near_goals_run_along_a_path_that_keeps_up_its_velocity(tiny_model):
+    env = make(tiny_model, 8, near_share=1.0, near_run=[4, 4], max_episode_steps=32)
+    env.reset(seed=2)
+    assert env._run_left.tolist() == [3] * 8  # the first of a run of 4 was drawn at the reset
+    checked = 0
+    for k in range(6):
+        before = env.current_goal()
+        left, velocity = env._run_left.clone(), env._run_vel.clone()
+        _, _, _, _, infos = env.step(actions(8, k))
+        assert infos["goal_due"].all()  # one near goal per step
+        after = env.current_goal()
+        gap, now = after["frame"] - before["frame"], 8 * (k + 1)
+        assert ((after["frame"] > now) & (after["frame"] <= now + 8)).all()
+        # a run goes on unless its goal was missed by more than 0.5 m; then (or after its last goal) a fresh one
+        went_on = (left > 0) & (infos["joint_error_m"] <= 0.5)
+        assert (env._run_left[went_on] == left[went_on] - 1).all() and (env._run_left[~went_on] == 3).all()
+        assert (gap[went_on] <= 8).all() and (gap[went_on] >= 1).all()
+        step = (after["target"] - before["target"])[went_on, :2]
+        g = gap[went_on]
+        # the path's step is at most max_speed x the gap, and its velocity changed by at most 1 m/s^2 x the gap
+        assert (step.norm(dim=-1) <= 1.2 * g / FPS + 1e-5).all()
+        assert ((step * FPS / g[:, None] - velocity[went_on]).norm(dim=-1) <= 1.0 * g / FPS + 1e-5).all()
+        assert (after["target"][went_on, 2] == before["target"][went_on, 2]).all()
+        checked += int(went_on.sum())
+    assert checked >= 8
+
+
+def test_a_run_of_near_goals_moves_as_its_velocity_model_says(tiny_model):
+    env = make(tiny_model, 3, near_share=1.0, near_run=[2, 2], max_speed=1.2)
+    env.reset(seed=0)
+    idx = torch.arange(3)
+    env._run_vel[:] = torch.tensor([[0.0, 0.0], [0.0, 0.0], [3.0, 0.0]])
+    env._run_speed[:] = torch.tensor([1.2, 1.2, 0.0])
+    env._run_heading[:] = torch.tensor([0.0, math.pi / 2, 0.0])
+    env._run_turn[:] = 0.0
+    # from rest toward 1.2 m/s along +x (+y): 1 m/s^2 for 1 s gives 1 m/s, then 0.2 m/s more within 0.5 s
+    step = env._run_step(idx, torch.tensor([30, 30, 15]))
+    assert step.flatten().tolist() == pytest.approx([1.0, 0.0, 0.0, 1.0, 0.6, 0.0], abs=1e-5)  # 2.5 m/s: cut to 1.2
+    step = env._run_step(idx, torch.tensor([15, 15, 15]))
+    assert step.flatten().tolist() == pytest.approx([0.6, 0.0, 0.0, 0.6, 0.35, 0.0], abs=1e-5)
+    # a goal missed by more than 0.5 m ends the run: the next goal is a fresh one, drawn from the body
+    env._run_left[:] = 1
+    env._due[:] = True
+    env._step_error[:] = torch.tensor([0.1, 0.6, 0.2])
+    env._advance_task(torch.zeros(3, dtype=torch.bool))
+    assert env._run_left.tolist() == [0, 1, 0]
 
 
 def test_reward_terms_of_the_joint_error():
@@ -193,6 +241,9 @@ def test_joint_goal_file_loads_targets_times_and_asap(tmp_path):
     ({"joints": ["pelvis", "left_hnd"]}, r"joints: unknown joint 'left_hnd' \(did you mean 'left_hand'\?\)"),
     ({"radius": 0}, r"radius: must be metres > 0, got 0"),
     ({"near_share": 1.5}, r"near_share: must be a share in \[0, 1\]"),
+    ({"near_run": [4, 2]}, r"near_run: must be \[min, max\] goals with 1 <= min <= max <= 1000, got \[4, 2\]"),
+    ({"near_run": [1.5, 2]}, r"near_run: must be \[min, max\] goals"),
+    ({"turn_deg_s": -1.0}, r"turn_deg_s: must be degrees per second in \[0, 360\], got -1.0"),
     ({"far_time": [4.0, 1.0]}, r"far_time: must be \[min, max\]"),
     ({"distance": [-1.0, 2.0]}, r"distance: must be \[min, max\] with 0 <= min <= max"),
     ({"max_speed": 0}, r"max_speed: must be m/s > 0"),
@@ -209,10 +260,12 @@ def test_env_config_section_builds_the_env(tiny_model):
     from latentrl.envs.config import EnvConfig, build
 
     cfg = from_dict(EnvConfig, {"task": "reach_joint", "num_envs": 2,
-                                "reach_joint": {"joints": ["left_hand", "head"], "radius": 0.05}}, "env")
+                                "reach_joint": {"joints": ["left_hand", "head"], "radius": 0.05,
+                                                "near_run": [2, 8], "turn_deg_s": 20.0}}, "env")
     cfg.validate()
     env = build(cfg, "cpu", motion=tiny_model)
     assert isinstance(env, ReachJointEnv) and env.joints == ("left_hand", "head") and env.radius == 0.05
+    assert env.near_run == (2, 8) and env.turn == pytest.approx(math.radians(20.0))
     with pytest.raises(ConfigError, match=r"^env: reach_joint.far_time: must be \[min, max\]"):
         from_dict(EnvConfig, {"task": "reach_joint", "reach_joint": {"far_time": [2.0]}}, "env")
 
