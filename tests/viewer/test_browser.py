@@ -2,8 +2,8 @@
 
 Runs Debian's ``chromium`` + ``chromium-driver`` through Selenium (no browser download) with software
 WebGL (SwiftShader). Skips, naming what is missing, where Chromium, its driver, Selenium or Viser is
-not installed. ``LATENTRL_VIEWER_SHOTS=DIR`` keeps the screenshots (docs/viewer_view.png and
-docs/viewer_play.png are made this way).
+not installed. ``LATENTRL_VIEWER_SHOTS=DIR`` keeps the screenshots (docs/viewer_play.png and
+docs/viewer_scene.png are made this way; docs/viewer_view.png is the same page on an evaluation folder).
 """
 
 import contextlib
