@@ -378,8 +378,7 @@ class LiveController:
             self.env.scene.replace(world)
             self.dropped += 1
             self._show_world(world)
-            self.message = f"dropped a box at ({xy[0]:.2f}, {xy[1]:.2f})" + (
-                "" if self.env.observe_scene else "; this policy was trained without a scene and does not see it")
+            self.message = f"dropped a box at ({xy[0]:.2f}, {xy[1]:.2f})"
         print(f"latentrl play: box dropped at ({xy[0]:.2f}, {xy[1]:.2f})", flush=True)
         return True
 
@@ -546,9 +545,11 @@ class LiveController:
         world = self.world()
         if world is None or not world.objects:
             return ""
-        seen = "the policy sees them" if self.env.observe_scene else "the policy was trained without a scene"
+        seen = "the policy sees them" if self.env.observe_scene else \
+            "the policy does not see them: trained without a scene"
+        n = len(world.objects)
         dropped = f", {self.dropped} dropped" if self.dropped else ""
-        return f"  \nscene: {len(world.objects)} objects{dropped} ({seen})"
+        return f"  \nscene: {n} object{'' if n == 1 else 's'}{dropped} ({seen})"
 
     def status_text(self) -> str:
         """The status panel: message, pelvis, goal, distance, scene and generation speed (markdown)."""

@@ -237,14 +237,21 @@ def test_play_walks_to_a_floor_click(browser):
         assert np.allclose(now["goal"], goal, atol=0.01), (now, goal)
         after = np.linalg.norm(goal - now["pelvis"])
         assert after < before - 0.5, f"pelvis {now['pelvis']} did not approach the goal {goal} ({before:.2f} m before)"
-        still_screenshot(browser)
-        keep(browser, "viewer_play.png")
         from selenium.webdriver.common.keys import Keys
 
+        before_drop = still_screenshot(browser)
         ActionChains(browser).move_to_element_with_offset(canvas, int(0.12 * w), int(0.1 * h)) \
             .key_down(Keys.CONTROL).click().key_up(Keys.CONTROL).perform()
         wait_line(lines, "latentrl play: box dropped at", 20)  # a ctrl-click drops a box, sets no goal
         assert np.allclose(status(browser)["goal"], goal, atol=0.01)
+        after_drop = still_screenshot(browser)
+        scene = slice(0, panel_left(browser))
+        changed = np.abs(after_drop - before_drop)[:, scene].max(axis=-1) > 40
+        r, g, b = after_drop[:, scene][changed].T
+        box = ((r > g + 40) & (g > b + 20)).sum()  # the dropped box's orange-brown, lit
+        assert box > 800, f"the dropped box is not drawn: {box} box-coloured pixels changed"
+        print(f"play: the dropped box changed {box} pixels")
+        keep(browser, "viewer_play.png")
 
 
 PWN = "<img src=x onerror=window.__pwned=1><script>window.__pwned=2</script>"

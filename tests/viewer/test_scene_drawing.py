@@ -192,7 +192,7 @@ def test_a_ctrl_click_drops_a_box_the_env_collides_with_and_the_policy_sees(serv
     obs, *_ = env.step(torch.zeros(1, env.single_action_space.shape[0]))  # and steps on with the new scene
     start, stop = env.observation_layout["scene_rays"]
     assert float(obs[0, start:stop].min()) < RAY_RANGE_M
-    assert "1 objects, 1 dropped (the policy sees them)" in live.status_text()
+    assert "scene: 1 object, 1 dropped (the policy sees them)" in live.status_text()
     assert "box dropped at" in capsys.readouterr().out
     live.clear_boxes()
     assert env.scene.spec.objects == () and live.scene.objects.nodes == [] and live.dropped == 0
@@ -206,7 +206,8 @@ def test_play_scene_flag_and_drop_bounds(server, tiny_model):
     pelvis = live.pelvis()
     assert not live.drop_box(pelvis[:2] + 0.1) and "within" in live.message and live.dropped == 0
     assert not live.drop_box((pelvis[0] + 80.0, pelvis[1])) and "more than 50 m" in live.message
-    assert live.drop_box((pelvis[0] - 2.0, pelvis[1])) and "does not see it" in live.message
+    assert live.drop_box((pelvis[0] - 2.0, pelvis[1])) and "dropped a box" in live.message
+    assert "scene: 5 objects, 1 dropped (the policy does not see them" in live.status_text()
     assert len(env.scene.spec.objects) == 5 and len(live.scene.objects.nodes) == 7
     live.clear_boxes()
     assert env.scene.spec == SCENE and len(live.scene.objects.nodes) == 6
