@@ -278,3 +278,31 @@ def test_play_observes_as_the_policy_was_trained(tiny_model):
     assert "scene_rays" in layout and layout["scene_height_grid"][1] - layout["scene_height_grid"][0] == 9
     flat = play_env({"config": {"env": {"texts": ["walk"]}}}, tiny_model, None, "cpu", "joystick", SCENE)
     assert "scene_rays" not in flat.observation_layout and flat.scene.spec == SCENE
+
+
+def test_the_body_and_skeleton_checkboxes_take_only_true_or_false(server, motion_file, capsys):
+    """Checkbox values as a raw client sends them switch the drawing; odd values stop nothing.
+
+    Viser casts a value to the checkbox's type (``bool``) before the handler; the handler refuses anything
+    else in one line.
+    """
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    player = Player(server, open_source(motion_file))
+    scene = player.scene
+    client = RawClient(server.get_port())
+    try:
+        client.gui(player.show_skeleton, True)
+        wait_for(lambda: scene.body.visible, "the skeleton checkbox shows the skeleton")
+        for bad in ("yes", 3, None, [True], ""):
+            client.gui(player.show_body, bad)
+        client.gui(player.show_body, True)  # Viser casts a value to the checkbox's bool; the page goes on
+        wait_for(lambda: scene.character.visible, "the body checkbox shows the body")
+        client.gui(player.show_body, False)
+        wait_for(lambda: not scene.character.visible, "the body checkbox hides the body")
+        assert scene.body.visible
+    finally:
+        client.close()
+    err = [line for line in capsys.readouterr().err.splitlines() if "ignored body" in line]
+    assert len(err) <= 4 and all(len(line) < 200 for line in err), err
