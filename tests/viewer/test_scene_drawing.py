@@ -306,3 +306,22 @@ def test_the_body_and_skeleton_checkboxes_take_only_true_or_false(server, motion
         client.close()
     err = [line for line in capsys.readouterr().err.splitlines() if "ignored body" in line]
     assert len(err) <= 4 and all(len(line) < 200 for line in err), err
+
+
+def test_a_foot_on_a_tread_counts_as_in_contact(server):
+    """Contact colours read the terrain under each foot: on a 0.3 m step the foot is green, beside it not."""
+    from latentrl.motion.skeleton import FOOT_JOINTS
+    from latentrl.render import CONTACT
+    from latentrl.viewer.body import BONES
+    from latentrl.viewer.scene import SkeletonScene
+
+    scene = SkeletonScene(server)
+    scene.set_scene(Scene((Box((0.0, 0.0), (4.0, 4.0, 0.3)),)))  # a platform under the whole body
+    joints = walking(1)[0]
+    joints[:, 2] += 0.3
+    scene.show_pose(joints)
+    bone = int(np.nonzero(BONES[:, 1] == FOOT_JOINTS[0])[0][0])
+    assert np.abs(scene.character.tubes.batched_colors[bone].astype(int) - CONTACT).max() <= 12
+    scene.set_scene(None)
+    scene.show_pose(joints)  # the same pose 0.3 m above the bare floor: in the air
+    assert np.abs(scene.character.tubes.batched_colors[bone].astype(int) - CONTACT).max() > 60
