@@ -204,8 +204,11 @@ def scene_solids(scene: Scene | None) -> list[Solid]:
     return out
 
 
-def terrain_heights(scene: Scene | None, xy: np.ndarray) -> np.ndarray:
-    """(...) terrain z under (..., 2) points: the floor, or the top of the highest object over it."""
+def terrain_heights(scene: Scene | None, xy: np.ndarray, batch: SceneBatch | None = None) -> np.ndarray:
+    """(...) terrain z under (..., 2) points: the floor, or the top of the highest object over it.
+
+    ``batch``: the scene as a one-row float64 :class:`SceneBatch`, when the caller keeps one for many queries.
+    """
     xy = np.asarray(xy, dtype=np.float64)
     if scene is None:
         return np.zeros(xy.shape[:-1])
@@ -213,7 +216,7 @@ def terrain_heights(scene: Scene | None, xy: np.ndarray) -> np.ndarray:
         return np.full(xy.shape[:-1], scene.floor_height)
     import torch
 
-    batch = SceneBatch.from_scenes([scene], dtype=torch.float64)
+    batch = batch if batch is not None else SceneBatch.from_scenes([scene], dtype=torch.float64)
     flat = torch.as_tensor(xy.reshape(1, -1, 2))
     return batch.height(flat).reshape(xy.shape[:-1]).numpy()
 
@@ -244,6 +247,17 @@ def _closest_point(solid: Solid, p: np.ndarray) -> np.ndarray:
     c, s = np.cos(solid.yaw), np.sin(solid.yaw)
     local = np.clip(np.array((c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2])), -solid.half, solid.half)
     return solid.centre + np.array((c * local[0] - s * local[1], s * local[0] + c * local[1], local[2]))
+
+
+def _under(solid: Solid, point: np.ndarray) -> bool:
+    """Whether ``point`` lies on the top face of ``solid`` (its footprint holds it, at its top's height)."""
+    d = point - solid.centre
+    if abs(d[2] - solid.half[2]) > 1e-4:
+        return False
+    if solid.kind == "cylinder":
+        return bool(np.hypot(d[0], d[1]) <= solid.half[0])
+    c, s = np.cos(solid.yaw), np.sin(solid.yaw)
+    return bool(abs(c * d[0] + s * d[1]) <= solid.half[0] and abs(-s * d[0] + c * d[1]) <= solid.half[1])
 
 
 def _clip_near(cam: Camera, points: np.ndarray) -> np.ndarray:
@@ -308,6 +322,11 @@ class FrameRenderer:
         self.scene = as_scene(scene)
         self.solids = scene_solids(self.scene)
         self.floor_z = self.scene.floor_height if self.scene is not None else 0.0
+        self._terrain = None
+        if self.solids:
+            import torch
+
+            self._terrain = SceneBatch.from_scenes([self.scene], dtype=torch.float64)
 
     def _backdrop(self):
         """The sky, a vertical gradient: what every frame starts from."""
@@ -371,14 +390,14 @@ class FrameRenderer:
         return colours
 
     def _capsules(self, draw, cam: Camera, p: np.ndarray, shadow: bool) -> None:
-        """Bones as round-capped thick lines, far ones first; ``shadow``: the same flattened onto the floor.
+        """Bones as round-capped thick lines, far ones first; ``shadow``: the same flattened onto the terrain.
 
         Three passes (dark rim, colour, light core) over all bones: a body reads as one shaded piece
         rather than a chain of beads.
         """
         if shadow:
             p = p.copy()
-            p[:, 2] = self.floor_z
+            p[:, 2] = self.floor_z if self._terrain is None else terrain_heights(self.scene, p[:, :2], self._terrain)
         pix, depth = cam.project(p)
         if depth.min() <= NEAR:
             return
@@ -462,35 +481,46 @@ class FrameRenderer:
         draw.ellipse((u - 0.55 * rad, v - 0.6 * rad, u - 0.05 * rad, v - 0.1 * rad), fill=_scaled(marker.colour, 1.3))
 
     def _depth_ordered(self, draw, cam: Camera, p: np.ndarray, items: list[Marker]) -> None:
-        """Scene objects, raised markers and the body by the painter's algorithm, far ones first.
+        """Scene objects, markers off the floor, the shadow and the body by the painter's algorithm, far first.
 
-        An object (or marker) is behind the body when its point nearest to the pelvis is farther from the
-        camera than the pelvis: a separating test that holds for convex objects clear of the body (a body
-        standing on a step, beside a pillar, behind a wall). Each side is then drawn far to near.
+        An object (or raised marker) is behind the body when its point nearest to the pelvis is farther from
+        the camera than the pelvis: a separating test that holds for convex objects clear of the body (a body
+        standing on a step, beside a pillar, behind a wall). Each side is then drawn far to near; a ring on
+        an object's top is drawn right after that object, and the shadow after everything behind the body.
         """
         pelvis = p[0]
+        on_top: dict[int, list[Marker]] = {}
+        loose = []
+        for marker in items:
+            holder = None if marker.raised else next(
+                (k for k, solid in enumerate(self.solids) if _under(solid, marker.point)), None)
+            if holder is None:
+                loose.append(marker)
+            else:
+                on_top.setdefault(holder, []).append(marker)
         behind: list[tuple[float, int, object]] = []
         front: list[tuple[float, int, object]] = []
-        for solid in self.solids:
+        for k, solid in enumerate(self.solids):
             side = front if (pelvis - _closest_point(solid, pelvis)) @ cam.forward > 0 else behind
-            side.append((-float((solid.centre - cam.position) @ cam.forward), 0, solid))
-        for marker in items:  # counted a radius nearer: a ring on a step is drawn after the step
+            side.append((-float((solid.centre - cam.position) @ cam.forward), k, solid))
+        for marker in loose:
             side = front if (pelvis - marker.point) @ cam.forward > 0 else behind
-            side.append((marker.radius + 0.05 - float((marker.point - cam.position) @ cam.forward), 1, marker))
+            side.append((-float((marker.point - cam.position) @ cam.forward), -1, marker))
         for group in (behind, None, front):
             if group is None:
                 if self.style == "body":
+                    self._capsules(draw, cam, p, shadow=True)
                     self._capsules(draw, cam, p, shadow=False)
                 else:
                     self._skeleton(draw, cam, p)
                 continue
-            for _, kind, item in sorted(group, key=lambda e: e[0]):
-                if kind:
+            for _, k, item in sorted(group, key=lambda e: e[0]):
+                if k < 0:
                     self._marker(draw, cam, item)
-                elif item.kind == "box":
-                    self._box(draw, cam, item)
-                else:
-                    self._cylinder(draw, cam, item)
+                    continue
+                (self._box if item.kind == "box" else self._cylinder)(draw, cam, item)
+                for marker in on_top.get(k, ()):
+                    self._marker(draw, cam, marker)
 
     def draw(self, joints: np.ndarray, target: np.ndarray, track: np.ndarray | None = None,
              goals: np.ndarray | None = None, label: str = "", marks: Sequence[Marker] = ()):
@@ -511,8 +541,6 @@ class FrameRenderer:
             if on_floor:
                 self._marker(draw, cam, m)
         p = np.asarray(joints, dtype=np.float64)
-        if self.style == "body":
-            self._capsules(draw, cam, p, shadow=True)
         self._depth_ordered(draw, cam, p, [m for m, on_floor in zip(marks, flat) if not on_floor])
         if self.title:
             draw.text((8, 6), self.title, fill=(30, 30, 30), font=self.small)

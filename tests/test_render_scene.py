@@ -126,3 +126,16 @@ def test_eval_render_draws_the_episodes_scene(eval_files, tmp_path):
     with Image.open(out / "renders" / "mini_path0_ep000.gif") as gif:
         frame = np.asarray(gif.convert("RGB"))
     assert shade_mask(frame, SCENE_COLOURS[Box], tol=3).sum() > 200
+
+
+def test_the_shadow_falls_on_the_platform_the_body_stands_on():
+    from latentrl.render import SHADOW
+
+    joints = t_pose(1, yaw=0.0)
+    joints[..., 2] += 0.3  # standing on a 0.3 m platform
+    frame = first_frame(joints, scene=Scene((Box((0.0, 0.2), (2.0, 2.0, 0.3)),)))
+    cam = Camera(follow_targets(joints)[0] + [0.0, 0.0, 0.3])  # the camera rises with the terrain
+    elbow = joints[0, 19].copy()  # the right elbow's shadow: on the top face, 0.3 m up
+    elbow[2] = 0.3
+    x, y = np.round(cam.project(elbow)[0]).astype(int)
+    assert shade_mask(frame[y - 1 : y + 2, x - 1 : x + 2], SHADOW, (1.0,), tol=0).all()
