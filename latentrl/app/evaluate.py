@@ -280,6 +280,9 @@ def _evaluate_physics(req: EvalRequest, spec: Any, files: list[Path], settings: 
         raise ConfigError(f"--physics: runs reach or path policies, this policy's task is '{spec.name}'")
     if req.scene is not None or settings.scene is not None:
         raise ConfigError("--physics: the humanoid walks on the flat floor; evaluate without a scene")
+    for file in files:  # a suite whose paths name their scene (maze, stairs) is not flat either
+        if any(p.scene is not None for p in spec.evaluator.load_suite(file)):
+            raise ConfigError(f"--physics: {file.stem}'s paths run in a scene; the humanoid walks on the flat floor")
     require_mujoco()
     from latentrl.evaluation.physics_episodes import run_episode, summarize
     from latentrl.evaluation.runner import load_suites, path_seed

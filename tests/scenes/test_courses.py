@@ -139,3 +139,10 @@ def load_scene_text(text):
     from latentrl.scenes import scene_from_json
 
     return scene_from_json(text)
+
+
+def test_physics_eval_refuses_a_suite_whose_paths_run_in_a_scene(eval_files, tmp_path, capsys):
+    code = main(["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", "stairs",
+                 "--physics", "--episodes", "1", "--max-steps", "2", "--out", str(tmp_path / "ev"), "--device", "cpu"])
+    err = capsys.readouterr().err
+    assert code == 2 and "--physics: stairs's paths run in a scene; the humanoid walks on the flat floor" in err
