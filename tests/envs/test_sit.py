@@ -173,3 +173,13 @@ def test_list_shows_the_sit_task_and_its_suite(capsys):
     assert any(line.split()[:1] == ["sit"] and "sit_seats" in line for line in capsys.readouterr().out.splitlines())
     assert main(["list", "configs"]) == 0
     assert any(line.split()[:3] == ["sit", "latentrl", "train"] for line in capsys.readouterr().out.splitlines())
+
+
+def test_restoring_the_episode_state_restores_the_seats(tiny_model):
+    env = SitEnv(3, motion=tiny_model)
+    env.reset(seed=1)
+    saved, seats, rows = env.get_rng_state(), env.seat.clone(), env.scene.batch.box_center.clone()
+    env.reset(seed=2)
+    assert not torch.equal(env.seat, seats)
+    env.set_rng_state(saved)
+    assert torch.equal(env.seat, seats) and torch.allclose(env.scene.batch.box_center, rows)
