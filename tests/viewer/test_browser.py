@@ -240,9 +240,13 @@ def test_play_walks_to_a_floor_click(browser):
         from selenium.webdriver.common.keys import Keys
 
         before_drop = still_screenshot(browser)
-        ActionChains(browser).move_to_element_with_offset(canvas, int(0.12 * w), int(0.1 * h)) \
+        # left of the body, below it (the panel covers the canvas's right side in the small window)
+        ActionChains(browser).move_to_element_with_offset(canvas, int(-0.3 * w), int(0.2 * h)) \
             .key_down(Keys.CONTROL).click().key_up(Keys.CONTROL).perform()
-        wait_line(lines, "latentrl play: box dropped at", 20)  # a ctrl-click drops a box, sets no goal
+        try:
+            wait_line(lines, "latentrl play: box dropped at", 20)  # a ctrl-click drops a box, sets no goal
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}\npage:\n{page_text(browser)}") from None
         assert np.allclose(status(browser)["goal"], goal, atol=0.01)
         after_drop = still_screenshot(browser)
         scene = slice(0, panel_left(browser))
