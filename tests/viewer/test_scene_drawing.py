@@ -325,3 +325,16 @@ def test_a_foot_on_a_tread_counts_as_in_contact(server):
     scene.set_scene(None)
     scene.show_pose(joints)  # the same pose 0.3 m above the bare floor: in the air
     assert np.abs(scene.character.tubes.batched_colors[bone].astype(int) - CONTACT).max() > 60
+
+
+def test_random_obstacles_are_not_replaced(tiny_model):
+    """EnvScene.replace takes a fixed scene's place; obstacles drawn per episode refuse it in one line."""
+    from latentrl.envs.reach import ReachLocationEnv
+    from latentrl.errors import ConfigError
+
+    env = ReachLocationEnv(2, motion=tiny_model, scene={"random_obstacles": {}})
+    with pytest.raises(ConfigError, match="only a fixed scene can be replaced"):
+        env.scene.replace(SCENE)
+    fixed = ReachLocationEnv(2, motion=tiny_model, scene=Scene())
+    fixed.scene.replace(SCENE)
+    assert fixed.scene.spec == SCENE and int(fixed.scene.batch.object_counts()[0]) == 6
