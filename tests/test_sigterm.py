@@ -116,3 +116,27 @@ def test_sigterm_during_optimize_exits_143_and_the_same_command_finishes(motion_
     for motion in (out / "motions").glob("*.npz"):
         load_motion_npz(motion)
 
+
+
+@pytest.mark.slow
+def test_sigterm_during_eval_keeps_the_report_of_finished_paths_and_the_same_command_finishes(eval_files, tmp_path):
+    from latentrl.evaluation.report import load_report
+
+    out = tmp_path / "out"
+    suite = tmp_path / "paths.json"
+    suite.write_text(json.dumps([{"goal_location": [[0.0, 0.0, 0.0], [0.0, 40.0 + i, 0.0]],
+                                  "goal_text": ["walk", "walk"]} for i in range(40)]))
+    argv = [sys.executable, "-m", "latentrl", "eval", str(eval_files["policy"]), "--motion",
+            str(eval_files["motion"]), "--paths", str(suite), "--episodes", "2", "--max-steps", "6", "--out", str(out),
+            "--no-progress"]
+    proc = _background(argv, tmp_path)
+    assert wait_for(lambda: (out / "report.json").is_file(), proc), proc.stderr.read()  # a path is done
+    code, err = _terminate(proc)
+    assert code == 143, err
+    assert "Traceback" not in err and err.rstrip().endswith("latentrl: interrupted by SIGTERM"), err
+    assert not list(out.rglob(".*.tmp*")), "a temporary file was left"
+    kept = load_report(out / "report.json")
+    assert 1 <= len(kept["suites"]["paths"]["paths"]) < 40
+    done = subprocess.run(argv, capture_output=True, text=True, env=ENV, cwd=tmp_path, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert len(load_report(out / "report.json")["suites"]["paths"]["paths"]) == 40

@@ -14,6 +14,30 @@ from latentrl.errors import ConfigError, DataError
 from latentrl.motion.skeleton import FOOT_JOINTS
 
 CLOSD_METRICS = ("penetration_mm", "floating_mm", "skating_mm")
+FELL_EXIT = 4
+"""Exit status of ``physics track`` / ``physics loop`` when the body fell: the outputs are written, but a
+script must not read the run as a clean execution of the motion."""
+
+
+def report_falls(command: str, runs: list[tuple[str, list[int]]], report: Path) -> int:
+    """0 when no run fell; else one stderr line naming each run's fall count and frames, and :data:`FELL_EXIT`.
+
+    ``runs``: (label, fall frames) per simulated run (label "" for a command's only run).
+    """
+    import sys
+
+    fell = [(label, falls) for label, falls in runs if falls]
+    if not fell:
+        return 0
+
+    def frames(falls: list[int]) -> str:
+        return ", ".join(map(str, falls[:10])) + (f", ... ({len(falls) - 10} more)" if len(falls) > 10 else "")
+
+    parts = " and ".join(f"{len(f)} time{'s' * (len(f) != 1)}{' in the ' + label if label else ''} (frames "
+                         f"{frames(f)})" for label, f in fell)
+    print(f"latentrl: {command}: the humanoid fell {parts}; after each fall it was put back on the reference and "
+          f"went on; see {report}; exit {FELL_EXIT}", file=sys.stderr)
+    return FELL_EXIT
 
 
 @dataclass
@@ -166,7 +190,9 @@ def track_command(req: TrackRequest) -> int:
     print(f"tracked {clip.frames} frames ({report['seconds']:.1f} s): MPJPE {t['mpjpe_mm']:.0f} mm, "
           f"falls {report['falls']}, assist {a['force_Ns_per_s']:.0f} N s/s ({a['force_percent_body_weight']:.0f} % "
           f"of body weight), {rtf:.1f}x real time; wrote {out / 'motion.npz'} and {out / 'report.json'}")
-    return 0 if math.isfinite(rtf) else 1
+    if not math.isfinite(rtf):
+        return 1
+    return report_falls("physics track", [("", result.falls)], out / "report.json")
 
 
 @dataclass
@@ -278,7 +304,8 @@ def loop_command(req: LoopRequest) -> int:
     print(f"closed loop, {steps} primitives ({seconds:.1f} s): falls {c['falls']}, assist "
           f"{c['assist']['force_percent_body_weight']:.0f} % of body weight, pelvis travel "
           f"{c['pelvis_travel_m']:.2f} m (open loop {o['pelvis_travel_m']:.2f} m); wrote {out}")
-    return 0
+    return report_falls("physics loop", [("open loop", tracked.falls), ("closed loop", closed.falls)],
+                        out / "report.json")
 
 
 def _travel(joints: np.ndarray) -> float:

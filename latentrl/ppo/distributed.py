@@ -161,6 +161,10 @@ class Collective:
         try:
             yield
         except RuntimeError as exc:  # gloo/nccl: a peer closed its connection, or the timeout passed
+            if re.search(r"timed out|timeout", str(exc), re.I):
+                raise RankLostError(f"rank {self.rank}: {op} timed out after {timeout_s():g} s ({TIMEOUT_VAR}) "
+                                    "waiting for the other ranks; another rank hung or stopped, so this one stops "
+                                    "too") from None
             raise RankLostError(f"rank {self.rank}: {op} with the other ranks failed ({_first_line(exc)}); another "
                                 f"rank stopped or hung, so this one stops too") from None
 
@@ -320,6 +324,8 @@ def shutdown() -> None:
 
 # --------------------------------------------------------------------------- torchrun's report
 _ELASTIC_LOG = re.compile(r"^[IWE]\d{4} [\d:.]+ +\d+ .*torch/distributed/")
+_TIMED_OUT = re.compile(r"^(?:\[rank\d+\]: ?)?latentrl: error: rank (\d+): \S+ timed out after ([\d.e+]+) s")
+"""A rank's :class:`RankLostError` line for a collective that waited ``LATENTRL_DIST_TIMEOUT`` in vain."""
 
 
 class TorchrunOutput:
@@ -334,9 +340,17 @@ class TorchrunOutput:
         self.held: list[str] = []
         self.report: list[str] | None = None
         self.report_done = False
+        self.timed_out: dict[int, str] = {}
+        """rank -> seconds, for the ranks whose collective timed out (their own line said so)."""
+        self.timed_out_lines: list[str] = []
+        """Those lines, held back: :meth:`cause` restates them with the rank that hung."""
 
     def feed(self, line: str) -> list[str]:
         """The lines to show now, given the next line of torchrun's stderr."""
+        if waited := _TIMED_OUT.match(line):
+            self.timed_out[int(waited.group(1))] = waited.group(2)
+            self.timed_out_lines.append(line)
+            return []
         if _ELASTIC_LOG.match(line):
             return []
         if self.report is not None and not self.report_done:
@@ -362,8 +376,10 @@ class TorchrunOutput:
         return [line]
 
     def flush(self) -> list[str]:
-        """Lines still held back (a traceback that did not end)."""
+        """Lines still held back (a traceback that did not end; timed-out lines when torchrun made no report)."""
         shown, self.held = self.held, []
+        if not self.report:
+            shown, self.timed_out_lines = self.timed_out_lines + shown, []
         return shown
 
     def cause(self) -> str | None:
@@ -377,6 +393,14 @@ class TorchrunOutput:
         if not rank or not code:
             return None
         value = int(code.group(1))
+        if int(rank.group(1)) in self.timed_out:  # not its fault: the ranks torchrun had to kill hung
+            failures = text.split("Root Cause", 1)[0]
+            hung = [r for r, c in re.findall(r"rank\s*:\s*(\d+).*?exitcode\s*:\s*(-?\d+)", failures, re.S)
+                    if int(c) == -signal.SIGKILL]
+            who = (f"{'rank' if len(hung) == 1 else 'ranks'} {', '.join(hung)} hung (did not stop when asked; "
+                   "killed by SIGKILL)" if hung else "another rank hung or stopped")
+            return (f"rank {rank.group(1)} timed out after {self.timed_out[int(rank.group(1))]} s ({TIMEOUT_VAR}) "
+                    f"waiting for the other ranks: {who}")
         if value < 0:
             try:
                 name = signal.Signals(-value).name

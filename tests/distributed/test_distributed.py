@@ -6,6 +6,7 @@ fails the test instead of blocking CI. One fresh run is shared by the checks tha
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import subprocess
@@ -331,3 +332,88 @@ def test_sigterm_to_the_nproc_launcher_alone_saves_one_iteration_on_every_rank_a
     start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
     assert start in (run / "train.log").read_text()
     assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
+
+
+HUNG_STDERR = """\
+latentrl: error: rank 0: all_gather_object timed out after 10 s (LATENTRL_DIST_TIMEOUT) waiting for the other \
+ranks; another rank hung or stopped, so this one stops too
+E1128 03:02:02.847000 17608 torch/distributed/elastic/multiprocessing/api.py:1002] failed (exitcode: 1) local_rank: \
+0 (pid: 17691) of binary: /usr/bin/python
+Traceback (most recent call last):
+  File "/x/torch/distributed/launcher/api.py", line 383, in launch_agent
+    raise ChildFailedError(
+torch.distributed.elastic.multiprocessing.errors.ChildFailedError:
+============================================================
+latentrl FAILED
+------------------------------------------------------------
+Failures:
+[1]:
+  time      : 2026-11-28_03:02:02
+  host      : localhost
+  rank      : 1 (local_rank: 1)
+  exitcode  : -9 (pid: 17692)  (SIGKILL)
+  error_file: <N/A>
+  traceback : Signal 9 (SIGKILL) received by PID 17692
+------------------------------------------------------------
+Root Cause (first observed failure):
+[0]:
+  time      : 2026-11-28_03:01:32
+  host      : localhost
+  rank      : 0 (local_rank: 0)
+  exitcode  : 1 (pid: 17691)
+  error_file: <N/A>
+  traceback : To enable traceback see: https://pytorch.org/docs/stable/elastic/errors.html
+============================================================
+"""
+
+
+def test_a_timed_out_rank_is_not_blamed_and_the_hung_one_is_named():
+    from latentrl.ppo.distributed import TorchrunOutput
+
+    out = TorchrunOutput()
+    shown = [line for raw in HUNG_STDERR.splitlines(keepends=True) for line in out.feed(raw)] + out.flush()
+    assert shown == []  # rank 0's own line is restated by the cause, with the rank that hung
+    assert out.cause() == ("rank 0 timed out after 10 s (LATENTRL_DIST_TIMEOUT) waiting for the other ranks: rank 1 "
+                           "hung (did not stop when asked; killed by SIGKILL)")
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="finds the ranks through /proc")
+def test_a_rank_that_hangs_without_dying_stops_the_run_within_the_collective_timeout_in_one_line(tmp_path):
+    """SIGSTOP of rank 1 of ``latentrl train --nproc 2`` (a rank that hangs, alive): rank 0's next collective times
+    out after LATENTRL_DIST_TIMEOUT (10 s here), torchrun stops the run (SIGKILL of the stopped rank after its 30 s
+    grace), and the launcher's last line names the timeout and the hung rank; no traceback; the newest checkpoint
+    loads."""
+    import signal
+    import time
+
+    run = tmp_path / "run"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "10"}
+    cmd = [sys.executable, "-m", "latentrl", "train", str(ROOT / "configs" / "tiny.yaml"), "--nproc", "2",
+           "--total-steps", str(128 * 40), "--run-dir", str(run), "--no-progress"]
+    proc = subprocess.Popen(cmd, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    stopped = None
+    try:
+        deadline = time.monotonic() + LAUNCH_TIMEOUT_S
+        while len(ckpt.iteration_checkpoints(run)) < 1 or len(_rank_pids(proc.pid)) < 2:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "training did not reach its first checkpoint"
+            time.sleep(0.05)
+        stopped = _rank_pids(proc.pid)[1]
+        os.kill(stopped, signal.SIGSTOP)
+        _, err = proc.communicate(timeout=120)  # bounded: 10 s timeout + torchrun's 30 s grace + start-up
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        if stopped is not None:  # torchrun killed it; never leave a stopped process behind
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(stopped, signal.SIGKILL)
+    assert proc.returncode == 1, err[-3000:]
+    assert "Traceback" not in err and "ChildFailedError" not in err, err[-3000:]
+    assert len([line for line in err.splitlines() if "error" in line]) == 1, err[-3000:]
+    assert err.strip().splitlines()[-1] == (
+        "latentrl: error: rank 0 timed out after 10 s (LATENTRL_DIST_TIMEOUT) waiting for the other ranks: rank 1 "
+        "hung (did not stop when asked; killed by SIGKILL); torchrun stopped the other ranks; continue the run "
+        f"with: latentrl train --resume {run} --nproc 2"), err[-3000:]
+    ckpt.read_checkpoint(ckpt.iteration_checkpoints(run)[0])
