@@ -116,8 +116,24 @@ def apply_aliases(data: dict, aliases: dict[str, str]) -> dict:
     return data
 
 
+def non_finite(value: Any) -> bool:
+    """Whether ``value`` is, or a list, tuple or dict holds (at any depth), a NaN or infinite float."""
+    if isinstance(value, float):
+        return not math.isfinite(value)
+    if isinstance(value, (list, tuple)):
+        return any(non_finite(v) for v in value)
+    if isinstance(value, dict):
+        return any(non_finite(v) for v in value.values())
+    return False
+
+
 def validate_tree(obj: Any, source: str, prefix: str = "") -> None:
-    """Call ``validate()`` on every dataclass in the tree; re-raise with file and dotted key."""
+    """Call ``validate()`` on every dataclass in the tree; re-raise with file and dotted key.
+
+    After a dataclass's own ``validate()`` (whose messages name the range), every float field of it, and
+    every float in a list or dict field, must be finite: no config value means anything as NaN or +/-inf
+    (``ppo.adam_eps: .inf`` trained with zero updates).
+    """
     if not dataclasses.is_dataclass(obj):
         return
     for f in dataclasses.fields(obj):
@@ -128,6 +144,11 @@ def validate_tree(obj: Any, source: str, prefix: str = "") -> None:
             check()
         except ConfigError as exc:
             raise ConfigError(f"{source}: {prefix}{exc}") from None
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if non_finite(value):
+            expected = "a finite number" if isinstance(value, float) else "finite numbers only"
+            raise ConfigError(f"{source}: {prefix}{f.name}: must be {expected} (not NaN or inf), got {str(value)[:80]}")
 
 
 def require(condition: bool, field: str, message: str) -> None:

@@ -72,6 +72,7 @@ def fx(tmp_path_factory) -> Path:
     _round2_files(root, state)
     _round3_files(root)
     _round3_late_files(root, model, motion)
+    _security_files(root)
     return root
 
 
@@ -382,7 +383,7 @@ ROUND2 = [  # issue 17: tracebacks, hangs and silent nonsense found by a careles
      r"flipped\.pt: policy weights do not match their recorded sha256"),
     # ------------------------------------------------ export-bvh
     ("export-bvh-fps-0", ["motion", "export-bvh", "{fx}/fps0.npz"],
-     r"fps0\.npz: field 'fps' must lie in \(0, 1000\], got 0"),
+     r"fps0\.npz: field 'fps' must lie in \[0\.001, 1000\], got 0"),
     ("export-bvh-fps-negative", ["motion", "export-bvh", "{fx}/fpsneg.npz"], r"field 'fps' must lie in .*got -30"),
     ("export-bvh-fps-nan", ["motion", "export-bvh", "{fx}/fpsnan.npz"], r"field 'fps' must lie in .*got nan"),
     ("export-bvh-fps-array", ["motion", "export-bvh", "{fx}/fpsarr.npz"], r"field 'fps' must be one real number"),
@@ -996,7 +997,214 @@ ROUND3 += [  # scenes, joint goals, physics: the formats and commands added afte
         {"TORCHINDUCTOR_CACHE_DIR": "/proc/inductor"}),
 ]
 ROWS += ROUND3
-SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS,
+
+
+def _npy_header_only(shape: tuple, dtype: str) -> bytes:
+    """A ``.npy`` member that announces ``shape`` but holds 64 bytes: what a decompression bomb's header says."""
+    import io
+
+    from numpy.lib import format as npy
+
+    buf = io.BytesIO()
+    npy.write_array_header_1_0(buf, {"descr": npy.dtype_to_descr(np.dtype(dtype)), "fortran_order": False,
+                                     "shape": shape})
+    return buf.getvalue() + b"\0" * 64
+
+
+def _security_files(root: Path) -> None:
+    """Malformed and hostile motions and reports (issue 47): each field of the motion schema, a 20 M-frame header,
+    a member announcing 3.2 GB, report entries of the wrong type, a report's motion outside its folder."""
+    import io
+    import zipfile
+
+    sec = root / "sec"
+    sec.mkdir()
+    joints = np.zeros((10, 22, 3), np.float32)
+    for name, fields in {
+        "texts-0d": {"texts": np.array("walk")}, "texts-int": {"texts": np.arange(10)},
+        "contacts-shape": {"contacts": np.zeros(3, bool)}, "goals-shape": {"goals": np.zeros((2, 2), np.float32)},
+        "goals-nan": {"goals": np.full((2, 3), np.nan, np.float32)},
+        "waypoints-shape": {"waypoints": np.ones(4, np.float32)}, "floor-array": {"floor": np.zeros(3)},
+        "floor-word": {"floor": np.array("low")}, "fps-1e-300": {"fps": 1e-300},
+        "primitive-text": {"primitive": np.array(["x"] * 10)}, "actions-inf": {"actions": np.full((2, 4), np.inf)},
+        "features-short": {"features": np.zeros((10, 5), np.float32)}, "scene-int": {"scene": np.array(5)},
+    }.items():
+        np.savez(sec / f"{name}.npz", joints=joints, **fields)
+    good = io.BytesIO()
+    np.save(good, joints)
+    with zipfile.ZipFile(sec / "frames-20m.npz", "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("joints.npy", _npy_header_only((20_000_000, 22, 3), "<f4"))
+    with zipfile.ZipFile(sec / "bomb.npz", "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("joints.npy", good.getvalue())
+        zf.writestr("features.npy", _npy_header_only((400_000_000,), "<f8"))
+    (sec / "bomb-suite.json").write_text(json.dumps({"format": "latentrl.constraints/1", "problems": [
+        {"name": "p", "start": {"motion": "bomb.npz"}, "text": "walk", "primitives": 1, "constraints": [
+            {"type": "joint", "frame": 4, "joint": "pelvis", "position": [0.0, 1.0, 0.9]}]}]}))
+
+    def evaluation(name: str, episode: dict | None = None, path: dict | None = None, top: dict | None = None) -> None:
+        folder = sec / name
+        folder.mkdir()
+        np.savez(folder / "m.npz", joints=joints)
+        entry = {"index": 0, "metrics": {}, "waypoints": [[0, 1, 0]],
+                 "episodes": [{"episode": 0, "motion": "m.npz", "success": True, **(episode or {})}], **(path or {})}
+        report = {"format": "latentrl.eval/1", "settings": {}, "overall": {"metrics": {}},
+                  "suites": {"s": {"metrics": {}, "paths": [entry]}}, **(top or {})}
+        (folder / "report.json").write_text(json.dumps(report))
+
+    evaluation("eval-episode-word", {"episode": "x"})
+    evaluation("eval-motion-int", {"motion": 5})
+    evaluation("eval-motion-outside", {"motion": "../eval-motion-int/m.npz"})
+    evaluation("eval-end-object", {"end": {"a": 1}})
+    evaluation("eval-waypoint-pair", path={"waypoints": [[0, 1]]})
+    evaluation("eval-episodes-object", path={"episodes": {"0": 1}})
+    evaluation("eval-policy-int", top={"policy": 5})
+    for name, problem, top in (
+            ("opt-metric-word", {"metrics": {"goal_error_cm": {"mean": "x"}}}, {}),
+            ("opt-frame-1e30", {"targets": [{"motion_frame": 10**30, "position": [0, 0, 0]}]}, {}),
+            ("opt-suite-object", {}, {"suite": {"x": 1}})):
+        folder = sec / name
+        folder.mkdir()
+        np.savez(folder / "m.npz", joints=joints)
+        (folder / "report.json").write_text(json.dumps({"format": "latentrl.optimize-report/1", "overall": {},
+                                                        "problems": [{"name": "a", "motion": "m.npz", **problem}],
+                                                        **top}))
+
+
+SEC = "{fx}/sec"
+BVH = ["motion", "export-bvh"]
+SECURITY = [
+    # ------------------------------------------------ motion files: every schema field, frames, decompressed size
+    *[_r3("bad file", f"view-{name}", ["view", f"{SEC}/{name}.npz"], rf"{re.escape(name)}\.npz: field {pattern}")
+      for name, pattern in {
+          "texts-0d": r"'texts' must be \(10,\) text", "texts-int": r"'texts' must be \(10,\) text",
+          "contacts-shape": r"'contacts' must be \(10, 2\) booleans", "goals-shape": r"'goals' must be \(N, 3\)",
+          "goals-nan": r"'goals' holds NaN or inf", "waypoints-shape": r"'waypoints' must be \(N, 3\)",
+          "floor-array": r"'floor' must be one real number", "floor-word": r"'floor' must be one real number",
+          "fps-1e-300": r"'fps' must lie in \[0\.001, 1000\], got 1e-300",
+          "primitive-text": r"'primitive' must be \(10,\) integers", "actions-inf": r"'actions' holds NaN or inf",
+          "features-short": r"'features' must be \(10, 276\)", "scene-int": r"'scene' must be the scene's JSON text",
+      }.items()],
+    _r3("hostile file", "view-frames-20m", ["view", f"{SEC}/frames-20m.npz"],
+        r"frames-20m\.npz: field 'joints' has 20,000,000 frames; a motion may have at most 1,000,000"),
+    _r3("hostile file", "view-decompression-bomb", ["view", f"{SEC}/bomb.npz"],
+        r"bomb\.npz: its arrays decompress to more than 1 GiB \(field 'features' alone is 3,200,000,000 bytes\)"),
+    _r3("hostile file", "view-folder-with-bomb", ["view", SEC], r"sec/actions-inf\.npz: field 'actions' holds NaN"),
+    _r3("hostile file", "export-bvh-frames-20m", [*BVH, f"{SEC}/frames-20m.npz"], r"has 20,000,000 frames"),
+    _r3("hostile file", "export-bvh-decompression-bomb", [*BVH, f"{SEC}/bomb.npz"], r"decompress to more than 1 GiB"),
+    _r3("bad file", "export-bvh-fps-1e-300", [*BVH, f"{SEC}/fps-1e-300.npz"], r"'fps' must lie in \[0\.001, 1000\]"),
+    _r3("bad file", "export-bvh-goals-nan", [*BVH, f"{SEC}/goals-nan.npz"], r"'goals' holds NaN or inf"),
+    _r3("hostile file", "optimize-start-decompression-bomb", ["optimize", f"{SEC}/bomb-suite.json", "--no-progress",
+                                                             "--steps", "1"], r"bomb\.npz: its arrays decompress"),
+    # ------------------------------------------------ reports: entries of the wrong type, motions outside the folder
+    _r3("bad file", "view-eval-episode-word", ["view", f"{SEC}/eval-episode-word"],
+        r"field 'suites\.s\.paths\.0\.episodes\.0\.episode' must be an integer >= 0, got 'x'"),
+    _r3("bad file", "view-eval-motion-int", ["view", f"{SEC}/eval-motion-int"], r"episodes\.0\.motion' must be null"),
+    _r3("hostile file", "view-eval-motion-outside", ["view", f"{SEC}/eval-motion-outside"],
+        r"episodes\.0\.motion' '\.\./eval-motion-int/m\.npz' points outside the report's folder"),
+    _r3("bad file", "view-eval-end-object", ["view", f"{SEC}/eval-end-object"], r"episodes\.0\.end' must be a string"),
+    _r3("bad file", "view-eval-waypoint-pair", ["view", f"{SEC}/eval-waypoint-pair"],
+        r"paths\.0\.waypoints' must be a list of \[x, y, z\] finite numbers"),
+    _r3("bad file", "view-eval-episodes-object", ["view", f"{SEC}/eval-episodes-object"],
+        r"paths\.0\.episodes' must be a list"),
+    _r3("bad file", "view-eval-policy-int", ["view", f"{SEC}/eval-policy-int"], r"field 'policy' must be an object"),
+    _r3("bad file", "view-optimize-metric-word", ["view", f"{SEC}/opt-metric-word"],
+        r"problems\.0\.metrics\.goal_error_cm' must be a number or null"),
+    _r3("hostile file", "view-optimize-frame-1e30", ["view", f"{SEC}/opt-frame-1e30"],
+        r"targets\.0\.motion_frame' must be an integer in \[0, 1000000\]"),
+    _r3("bad file", "view-optimize-suite-object", ["view", f"{SEC}/opt-suite-object"],
+        r"field 'suite' must be a string"),
+    _r3("bad file", "compare-episode-word", ["compare", f"{SEC}/eval-episode-word", f"{SEC}/eval-end-object"],
+        r"eval-episode-word/report\.json: field .*episode' must be an integer"),
+    # ------------------------------------------------ config values: NaN and +/-inf in any float field
+    *[_r3("bad value", f"train-{key.replace('.', '-')}-{name}", [*TRAIN, "--set", f"{key}={value}"],
+          rf"{re.escape(key)}: must be (a finite number|finite numbers only) \(not NaN or inf\)")
+      for key, value, name in (("ppo.adam_eps", ".inf", "inf"), ("ppo.max_grad_norm", ".inf", "inf"),
+                               ("ppo.target_kl", ".inf", "inf"), ("policy.action_scale", ".inf", "inf"),
+                               ("policy.obs_norm_clip", ".inf", "inf"), ("env.reach.goal_angle_deg", ".nan", "nan"),
+                               ("env.timed.time_left_clip", ".inf", "inf"), ("eval.success_target", "-.inf", "-inf"),
+                               ("env.reach.goal_distance", "[0.5,.inf]", "list-inf"),
+                               ("policy.log_std_bounds", "[-.inf,1.0]", "tuple-inf"))],
+    *[_r3("bad value", f"motion-train-{key.replace('.', '-')}-{name}",
+          ["motion", "train", "{MTINY}", "--set", f"{key}={value}"],
+          rf"{re.escape(key)}: must be a finite number \(not NaN or inf\)")
+      for key, value, name in (("vae_train.learning_rate", ".inf", "inf"), ("model.vae.dropout", ".nan", "nan"),
+                               ("denoiser_train.grad_clip", "-.inf", "-inf"),
+                               ("data.locomotion.start_half_size", ".nan", "nan"))],
+]
+RB, EB = ["bench", "rollout", "--device", "cpu", "--models", "default"], ["bench", "env", "--device", "cpu"]
+SECURITY += [
+    # ------------------------------------------------ NaN, inf and unbounded sizes in bench, export and --nproc flags
+    *[_r3("bad value", f"bench-motion-guidance-{value}", ["bench", "motion", "--guidance", value],
+          rf"argument --guidance: must be a finite number in \[-100, 100\], got {value}")
+      for value in ("nan", "1e30", "inf")],
+    _r3("bad value", "bench-rollout-amp-fp16-cpu", [*RB, "--amp", "fp16", "--batches", "1", "--repeats", "1"],
+        r"--amp fp16: fp16 autocast runs on CUDA only, and the devices include cpu; use --amp bf16 on the CPU"),
+    _r3("bad value", "bench-env-amp-fp16-cpu", [*EB, "--amp", "fp16", "--num-envs", "1", "--steps", "1"],
+        r"--amp fp16: fp16 autocast runs on CUDA only"),
+    *[_r3("bad value", f"{rid}", argv, rf"argument {flag}: must be at most {bound}, got {value}")
+      for rid, argv, flag, bound, value in (
+          ("bench-rollout-batches-2-20-plus-1", [*RB, "--batches", "1", "1048577"], "--batches", "1,048,576", 1048577),
+          ("bench-rollout-repeats-1e9", [*RB, "--repeats", "1000000000"], "--repeats", "100,000", 1000000000),
+          ("bench-rollout-rounds-1e9", [*RB, "--rounds", "1000000000"], "--rounds", "100,000", 1000000000),
+          ("bench-rollout-threads-100000", [*RB, "--threads", "100000"], "--threads", "1,024", 100000),
+          ("bench-env-num-envs-1e12", [*EB, "--num-envs", "1000000000000"], "--num-envs", "1,048,576",
+           1000000000000),
+          ("bench-env-steps-1e9", [*EB, "--steps", "1000000000"], "--steps", "100,000", 1000000000),
+          ("bench-env-threads-100000", [*EB, "--threads", "100000"], "--threads", "1,024", 100000),
+          ("bench-env-max-seconds-1e300", [*EB, "--max-seconds", "1e300"], "--max-seconds", "86,400", "1e300"),
+          ("bench-motion-seconds-1e9", ["bench", "motion", "--seconds", "1e9"], "--seconds", "3,600", "1e9"),
+          ("bench-motion-batch-1e6", ["bench", "motion", "--batch", "1000000"], "--batch", "1,024", 1000000),
+          ("bench-train-iterations-1e9", ["bench", "train", "--iterations", "1000000000"], "--iterations", "100,000",
+           1000000000),
+          ("bench-train-threads-100000", ["bench", "train", "--threads", "100000"], "--threads", "1,024", 100000),
+          ("bench-optimize-batch-1e6", ["bench", "optimize", "--batch", "1000000"], "--batch", "4,096", 1000000),
+          ("bench-optimize-batches-1e6", ["bench", "optimize", "--batches", "1000000"], "--batches", "4,096",
+           1000000),
+          ("bench-optimize-steps-1e9", ["bench", "optimize", "--steps", "1000000000"], "--steps", "100,000",
+           1000000000),
+          ("export-onnx-batch-2-20-plus-1", ["export", "onnx", "reach_walk_default", "--out", "c.onnx", "--batch",
+                                             "1048577"], "--batch", "1,048,576", 1048577))],
+    _r3("bad value", "bench-env-max-seconds-inf", [*EB, "--max-seconds", "inf"],
+        r"argument --max-seconds: must be > 0"),
+    _r3("bad value", "train-nproc-100000", [*TRAIN, "--nproc", "100000"],
+        r"argument --nproc: must be at most this machine's \d+ CPU cores, got 100000"),
+    _r3("bad value", "bench-train-nproc-100000", ["bench", "train", "--nproc", "1", "100000"],
+        r"argument --nproc: must be at most this machine's \d+ CPU cores"),
+    # ------------------------------------------------ memory estimated before allocation (far beyond any machine)
+    _r3("bad value", "train-num-envs-2-20-memory", [*TRAIN, "--set", "env.num_envs=1048576", "--set",
+                                                    "ppo.num_steps=64"],
+        r"env\.num_envs: training 1 rank of 1,048,576 envs x 64 steps on the CPU needs about [\d,.]+ GiB of memory; "
+        r"this machine has [\d,.]+ GiB available; lower env\.num_envs or ppo\.num_steps"),
+    _r3("bad value", "train-widest-policy-memory", [*TRAIN, "--set", "policy.latent_dim=16384", "--set",
+                                                    "policy.n_blocks=64"],
+        r"policy\.latent_dim: training .* needs about [\d,.]+ GiB of memory; .*make the policy narrower"),
+    _r3("bad value", "train-widest-mlp-memory", [*TRAIN, "--set", "policy.architecture=mlp", "--set",
+                                                 f"policy.mlp_hidden=[{','.join(['16384'] * 64)}]"],
+        r"policy\.mlp_hidden: training .* needs about [\d,.]+ GiB"),
+    _r3("bad value", "train-nproc-memory", [*NPROC, "--set", "env.num_envs=1048576", "--set", "ppo.num_steps=64"],
+        r"--nproc: training 2 ranks of 1,048,576 envs .* use fewer ranks"),
+    _r3("bad value", "bench-rollout-batches-2-20-memory", [*RB, "--batches", "1", "1048576"],
+        r"--batches: a sampler batch of 1,048,576 needs about [\d,.]+ GiB of memory; .*lower --batches"),
+    _r3("bad value", "bench-env-num-envs-2-20-memory", [*EB, "--num-envs", "1048576"],
+        r"--num-envs: a batched env of 1,048,576 needs about [\d,.]+ GiB of memory"),
+    _r3("bad value", "export-onnx-batch-2-20-memory", ["export", "onnx", "reach_walk_default", "--out", "c.onnx",
+                                                       "--batch", "1048576"],
+        r"--batch: exporting a controller for 1,048,576 characters needs about [\d,.]+ GiB of memory"),
+    _r3("bad value", "eval-episodes-65536-memory", [*EVAL, "--paths", "dart_demo_walk", "--episodes", "65536"],
+        r"--episodes: 65536 episodes x 2 steps need about [\d.]+ GiB \(their envs and motion\)"),
+]
+ROWS += SECURITY
+
+
+def _eval_memory_fits() -> bool:
+    """Whether 65,536 two-step episodes fit in half this machine's RAM (then their row cannot be refused here)."""
+    from latentrl.evaluation.config import EvalSettings, physical_memory
+
+    total = physical_memory()
+    return total is None or EvalSettings(episodes=65536, max_steps=2).memory_bytes() <= total // 2
+
+
+SKIP = {"train-device-cuda": CUDA, "train-device-mps": MPS, "eval-episodes-65536-memory": _eval_memory_fits(),
         **{rid: not MUJOCO for rid, *_ in ROUND3 if rid.startswith("physics-")}}
 
 

@@ -19,7 +19,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "latentrl"
 
 FLOORS = (
     ("errors", "constants", "config", "safe_io", "preflight", "timing", "resources", "monitor", "runlock",
-     "interrupts"),
+     "interrupts", "memory"),
     ("motion",),
     ("datasets", "render", "rewards", "scenes"),
     ("motion_training", "envs", "ppo", "physics"),

@@ -161,6 +161,59 @@ def _positive(kind: type):
 _pos_int, _pos_float = _positive(int), _positive(float)
 
 
+def _at_most(kind: type, upper: float):
+    """Argument type: an int or float in (0, upper] (finite): a bench or export size that cannot exhaust the machine."""
+    positive = _positive(kind)
+
+    def parse(text: str):
+        value = positive(text)
+        if value > upper:
+            raise argparse.ArgumentTypeError(f"must be at most {upper:,}, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def _guidance(text: str) -> float:
+    """Argument type: a classifier-free guidance scale, finite and within +/- MAX_GUIDANCE (NaN makes NaN motion)."""
+    from latentrl.constants import MAX_GUIDANCE
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not abs(value) <= MAX_GUIDANCE:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"must be a finite number in [-{MAX_GUIDANCE:g}, {MAX_GUIDANCE:g}], "
+                                         f"got {text}")
+    return value
+
+
+_guidance.__name__ = "float"
+
+
+def _nproc(text: str) -> int:
+    """Argument type: ranks on this machine, 1 to its CPU count (each rank is a process with its own torch)."""
+    import os
+
+    value = _pos_int(text)
+    cores = os.cpu_count() or 1
+    if value > cores:
+        raise argparse.ArgumentTypeError(f"must be at most this machine's {cores} CPU cores, got {text}")
+    return value
+
+
+_nproc.__name__ = "int"
+MAX_BENCH_BATCH = 1 << 20
+"""Largest batch or env count a benchmark times (memory is also estimated before it runs)."""
+MAX_BENCH_STEPS = 100_000
+"""Most timed steps, repeats, rounds or iterations a benchmark flag may ask for."""
+MAX_THREAD_FLAG = 1024
+"""Most torch threads a ``--threads`` flag may ask for (``latentrl.config.MAX_THREADS``)."""
+_batch_size, _step_count = _at_most(int, MAX_BENCH_BATCH), _at_most(int, MAX_BENCH_STEPS)
+_threads = _at_most(int, MAX_THREAD_FLAG)
+
+
 def _fraction(text: str) -> float:
     """Argument type: a float in (0, 1]."""
     value = _pos_float(text)
@@ -252,7 +305,7 @@ def _train_commands(sub) -> None:
     train.add_argument("--allow-motion-mismatch", action="store_true",
                        help="resume onto a different motion model than the run was trained on (experts)")
     train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    train.add_argument("--nproc", type=_pos_int,
+    train.add_argument("--nproc", type=_nproc,
                        help="ranks on this machine (launches torchrun; env.num_envs is per rank; docs/training.md)")
     train.set_defaults(func=_train)
 
@@ -262,16 +315,16 @@ def _bench_commands(sub) -> None:
     bsub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK", parser_class=_Parser)
     bsub.required = True
     roll = bsub.add_parser("rollout", help="primitives/s of the motion model, side by side with DART's sampler")
-    roll.add_argument("--batches", type=_pos_int, nargs="+", default=[1, 16, 256], help="batch sizes")
+    roll.add_argument("--batches", type=_batch_size, nargs="+", default=[1, 16, 256], help="batch sizes")
     roll.add_argument("--models", nargs="+", default=["official", "default"],
                       help="'official' (DART size, random weights), 'default', or model paths")
     roll.add_argument("--device", nargs="+", type=_device, default=None,
                       help="devices (default: cpu, plus cuda when present)")
-    roll.add_argument("--repeats", type=_pos_int, default=5, help="timed runs per figure (median reported)")
-    roll.add_argument("--rounds", type=_pos_int, default=None,
+    roll.add_argument("--repeats", type=_step_count, default=5, help="timed runs per figure (median reported)")
+    roll.add_argument("--rounds", type=_step_count, default=None,
                       help="with --dart-src: time ours, then DART's, this many times over (default 5); ratios are "
                            "the median over rounds with their min-max and IQR")
-    roll.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads (default: torch's)")
+    roll.add_argument("--threads", type=_threads, default=None, help="torch CPU threads (default: torch's)")
     roll.add_argument("--amp", nargs="+", choices=["bf16", "fp16"],
                       help="also time autocast in these dtypes (CPU: bf16; CUDA: bf16/fp16); with --compile also "
                            "compiled; rows print their difference from the plain fp32 sampler")
@@ -293,11 +346,12 @@ def _bench_commands(sub) -> None:
     env = bsub.add_parser("env", help="env steps/s of the batched env vs. a per-env SyncVectorEnv loop")
     env.add_argument("--models", nargs="+", default=["default", "official"],
                      help="'default', 'official' (DART size, random weights), 'tiny', or model paths")
-    env.add_argument("--num-envs", type=_pos_int, nargs="+", default=[1, 64, 256, 1024], help="env counts")
+    env.add_argument("--num-envs", type=_batch_size, nargs="+", default=[1, 64, 256, 1024], help="env counts")
     env.add_argument("--device", nargs="+", type=_device, default=None,
                      help="devices (default: cpu, plus cuda when present)")
-    env.add_argument("--steps", type=_pos_int, default=5, help="timed steps per figure")
-    env.add_argument("--max-seconds", type=_pos_float, default=120.0, help="skip combinations estimated to take longer")
+    env.add_argument("--steps", type=_step_count, default=5, help="timed steps per figure")
+    env.add_argument("--max-seconds", type=_at_most(float, 86_400), default=120.0,
+                     help="skip combinations estimated to take longer")
     env.add_argument("--no-baseline", dest="baseline", action="store_false", help="skip the per-env loop")
     env.add_argument("--compile", action="store_true",
                      help="also time the env with compile=True (on CUDA captured as a CUDA graph; its first two "
@@ -305,7 +359,7 @@ def _bench_commands(sub) -> None:
     env.add_argument("--amp", choices=["bf16", "fp16"], default=None,
                      help="also time the env with amp=bf16/fp16 (the motion model under autocast; docs/envs.md); "
                           "with --compile also both together")
-    env.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
+    env.add_argument("--threads", type=_threads, default=None, help="torch CPU threads")
     env.add_argument("--scene", action="store_true",
                      help="also time the env with 8 random obstacles per env (docs/scenes.md) and print its step-time "
                           "ratio to the flat env")
@@ -316,25 +370,25 @@ def _bench_commands(sub) -> None:
     tr.add_argument("--config", help="training config (default: configs/quick.yaml)")
     tr.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config field (dotted)")
     tr.add_argument("--target", type=_fraction, default=0.9, help="eval success rate to reach")
-    tr.add_argument("--eval-every", type=_pos_int, default=10, help="iterations between evaluations")
-    tr.add_argument("--max-steps", type=_pos_int, default=None, help="env-step cap for the success run")
-    tr.add_argument("--iterations", type=_pos_int, default=5, help="iterations per trainer in the side-by-side run")
+    tr.add_argument("--eval-every", type=_step_count, default=10, help="iterations between evaluations")
+    tr.add_argument("--max-steps", type=_at_most(int, 10**12), default=None, help="env-step cap for the success run")
+    tr.add_argument("--iterations", type=_step_count, default=5, help="iterations per trainer in the side-by-side run")
     tr.add_argument("--skip-success", action="store_true", help="only the native vs SB3 comparison")
     tr.add_argument("--no-side-by-side", dest="side_by_side", action="store_false",
                     help="only the success run (no native vs SB3 comparison)")
-    tr.add_argument("--threads", type=_pos_int, default=None, help="torch CPU threads")
+    tr.add_argument("--threads", type=_threads, default=None, help="torch CPU threads")
     tr.add_argument("--run-dir", help="where the benchmark's runs go (default: a temporary folder)")
     tr.add_argument("--no-progress", action="store_true")
     tr.add_argument("--json", help="write all figures to this JSON file")
-    tr.add_argument("--nproc", type=_pos_int, nargs="+",
+    tr.add_argument("--nproc", type=_nproc, nargs="+",
                     help="instead: env steps/s with this many ranks each (latentrl train --nproc N), e.g. 1 2")
     tr.set_defaults(func=_bench_train)
 
     motion = bsub.add_parser("motion", help="stability and text control of a motion model vs. its training data")
     motion.add_argument("--motion", default="default", help="'default' or a model file")
-    motion.add_argument("--seconds", type=_pos_float, default=60.0, help="rollout length per prompt")
-    motion.add_argument("--batch", type=_pos_int, default=8, help="rollouts per prompt")
-    motion.add_argument("--guidance", type=float, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
+    motion.add_argument("--seconds", type=_at_most(float, 3600), default=60.0, help="rollout length per prompt")
+    motion.add_argument("--batch", type=_at_most(int, 1024), default=8, help="rollouts per prompt")
+    motion.add_argument("--guidance", type=_guidance, default=GUIDANCE_SCALE, help="classifier-free guidance scale")
     motion.add_argument("--seed", type=_seed, default=0, help="random seed")
     motion.add_argument("--json", help="write all figures to this JSON file")
     motion.add_argument("--no-floor-snap", action="store_true",
@@ -354,17 +408,17 @@ def _bench_optimize_command(bsub) -> None:
                                            "time to 1 cm, cost per 100 steps vs DART")
     opt.add_argument("--suites", nargs="+", default=["inbetween", "inbetween_mid", "joint_targets"],
                      help="shipped constraint suites")
-    opt.add_argument("--steps", type=_pos_int, default=100, help="Adam steps")
-    opt.add_argument("--batch", type=_pos_int, default=16, help="problems solved together")
+    opt.add_argument("--steps", type=_step_count, default=100, help="Adam steps")
+    opt.add_argument("--batch", type=_at_most(int, 4096), default=16, help="problems solved together")
     opt.add_argument("--lr", type=_pos_float, default=0.05, help="Adam learning rate")
     opt.add_argument("--warm", metavar="POLICY", help="also run every suite warm-started from this policy's noises")
-    opt.add_argument("--cost-steps", type=_pos_int, default=5, help="timed steps of the cost rows")
+    opt.add_argument("--cost-steps", type=_step_count, default=5, help="timed steps of the cost rows")
     opt.add_argument("--models", nargs="+", default=["default", "official"], help="models of the cost rows")
-    opt.add_argument("--batches", type=_pos_int, nargs="+", default=None,
+    opt.add_argument("--batches", type=_at_most(int, 4096), nargs="+", default=None,
                      help="problems solved together in the rate rows: problems per minute at 100 steps on the "
                           "default model (default: 1 8 64)")
     opt.add_argument("--device", action="append", type=_device, help="repeat for several (default: cpu and cuda)")
-    opt.add_argument("--threads", type=_pos_int)
+    opt.add_argument("--threads", type=_threads)
     opt.add_argument("--skip-suites", action="store_true", help="only the cost rows")
     opt.add_argument("--json", help="write all figures to this JSON file")
     opt.add_argument("--plot", metavar="PNG", help="mean goal error against wall time, per suite and start")
@@ -486,7 +540,8 @@ def _export_commands(sub) -> None:
     onnx.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach, path, joystick or "
                                                        "timed policy, or a shipped policy by name (reach_walk_default)")
     onnx.add_argument("--out", required=True, metavar="FILE", help="output .onnx file")
-    onnx.add_argument("--batch", type=_pos_int, default=1, help="characters per call, fixed in the graph (default 1)")
+    onnx.add_argument("--batch", type=_batch_size, default=1,
+                      help="characters per call, fixed in the graph (default 1)")
     onnx.add_argument("--text", help="bake this prompt in (default: the graph takes a text_embedding input)")
     onnx.add_argument("--opset", type=int, default=17, help="ONNX opset version, >= 17 (default 17)")
     onnx.add_argument("--motion", default=None,

@@ -157,6 +157,8 @@ def launch(req: TrainRequest) -> int:
         cfg.validate()
         if cfg.env.compile:
             check_compile(check_device(cfg.ppo.device, "ppo.device"), "env.compile")
+        if not str(cfg.ppo.device).startswith("cuda"):
+            check_training_memory(cfg, ranks=req.nproc)
         req = dataclasses.replace(req, run_dir=str(default_run_dir(req)))
         check_new_run(Path(req.run_dir))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
@@ -229,6 +231,28 @@ def train(req: TrainRequest) -> int:
     return 0
 
 
+def check_training_memory(cfg: TrainConfig, ranks: int = 1) -> None:
+    """Refuse in one line a CPU run whose memory estimate exceeds what this machine has available.
+
+    The estimate is :func:`latentrl.memory.training_bytes` per rank; the line names the setting that costs most.
+    """
+    from latentrl import memory
+
+    p = cfg.policy
+    params = memory.policy_parameters(p.architecture, p.latent_dim, p.n_blocks, p.mlp_hidden)
+    need = ranks * memory.training_bytes(cfg.env.num_envs, cfg.ppo.num_steps, params)
+    if ranks > 1:
+        flag, hint = "--nproc", "use fewer ranks, or lower env.num_envs (it is per rank)"
+    elif params * memory.PARAMETER_BYTES > cfg.env.num_envs * cfg.ppo.num_steps * memory.TRANSITION_BYTES:
+        flag = "policy.mlp_hidden" if p.architecture == "mlp" else "policy.latent_dim"
+        hint = f"make the policy narrower (about {params:,} parameters)"
+    else:
+        flag, hint = "env.num_envs", "lower env.num_envs or ppo.num_steps"
+    what = (f"training {ranks} rank{'s' * (ranks > 1)} of {cfg.env.num_envs:,} envs x {cfg.ppo.num_steps:,} steps "
+            f"on the CPU")
+    memory.require_memory(need, flag, what, hint)
+
+
 def check_new_run(run_dir: Path) -> None:
     """A fresh run must not start in a folder that holds another run (its checkpoints would mix with ours)."""
     from latentrl.ppo.checkpoint import FINAL, iteration_checkpoints
@@ -260,6 +284,8 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
+    if torch.device(device).type == "cpu":  # GPU memory is not estimated
+        check_training_memory(cfg)
     run_dir = Path(run_dir)
     check_writable(run_dir, "run directory")
     motion = load_motion(cfg.env, device)

@@ -144,16 +144,20 @@ class EvalSettings(StepSettings):
         need = self.memory_bytes()
         total = physical_memory()
         require(total is None or need <= total // 2, "episodes",
-                f"{self.episodes} episodes x {self.max_steps} steps keep about {need / 2**30:.1f} GiB of motion; "
-                f"this machine has {(total or 0) / 2**30:.1f} GiB; lower --episodes or --max-steps")
+                f"{self.episodes} episodes x {self.max_steps} steps need about {need / 2**30:.1f} GiB (their envs "
+                f"and motion); this machine has {(total or 0) / 2**30:.1f} GiB; lower --episodes or --max-steps")
         require(self.success_threshold > 0, "success_threshold", f"must be > 0, got {self.success_threshold}")
         super().validate()
 
     def memory_bytes(self) -> int:
-        """Rough memory the per-episode records need: joints and features of every frame (float32)."""
-        from latentrl.evaluation.results import frames_after
+        """Rough memory of the episodes: each one's env and the frames it records.
 
-        return self.episodes * frames_after(self.max_steps) * (22 * 3 + 276) * 4
+        An env is :data:`latentrl.memory.ENV_BYTES`; a frame's joints and features are float32.
+        """
+        from latentrl.evaluation.results import frames_after
+        from latentrl.memory import ENV_BYTES
+
+        return self.episodes * (frames_after(self.max_steps) * (22 * 3 + 276) * 4 + ENV_BYTES)
 
     @property
     def budget_s(self) -> float:

@@ -461,6 +461,10 @@ def export_command(policy: str | Path, out: str | Path, batch: int = 1, text: st
         raise ConfigError(f"--opset must lie in [{MIN_OPSET}, {max_opset}], got {opset}")
     if int(batch) < 1:
         raise ConfigError(f"--batch must be >= 1, got {batch}")
+    from latentrl.memory import EXPORT_BYTES, require_memory
+
+    require_memory(int(batch) * EXPORT_BYTES, "--batch", f"exporting a controller for {int(batch):,} characters",
+                   "lower --batch (an engine may call the graph several times per frame)")
     check_output_file(out)
     from latentrl.resources import policy_file
 

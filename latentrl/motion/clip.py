@@ -43,7 +43,7 @@ import torch
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import DataError
 from latentrl.motion.contacts import foot_contacts
-from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
+from latentrl.motion.representation import FEATURE_DIM, FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, NUM_JOINTS, PARENTS, rest_offsets
 from latentrl.safe_io import atomic_write_bytes
 
@@ -199,7 +199,15 @@ class MotionClip:
 MAX_SCENE_CHARS = 1 << 20
 """Longest scene JSON a motion file may carry (the scene file's own bound)."""
 MAX_FPS = 1000.0
-"""Frame rates outside (0, MAX_FPS] are refused."""
+"""Frame rates above this are refused."""
+MIN_FPS = 0.001
+"""Frame rates below this are refused (1e-300 would round to 0 in the file's float32)."""
+MAX_FRAMES = 1_000_000
+"""Most frames a motion may have: 9 hours at 30 fps (``eval --max-steps`` 100,000 makes 800,002)."""
+MAX_MOTION_BYTES = 1 << 30
+"""Most bytes a motion ``.npz`` may decompress to, all members together (checked before any is read)."""
+MAX_MEMBERS = 64
+"""Most arrays a motion ``.npz`` may hold (the schema has 13 plus a few scalars)."""
 MAX_COORD_M = 10_000.0
 """Joint coordinates beyond +/- this many metres are no human motion (a diverged rollout or a broken file)."""
 
@@ -227,16 +235,121 @@ def check_motion(joints, fps, source: str) -> tuple[np.ndarray, float]:
     if fps_arr.shape != () or fps_arr.dtype.kind not in "iuf":
         raise DataError(f"{source}: field 'fps' must be one real number, got {fps_arr.dtype} of shape {fps_arr.shape}")
     fps = float(fps_arr)
-    if not 0 < fps <= MAX_FPS:  # also refuses nan
-        raise DataError(f"{source}: field 'fps' must lie in (0, {MAX_FPS:g}], got {fps:g}")
+    if not MIN_FPS <= fps <= MAX_FPS:  # also refuses nan
+        raise DataError(f"{source}: field 'fps' must lie in [{MIN_FPS:g}, {MAX_FPS:g}], got {fps:g}")
+    if len(joints) > MAX_FRAMES:
+        raise DataError(f"{source}: field 'joints' has {len(joints):,} frames; a motion may have at most "
+                        f"{MAX_FRAMES:,}")
     return joints, fps
 
 
+def _member_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Shape and dtype of every ``.npy`` member, read from the headers alone, before any data is decompressed.
+
+    Refuses an archive whose members would decompress to more than :data:`MAX_MOTION_BYTES`, or whose ``joints``
+    have more than :data:`MAX_FRAMES`. ``np.load`` allocates what a member's header announces and reads a
+    non-``.npy`` member whole, so both sizes are summed.
+    """
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    headers: dict[str, tuple[tuple[int, ...], np.dtype]] = {}
+    total = 0
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+            if len(infos) > MAX_MEMBERS:
+                raise DataError(f"{path}: holds {len(infos)} arrays; a motion .npz may hold at most {MAX_MEMBERS}")
+            for info in infos:
+                name = info.filename.removesuffix(".npy")
+                size = info.file_size
+                if info.filename.endswith(".npy"):
+                    with zf.open(info) as f:
+                        version = npy.read_magic(f)
+                        if version not in ((1, 0), (2, 0)):
+                            raise DataError(f"{path}: field '{name}': .npy format version {version} is not read")
+                        read = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+                        shape, _, dtype = read(f)
+                    size = max(size, int(np.prod(shape, dtype=object)) * dtype.itemsize)
+                    headers[name] = (tuple(shape), dtype)
+                    if name == "joints" and len(shape) == 3 and shape[0] > MAX_FRAMES:
+                        raise DataError(f"{path}: field 'joints' has {shape[0]:,} frames; a motion may have at most "
+                                        f"{MAX_FRAMES:,}")
+                total += size
+                if total > MAX_MOTION_BYTES:
+                    raise DataError(f"{path}: its arrays decompress to more than {MAX_MOTION_BYTES / 2**30:g} GiB "
+                                    f"(field '{name}' alone is {size:,} bytes); refused before reading")
+    except DataError:
+        raise
+    except Exception as exc:  # zipfile and numpy raise several types for broken archives and headers
+        raise DataError(f"{path}: not a readable motion .npz ({str(exc)[:120]})") from None
+    return headers
+
+
+def _field_problem(key: str, value: np.ndarray, frames: int) -> str | None:
+    """What is wrong with one optional field of a motion file (the schema above), or None."""
+    real = value.dtype.kind in "fiu"
+    if key == "texts":
+        if value.dtype.kind != "U" or value.shape != (frames,):
+            return f"must be ({frames},) text, one prompt per frame"
+    elif key == "contacts":
+        if value.dtype.kind not in "biu" or value.shape != (frames, 2):
+            return f"must be ({frames}, 2) booleans"
+    elif key == "primitive":
+        if value.dtype.kind not in "iu" or value.shape != (frames,):
+            return f"must be ({frames},) integers"
+    elif key == "features":
+        if not real or value.shape != (frames, FEATURE_DIM):
+            return f"must be ({frames}, {FEATURE_DIM}) real numbers"
+    elif key == "actions":
+        if not real or (value.ndim != 2 and value.size):
+            return "must be (S, D) real numbers"
+    elif key in ("goals", "waypoints"):
+        if not real or ((value.ndim != 2 or value.shape[1] != 3) and value.size):
+            return "must be (N, 3) real numbers"
+    elif key == "scene":
+        if value.dtype.kind != "U" or value.shape != () or len(str(value)) > MAX_SCENE_CHARS:
+            return f"must be the scene's JSON text (at most {MAX_SCENE_CHARS:,} characters)"
+    elif key == "floor":
+        if not real or value.shape != ():
+            return "must be one real number"
+    else:
+        return None
+    if real and not np.isfinite(value).all():
+        return f"holds NaN or inf ({int((~np.isfinite(value)).sum())} of {value.size} values)"
+    if key in ("goals", "waypoints", "floor") and value.size and float(np.abs(value).max()) > MAX_COORD_M:
+        return f"reaches {float(np.abs(value).max()):.3g} m, beyond the +/-{MAX_COORD_M:g} m a motion may span"
+    return None
+
+
+def check_motion_fields(data: dict[str, np.ndarray], source: str) -> None:
+    """The one check of a motion file's optional fields: shape, dtype and finite values (one line naming the field).
+
+    ``rest_offsets`` and ``parents`` are not checked: loading recomputes them from the joints.
+    """
+    frames = len(data["joints"])
+    for key in ("texts", "contacts", "primitive", "features", "actions", "goals", "waypoints", "floor", "scene"):
+        if key in data:
+            value = np.asarray(data[key])
+            problem = _field_problem(key, value, frames)
+            if problem and problem.startswith("must"):
+                problem += f", got {value.dtype} of shape {value.shape}"
+            if problem:
+                raise DataError(f"{source}: field '{key}' {problem}")
+
+
 def read_motion_arrays(path: str | Path) -> dict[str, np.ndarray]:
-    """The raw arrays of a motion ``.npz``; checks ``joints`` and fills ``fps`` (30) for old files."""
+    """The raw arrays of a motion ``.npz``, checked: the one reader of motion files.
+
+    Before reading: the archive's decompressed size, member count and frame count (:func:`_member_headers`).
+    After: ``joints`` and ``fps`` (:func:`check_motion`; ``fps`` 30 for old files) and every optional field
+    (:func:`check_motion_fields`). Every refusal is one :class:`DataError` line naming the file and field.
+    """
     path = Path(path)
     if not path.is_file():
         raise DataError(f"motion file not found: {path}")
+    _member_headers(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
@@ -248,6 +361,7 @@ def read_motion_arrays(path: str | Path) -> dict[str, np.ndarray]:
     data.setdefault("fps", np.float32(FPS))
     joints, fps = check_motion(joints, data["fps"], str(path))
     data["joints"], data["fps"] = joints.astype(np.float32), np.float32(fps)
+    check_motion_fields(data, str(path))
     return data
 
 

@@ -11,9 +11,11 @@ import io
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from latentrl.errors import DataError
 from latentrl.motion.representation import HISTORY_LENGTH
 from latentrl.motion.skeleton import JOINT_NAMES
 from latentrl.optim.solver import OptimizeSettings, Result
@@ -37,6 +39,55 @@ def summary(results: list[Result]) -> dict:
     # each problem's share of its own batch's wall time (batches of one suite may differ in size)
     out["seconds_per_problem"] = _mean([r.metrics["seconds"] / r.metrics["batch"] for r in results]) or 0.0
     return out
+
+
+def check_report(report: Any, path: str | Path) -> None:
+    """The one check of a read ``report.json`` of this format (what ``latentrl view`` relies on).
+
+    ``problems`` a non-empty list; each with ``name`` and ``motion`` strings (the motion a relative file name
+    inside the report's folder), ``metrics`` numbers (NaN allowed) or null, ``targets`` a list of ``motion_frame`` (an
+    integer in [0, MAX_FRAMES]) and ``position`` (three finite numbers); ``overall`` numbers or null;
+    ``suite`` a string. One :class:`DataError` line naming the file and field.
+    """
+    from latentrl.motion.clip import MAX_FRAMES
+
+    def need(ok: bool, field: str, expected: str, got: Any) -> None:
+        if not ok:
+            shown = type(got).__name__ if isinstance(got, (dict, list)) else repr(got)[:60]
+            raise DataError(f"{path}: field '{field}' must be {expected}, got {shown}")
+
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    def numbers(block: Any, field: str) -> None:  # NaN and inf stay allowed: a metric may be undefined
+        need(isinstance(block, dict), field, "an object", block)
+        for key, v in block.items():
+            need(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)), f"{field}.{key}",
+                 "a number or null", v)
+
+    need(isinstance(report, dict), "report", "an object", report)
+    need(isinstance(report.get("suite", ""), str), "suite", "a string", report.get("suite"))
+    numbers(report.get("overall", {}), "overall")
+    problems = report.get("problems")
+    need(isinstance(problems, list) and len(problems) > 0, "problems", "a non-empty list", problems)
+    for i, e in enumerate(problems):
+        field = f"problems.{i}"
+        need(isinstance(e, dict), field, "an object", e)
+        need(isinstance(e.get("name"), str), f"{field}.name", "a string", e.get("name"))
+        motion = e.get("motion")
+        need(isinstance(motion, str), f"{field}.motion", "a file name inside the report's folder", motion)
+        if Path(motion).is_absolute() or ".." in Path(motion).parts:
+            raise DataError(f"{path}: field '{field}.motion' {motion[:80]!r} points outside the report's folder")
+        numbers(e.get("metrics", {}), f"{field}.metrics")
+        targets = e.get("targets", [])
+        need(isinstance(targets, list), f"{field}.targets", "a list", targets)
+        for j, t in enumerate(targets):
+            need(isinstance(t, dict), f"{field}.targets.{j}", "an object", t)
+            frame, pos = t.get("motion_frame"), t.get("position")
+            need(isinstance(frame, int) and not isinstance(frame, bool) and 0 <= frame <= MAX_FRAMES,
+                 f"{field}.targets.{j}.motion_frame", f"an integer in [0, {MAX_FRAMES}]", frame)
+            need(isinstance(pos, list) and len(pos) == 3 and all(number(v) for v in pos),
+                 f"{field}.targets.{j}.position", "[x, y, z] finite numbers", pos)
 
 
 def problem_entry(r: Result, motion_file: str) -> dict:

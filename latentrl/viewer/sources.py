@@ -209,13 +209,9 @@ def motion_source(path: Path) -> Source:
 
 def _npz_scalars(path: Path) -> dict[str, Any]:
     """The 0-d fields of a motion file (an evaluation writes success, end, reach_time_s there)."""
-    out = {}
-    with np.load(path, allow_pickle=False) as z:
-        for key in z.files:
-            value = z[key]
-            if value.ndim == 0:
-                out[key] = value.item()
-    return out
+    from latentrl.motion.clip import read_motion_arrays
+
+    return {key: value.item() for key, value in read_motion_arrays(path).items() if value.ndim == 0}
 
 
 def folder_source(path: Path) -> Source:
@@ -290,7 +286,10 @@ def _target_rows(targets: Any, where: str) -> list[dict]:
 
 def optimize_source(folder: Path, report: dict) -> Source:
     """Every problem of a ``latentrl optimize`` output (its parsed ``report``), with its targets."""
+    from latentrl.optim.report import check_report
+
     path = folder / REPORT_JSON
+    check_report(report, path)
     problems = report.get("problems")
     if not isinstance(problems, list) or not problems:
         raise DataError(f"{path}: an optimize report needs a non-empty 'problems' list")

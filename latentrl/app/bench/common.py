@@ -28,6 +28,25 @@ def default_devices(requested: list[str] | None) -> list[str]:
     return ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
 
+def check_amp(amp: list[str] | str | None, devices: list[str]) -> None:
+    """Refuse ``--amp fp16`` with a CPU among the devices, before any timing.
+
+    Autocast in fp16 on the CPU gave NaN motion with exit 0; bf16 is the CPU's autocast dtype.
+    """
+    asked = [amp] if isinstance(amp, str) else list(amp or [])
+    cpus = [d for d in devices if not d.startswith("cuda")]
+    if "fp16" in asked and cpus:
+        raise LatentRLError(f"--amp fp16: fp16 autocast runs on CUDA only, and the devices include {cpus[0]}; use "
+                            "--amp bf16 on the CPU, or --device cuda")
+
+
+def check_bench_memory(count: int, per_unit: int, flag: str, what: str) -> None:
+    """The largest size a benchmark times (``count`` units of ``per_unit`` bytes) must fit the available memory."""
+    from latentrl.memory import PROCESS_BYTES, require_memory
+
+    require_memory(PROCESS_BYTES + count * per_unit, flag, f"{what} of {count:,}", f"lower {flag}")
+
+
 def official_size_model():
     """DART's released architecture with random weights, for timing only.
 

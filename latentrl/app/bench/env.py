@@ -23,7 +23,13 @@ import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode
 
-from latentrl.app.bench.common import default_devices, official_size_model, write_json
+from latentrl.app.bench.common import (
+    check_amp,
+    check_bench_memory,
+    default_devices,
+    official_size_model,
+    write_json,
+)
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.envs.single import SingleEnv
 from latentrl.motion.rollout import MotionModel
@@ -206,9 +212,13 @@ def bench_env(args: EnvBenchRequest) -> int:
     ``threads`` (torch CPU threads or ``None``), ``json`` (output path or ``None``), ``scene`` (time the env with
     :data:`BENCH_SCENE` too).
     """
+    from latentrl.memory import ENV_BYTES
+
+    devices = default_devices(args.device)
+    check_amp(args.amp, devices)
+    check_bench_memory(max(args.num_envs), ENV_BYTES, "--num-envs", "a batched env")
     if args.threads:
         torch.set_num_threads(args.threads)
-    devices = default_devices(args.device)
     if args.compile:  # refuse before any timing when torch cannot compile here
         from latentrl.preflight import check_compile
 

@@ -15,7 +15,13 @@ from pathlib import Path
 
 import torch
 
-from latentrl.app.bench.common import default_devices, official_size_model, write_json
+from latentrl.app.bench.common import (
+    check_amp,
+    check_bench_memory,
+    default_devices,
+    official_size_model,
+    write_json,
+)
 from latentrl.constants import GUIDANCE_SCALE
 from latentrl.errors import LatentRLError
 from latentrl.motion.rollout import AMP_DTYPES
@@ -260,11 +266,14 @@ def _dart_ms(dart: dict, batch: int) -> float | None:
 
 def bench_rollout(req: RolloutBenchRequest) -> int:
     """Primitives/s and frames/s per model, device and batch size; DART's sampler interleaved with ours."""
+    from latentrl.memory import SAMPLE_BYTES
     from latentrl.motion.checkpoint import load_motion_model
 
+    devices = default_devices(req.device)
+    check_amp(req.amp, devices)
+    check_bench_memory(max(req.batches), SAMPLE_BYTES, "--batches", "a sampler batch")
     if req.threads:
         torch.set_num_threads(req.threads)
-    devices = default_devices(req.device)
     if req.compile:  # refuse before any timing when torch cannot compile here
         from latentrl.preflight import check_compile
 
