@@ -315,9 +315,17 @@ def current() -> Collective:
 
 
 def shutdown() -> None:
-    """Leave the process group (end of a run)."""
+    """Leave the process group (end of a run).
+
+    The ranks meet at a barrier first, so no rank tears its connections down while another still uses them (a
+    rank that left early made its peer abort on exit with "terminate called without an active exception").
+    """
     global _current
     if _current is not SINGLE and torch.distributed.is_initialized():
+        try:
+            torch.distributed.barrier()
+        except RuntimeError:  # a peer is gone: nothing left to wait for
+            pass
         torch.distributed.destroy_process_group()
     _current = SINGLE
 
