@@ -66,3 +66,25 @@ def walk_controller(server):
     env = SteeredReachEnv(1, motion=load_motion_model("default"), texts=["walk", "run"], max_episode_steps=10**9,
                           autoreset_mode="Disabled", foot_lock=True)
     return LiveController(server, env, load_policy(policy_file("reach_walk_default")).policy, "test", "walk", seed=0)
+
+
+@pytest.fixture
+def server():
+    """A bare Viser server on a free loopback port."""
+    viser = pytest.importorskip("viser")
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    yield srv
+    srv.stop()
+
+
+@pytest.fixture
+def guarded_server(monkeypatch):
+    """latentrl's own server (origin check, connection bound) for ``play``, with a fresh stderr-line window."""
+    pytest.importorskip("viser")
+    from latentrl.viewer import guard
+    from latentrl.viewer.server import start_server
+
+    monkeypatch.setattr(guard, "_window", {"start": -float("inf"), "lines": 0})
+    srv = start_server("127.0.0.1", 0, "test", "play")
+    yield srv
+    srv.stop()

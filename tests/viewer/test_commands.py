@@ -99,14 +99,6 @@ def test_ctrl_c_stops_cleanly(motion_file):
     assert out.strip().splitlines()[-1] == "latentrl view: stopped", out
 
 
-@pytest.fixture
-def server():
-    viser = pytest.importorskip("viser")
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    yield srv
-    srv.stop()
-
-
 def test_player_without_browser(server, eval_folder):
     from latentrl.viewer.playback import Player
     from latentrl.viewer.sources import open_source

@@ -30,15 +30,9 @@ def joystick_controller(server):
 
 
 @pytest.fixture
-def server(monkeypatch):
-    pytest.importorskip("viser")
-    from latentrl.viewer import guard
-    from latentrl.viewer.server import start_server
-
-    monkeypatch.setattr(guard, "_window", {"start": -float("inf"), "lines": 0})
-    srv = start_server("127.0.0.1", 0, "test", "play")
-    yield srv
-    srv.stop()
+def server(guarded_server):
+    """These tests drive play's own server (tests/viewer/conftest.py)."""
+    return guarded_server
 
 
 def test_keys_sent_by_a_raw_client_steer_the_joystick_command(server, capsys):

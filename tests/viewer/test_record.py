@@ -29,14 +29,6 @@ def frame_count(path: Path) -> int:
     return sum(1 for _ in reader)
 
 
-@pytest.fixture
-def server():
-    viser = pytest.importorskip("viser")
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    yield srv
-    srv.stop()
-
-
 def test_recorder_keeps_the_last_frames_and_writes_them(tmp_path, capsys):
     pytest.importorskip("imageio_ffmpeg")
     from latentrl.viewer.record import Recorder

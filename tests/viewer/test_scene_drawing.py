@@ -24,15 +24,9 @@ SCENE = Scene((Box((1.0, 2.0), (0.6, 0.4, 1.0), 30.0), Cylinder((-1.0, 3.0), 0.2
 
 
 @pytest.fixture
-def server(monkeypatch):
-    pytest.importorskip("viser")
-    from latentrl.viewer import guard
-    from latentrl.viewer.server import start_server
-
-    monkeypatch.setattr(guard, "_window", {"start": -float("inf"), "lines": 0})
-    srv = start_server("127.0.0.1", 0, "test", "play")
-    yield srv
-    srv.stop()
+def server(guarded_server):
+    """These tests drive play's own server (tests/viewer/conftest.py)."""
+    return guarded_server
 
 
 def rotate(wxyz: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -42,14 +42,6 @@ def test_plain_keeps_line_breaks_from_making_blocks():
     assert plain("success 0.50 ± 0.10") == "success 0.50 ± 0.10"  # numbers stay readable in the source
 
 
-@pytest.fixture
-def server():
-    viser = pytest.importorskip("viser")
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    yield srv
-    srv.stop()
-
-
 def markdown_shown(player) -> list[str]:
     return [player.header.content, player.metrics.content, player.status.content]
 
