@@ -231,21 +231,22 @@ def test_a_rank_traceback_is_shown_and_an_exit_code_is_named():
     assert out.cause() == "rank 0 exited with code 2"
 
 
-@pytest.mark.slow
-def test_ctrl_c_under_nproc_saves_once_shows_the_ranks_lines_and_the_run_resumes(tmp_path):
-    """Ctrl-C (SIGINT to the process group, as a terminal sends it) of ``latentrl train --nproc 2``: the ranks
-    save the iteration they are in and say so, torchrun's own traceback is not shown, exit 130; ``--resume``
-    then starts there and finishes."""
+STOP_TOTAL = 128 * 40  # 2 ranks x 8 envs x 8 steps = 128 env steps per iteration
+STOP_ENV = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
+
+
+def _stop_at_iteration_2(tmp_path: Path, stop, timeout_s: float, **popen) -> tuple[Path, subprocess.Popen, str]:
+    """Start ``latentrl train --nproc 2`` in its own session, call ``stop(proc)`` once iteration 2 is logged and
+    return the run folder, the finished launcher and its stderr (bounded: a hang fails here)."""
     import signal
     import time
 
     run = tmp_path / "run"
-    total = 128 * 40
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
     cmd = [sys.executable, "-m", "latentrl", "train", str(ROOT / "configs" / "tiny.yaml"), "--nproc", "2",
-           "--set", "ppo.checkpoint_every=0", "--total-steps", str(total), "--run-dir", str(run), "--no-progress"]
-    proc = subprocess.Popen(cmd, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+           "--set", "ppo.checkpoint_every=0", "--total-steps", str(STOP_TOTAL), "--run-dir", str(run),
+           "--no-progress"]
+    proc = subprocess.Popen(cmd, env=STOP_ENV, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True, **popen)
     try:
         deadline = time.monotonic() + LAUNCH_TIMEOUT_S
         log = run / "train.log"
@@ -253,25 +254,41 @@ def test_ctrl_c_under_nproc_saves_once_shows_the_ranks_lines_and_the_run_resumes
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "training did not reach its second iteration"
             time.sleep(0.05)
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
+        stop(proc)
+        _, err = proc.communicate(timeout=timeout_s)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.communicate()
+    return run, proc, err
+
+
+def _resume_finishes_from(run: Path, tmp_path: Path, newest: dict) -> None:
+    """``--resume RUN --nproc 2`` starts at the saved iteration (not from 0) and finishes the run."""
+    resumed = subprocess.run([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--nproc", "2",
+                              "--no-progress"], env=STOP_ENV, cwd=tmp_path, capture_output=True, text=True,
+                             timeout=LAUNCH_TIMEOUT_S * 2)
+    ok(resumed)
+    start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
+    assert start in (run / "train.log").read_text()
+    assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == STOP_TOTAL
+
+
+@pytest.mark.slow
+def test_ctrl_c_under_nproc_saves_once_shows_the_ranks_lines_and_the_run_resumes(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) of ``latentrl train --nproc 2``: the ranks
+    save the iteration they are in and say so, torchrun's own traceback is not shown, exit 130; ``--resume``
+    then starts there and finishes."""
+    import signal
+
+    run, proc, err = _stop_at_iteration_2(tmp_path, lambda p: os.killpg(p.pid, signal.SIGINT), 60)
     assert proc.returncode == 130, err[-3000:]
     assert "Traceback" not in err and err.strip().splitlines()[-1] == "latentrl: interrupted", err[-3000:]
     saved = ckpt.iteration_checkpoints(run)
     assert len(saved) == 1, saved  # checkpoint_every=0: the Ctrl-C wrote it
     newest = ckpt.read_checkpoint(saved[0])
     assert f"interrupted: saved iteration {newest['iteration']} " in err, err[-3000:]
-    resumed = subprocess.run([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--nproc", "2",
-                              "--no-progress"], env=env, cwd=tmp_path, capture_output=True, text=True,
-                             timeout=LAUNCH_TIMEOUT_S * 2)
-    ok(resumed)
-    start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
-    assert start in (run / "train.log").read_text()
-    assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
+    _resume_finishes_from(run, tmp_path, newest)
 
 
 def test_ranks_that_see_a_signal_in_different_iterations_stop_at_the_same_one_and_rank_0_saves_it(tmp_path):
@@ -295,28 +312,10 @@ def test_sigterm_to_the_nproc_launcher_alone_saves_one_iteration_on_every_rank_a
     ``kill PID``), started with SIGINT ignored as a background job is: the launcher passes it on, every rank
     stops at the same iteration, rank 0 saves it, exit 143; ``--resume RUN --nproc 2`` starts there and finishes."""
     import signal
-    import time
 
-    run = tmp_path / "run"
-    total = 128 * 40
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "LATENTRL_DIST_TIMEOUT": "60"}
-    cmd = [sys.executable, "-m", "latentrl", "train", str(ROOT / "configs" / "tiny.yaml"), "--nproc", "2",
-           "--set", "ppo.checkpoint_every=0", "--total-steps", str(total), "--run-dir", str(run), "--no-progress"]
-    proc = subprocess.Popen(cmd, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
-    try:
-        deadline = time.monotonic() + LAUNCH_TIMEOUT_S
-        log = run / "train.log"
-        while not (log.is_file() and "iter 2 " in log.read_text()):
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, "training did not reach its second iteration"
-            time.sleep(0.05)
-        proc.send_signal(signal.SIGTERM)  # the launcher's PID alone
-        _, err = proc.communicate(timeout=90)  # bounded: a hang fails here
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
+    run, proc, err = _stop_at_iteration_2(  # the launcher's PID alone, SIGINT ignored as in a background job
+        tmp_path, lambda p: p.send_signal(signal.SIGTERM), 90,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     assert proc.returncode == 143, err[-3000:]
     assert "Traceback" not in err and err.strip().splitlines()[-1] == "latentrl: interrupted by SIGTERM", err[-3000:]
     saved = ckpt.iteration_checkpoints(run)
@@ -325,13 +324,7 @@ def test_sigterm_to_the_nproc_launcher_alone_saves_one_iteration_on_every_rank_a
     notes = [line for line in err.splitlines() if line.startswith("interrupted: saved iteration")]
     assert len(notes) == 2 and len(set(notes)) == 1, err[-3000:]  # both ranks stopped at the same iteration
     assert notes[0].startswith(f"interrupted: saved iteration {newest['iteration']} "), err[-3000:]
-    resumed = subprocess.run([sys.executable, "-m", "latentrl", "train", "--resume", str(run), "--nproc", "2",
-                              "--no-progress"], env=env, cwd=tmp_path, capture_output=True, text=True,
-                             timeout=LAUNCH_TIMEOUT_S * 2)
-    ok(resumed)
-    start = f"start at iteration {newest['iteration']}, {newest['env_steps']} env steps"
-    assert start in (run / "train.log").read_text()
-    assert ckpt.read_checkpoint(run / ckpt.FINAL)["env_steps"] == total
+    _resume_finishes_from(run, tmp_path, newest)
 
 
 HUNG_STDERR = """\
