@@ -73,6 +73,7 @@ def fx(tmp_path_factory) -> Path:
     _round3_files(root)
     _round3_late_files(root, model, motion)
     _security_files(root)
+    _sit_files(root, model, motion)
     return root
 
 
@@ -1194,6 +1195,195 @@ SECURITY += [
         r"--episodes: 65536 episodes x 2 steps need about [\d.]+ GiB \(their envs and motion\)"),
 ]
 ROWS += SECURITY
+SEAT = {"center": [0.4, 2.2], "seat_height": 0.45, "facing_deg": 90}
+SEATS = {  # seat files of the sit task (tasks/sit/README.md): name -> (content, what the line must say)
+    "truncated": ('[{"center": ', r"invalid JSON: Expecting value"),
+    "object": (json.dumps(SEAT), r"expected a list of 1 to 1000 seats like .*got dict"),
+    "empty": ("[]", r"expected a list of 1 to 1000 seats .*got list of 0"),
+    "no-height": (json.dumps([{"center": [0.4, 2.2], "facing_deg": 90}]), r"seat 0: missing field 'seat_height'"),
+    "typo": (json.dumps([{"centre": [0, 1], "seat_height": 0.4, "facing_deg": 0}]),
+             r"seat 0: unknown field 'centre' \(did you mean 'center'\?\)"),
+    "height-2": (json.dumps([{**SEAT, "seat_height": 2.0}]),
+                 r"seat 0: field 'seat_height' must be metres in \[0\.05, 1\.5\], got 2\.0"),
+    "height-0.01": (json.dumps([{**SEAT, "seat_height": 0.01}]), r"field 'seat_height' must be metres .*got 0\.01"),
+    "height-nan": (json.dumps([{**SEAT, "seat_height": float("nan")}]),
+                   r"field 'seat_height' must be metres .*got nan"),
+    "height-word": (json.dumps([{**SEAT, "seat_height": "low"}]), r"field 'seat_height' must be metres .*got 'low'"),
+    "height-bool": (json.dumps([{**SEAT, "seat_height": True}]), r"field 'seat_height' must be metres .*got True"),
+    "center-nan": (json.dumps([{**SEAT, "center": [float("nan"), 1]}]),
+                   r"field 'center' must be \[x, y\] within \+/-100 m, got \[nan, 1\]"),
+    "center-1e308": (json.dumps([{**SEAT, "center": [1e308, 1]}]), r"field 'center' must be \[x, y\] within"),
+    "facing-inf": (json.dumps([{**SEAT, "facing_deg": float("inf")}]),
+                   r"field 'facing_deg' must be degrees in \[-360, 360\], got inf"),
+    "seats-2000": (json.dumps([SEAT] * 2000), r"expected a list of 1 to 1000 seats .*got list of 2000"),
+    "oversized": (b" " * ((1 << 20) + 1), r"1,048,577 bytes is larger than the 1 MiB a seat file may have"),
+    "deep": ("[" * 200_000 + "]" * 200_000, r"JSON nested too deeply for a seat file"),
+    "path-file": (json.dumps([{"goal_location": [[0, 1, 0]], "goal_text": ["walk"]}]),
+                  r"seat 0: unknown field 'goal_location'"),
+}
+HOSTILE_SEATS = {"center-1e308", "seats-2000", "oversized", "deep"}
+PATH_SCENES = {  # a path file's per-path "scene" field: name -> (its value, what the line must say)
+    "unknown-name": ("nowhere_scene", r"field 'scene': scene: scene file not found: nowhere_scene"),
+    "traversal": ("../../etc/passwd", r"field 'scene': scene: scene file not found: \.\./\.\./etc/passwd"),
+    "traversal-deep": ("../" * 40 + "etc/passwd", r"field 'scene': .*etc/passwd: invalid JSON"),
+    "absolute": ("/etc/passwd", r"field 'scene': /etc/passwd: invalid JSON"),
+    "dev-zero": ("/dev/zero", r"field 'scene': scene: scene file not found: /dev/zero"),
+    "empty": ("", r"field 'scene': scene: scene file not found:  \("),
+    "bad-file": ("../scenes/bad.json", r"field 'scene': .*bad\.json: invalid JSON"),
+    "oversized-file": ("../scenes/oversized.json", r"field 'scene': .*1,048,577 bytes is larger than the 1 MiB"),
+    "inline-nan": ({"format": "latentrl.scene/1", "objects": [{"type": "box", "center": [1, 2],
+                                                                "size": [float("nan"), 1, 1]}]},
+                   r"field 'scene': .*objects\[0\]\.size\[0\]: expected a finite number, got nan"),
+    "inline-typo": ({"format": "latentrl.scene/1", "objectz": []},
+                    r"field 'scene': .*objectz: unknown field; expected format, objects"),
+    "inline-format": ({"format": "latentrl.scene/9", "objects": []},
+                      r"field 'scene': .*format: expected 'latentrl\.scene/1', got 'latentrl\.scene/9'"),
+    "inline-random": ({"random_obstacles": {"count": [1, 3]}},
+                      r"field 'scene' must be a fixed scene \(random_obstacles is an env setting\)"),
+    "inline-objects-65": ({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [1, 2], "size": [0.6, 0.4, 1.0]}] * 65},
+        r"field 'scene': .*65 objects, more than the 64 allowed"),
+    "number": (5, r"field 'scene' must be a scene file name or a latentrl\.scene/1 object, got int"),
+    "list": ([1, 2], r"field 'scene' must be a scene file name or a latentrl\.scene/1 object, got list"),
+}
+HOSTILE_PATH_SCENES = {"traversal", "traversal-deep", "absolute", "dev-zero", "oversized-file", "inline-objects-65"}
+
+
+def _sit_files(root: Path, model, motion: Path) -> None:
+    """Seat files, a sit policy, path files whose paths name a scene (the rows of the sit task and path scenes)."""
+    from latentrl.envs.sit import SitEnv
+    from latentrl.motion.checkpoint import file_sha256
+    from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
+    from latentrl.ppo.config import PolicyConfig
+    from latentrl.ppo.policy import ActorCritic
+
+    (root / "seats").mkdir()
+    for name, (data, _) in SEATS.items():
+        (root / "seats" / f"{name}.json").write_bytes(data if isinstance(data, bytes) else data.encode())
+    (root / "seats" / "ok.json").write_text(json.dumps([SEAT]))
+    (root / "pathscenes").mkdir()
+    for name, (scene, _) in PATH_SCENES.items():
+        (root / "pathscenes" / f"{name}.json").write_text(
+            json.dumps([{"goal_location": [[0, 1, 0]], "goal_text": ["walk"], "scene": scene}]))
+    env = SitEnv(1, motion=model)
+    torch.manual_seed(0)
+    policy = ActorCritic(env.single_observation_space.shape[0], env.single_action_space.shape[0],
+                         PolicyConfig(latent_dim=32), env.metadata["observation_layout"])
+    state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
+                            optimizer=torch.optim.Adam(policy.parameters()),
+                            config={"env": {"task": "sit", "texts": ["walk"]}},
+                            motion={"path": str(motion), "sha256": file_sha256(motion)})
+    save_checkpoint(state, root / "sit.pt")
+
+
+SIT_EVAL = ["eval", "{fx}/sit.pt", "--motion", "{fx}/motion.pt", "--episodes", "1", "--max-steps", "2", "--render",
+            "0"]
+SIT_TRAIN = [*TRAIN, "--set", "env.task=sit"]
+PLAY = ["play", "reach_walk_default"]  # every --scene row fails before the server starts (play_scene comes first)
+SITS = [
+    # ------------------------------------------------ seat files and the sit_seats suite (eval of a sit policy)
+    *[_r3("hostile file" if name in HOSTILE_SEATS else "bad file", f"eval-seats-{name}",
+          [*SIT_EVAL, "--paths", f"{{fx}}/seats/{name}.json"], rf"{re.escape(name)}\.json: .*{pattern}")
+      for name, (_, pattern) in SEATS.items()],
+    _r3("bad value", "eval-seats-suite-typo", [*SIT_EVAL, "--paths", "sit_seat"],
+        r"path file not found: sit_seat \(give a file, or one of the suites \['sit_seats'\]\)"),
+    _r3("bad file", "eval-seats-missing", [*SIT_EVAL, "--paths", "nowhere_seats.json"],
+        r"path file not found: nowhere_seats\.json"),
+    _r3("hostile file", "eval-seats-dev-zero", [*SIT_EVAL, "--paths", "/dev/zero"], r"path file not found: /dev/zero"),
+    _r3("bad file", "eval-seats-etc-passwd", [*SIT_EVAL, "--paths", "/etc/passwd"], r"/etc/passwd: invalid JSON"),
+    _r3("bad file", "eval-seats-motion-pt", [*SIT_EVAL, "--paths", "{fx}/motion.pt"],
+        r"motion\.pt: not a UTF-8 text file"),
+    _r3("bad file", "eval-reach-policy-seat-file", [*EVAL, "--paths", "{fx}/seats/ok.json"],
+        r"ok\.json: path 0: unknown field 'center'"),
+    _r3("bad value", "eval-sit-scene", [*SIT_EVAL, "--paths", "{fx}/seats/ok.json", "--scene", "maze_a"],
+        r"--scene: the sit task's evaluation runs without a scene .*leave out --scene"),
+    _r3("bad value", "eval-reach-joint-scene", [*RJ_EVAL, "--paths", "{fx}/goals/ok.json", "--scene", "maze_a"],
+        r"--scene: the reach_joint task's evaluation runs without a scene"),
+    # ------------------------------------------------ env.task: sit settings (train --set env.options.*)
+    *[_r3("bad value", f"train-sit-{value.split('=')[0]}-{name}", [*SIT_TRAIN, "--set", f"env.options.{value}"],
+          rf"tiny\.yaml: env\.options\.{value.split('=')[0]}: {pattern}")
+      for name, value, pattern in (
+          ("outside", "seat_height=[0.1,2]", r"must be \[min, max\] with 0\.05 <= min <= max <= 1\.5, got \[0\.1, 2\]"),
+          ("reversed", "seat_height=[0.6,0.2]", r"must be \[min, max\] .*got \[0\.6, 0\.2\]"),
+          ("nan", "seat_height=[.nan,0.6]", r"must be \[min, max\] .*got \[nan, 0\.6\]"),
+          ("scalar", "seat_height=0.4", r"must be \[min, max\] .*got 0\.4"),
+          ("inf", "seat_distance=[0,.inf]", r"must be \[min, max\] with 0 <= min <= max <= 100, got \[0, inf\]"),
+          ("zero", "seat_size=[0,0.5]", r"must be \[min, max\] with 0\.05 <= min"),
+          ("200", "seat_angle_deg=200", r"must be degrees in \[0, 180\], got 200"),
+          ("0", "hold_frames=0", r"must be an integer in \[1, 3000\], got 0"),
+          ("1e9", "hold_frames=1000000000", r"must be an integer in \[1, 3000\], got 1000000000"),
+          ("float", "hold_frames=1.5", r"must be an integer in \[1, 3000\], got 1\.5"),
+          ("nan", "stand_fraction=.nan", r"must be in \(0, 1\], got nan"),
+          ("negative", "sit_radius=-1", r"must be metres in \(0, 10\], got -1"),
+          ("inf", "approach_offset=.inf", r"must be metres in \(0, 10\], got inf"),
+          ("1e9", "leave_distance=1e9", r"must be metres in \(0, 10\], got 1000000000\.0"),
+          ("empty", "sit_text=''", r"must be a prompt"))],
+    _r3("bad value", "train-sit-unknown-option", [*SIT_TRAIN, "--set", "env.options.seat_heigth=[0.2,0.6]"],
+        r"env\.options: .*unexpected keyword argument 'seat_heigth' \(the arguments of task 'sit'\)"),
+    _r3("bad value", "train-sit-long-text", [*SIT_TRAIN, "--set", "env.options.walk_text={LONG}"],
+        r"has 1001 characters, more than the 1000 allowed"),
+    _r3("bad value", "train-sit-scene", [*SIT_TRAIN, "--set", "env.scene=maze_a"],
+        r"scene: the sit task places its own seat; leave env\.scene unset"),
+    _r3("bad value", "train-sit-compile", [*SIT_TRAIN, *COMPILE], r"compile: the sit task runs eagerly"),
+    _r3("bad value", "train-sit-height-grid-even", [*SIT_TRAIN, "--set", "env.height_grid=4"],
+        r"env\.height_grid: expected 0 \(none\) or an odd number of samples per side in \[3, 15\], got 4"),
+    # ------------------------------------------------ env.height_grid / env.height_grid_spacing
+    *[_r3("bad value", f"train-height-grid-{name}", [*TRAIN, "--set", f"env.{value}"],
+          rf"tiny\.yaml: env\.{value.split('=')[0]}: {pattern}")
+      for name, value, pattern in (
+          ("even", "height_grid=6", r"expected 0 \(none\) or an odd number .*in \[3, 15\], got 6"),
+          ("1", "height_grid=1", r"expected 0 \(none\) or an odd number .*got 1"),
+          ("17", "height_grid=17", r"expected 0 \(none\) or an odd number .*got 17"),
+          ("negative", "height_grid=-3", r"expected 0 \(none\) or an odd number .*got -3"),
+          ("1e6", "height_grid=1000001", r"expected 0 \(none\) or an odd number .*got 1000001"),
+          ("spacing-nan", "height_grid_spacing=.nan", r"expected metres in \(0, 2\], got nan"),
+          ("spacing-inf", "height_grid_spacing=.inf", r"expected metres in \(0, 2\], got inf"),
+          ("spacing-negative", "height_grid_spacing=-0.25", r"expected metres in \(0, 2\], got -0\.25"),
+          ("spacing-0", "height_grid_spacing=0", r"expected metres in \(0, 2\], got 0\.0"),
+          ("spacing-3", "height_grid_spacing=3", r"expected metres in \(0, 2\], got 3\.0"))],
+    _r3("bad value", "train-height-grid-bool", [*TRAIN, "--set", "env.height_grid=true"],
+        r"env\.height_grid: Value 'True' of type 'bool' could not be converted to Integer"),
+    _r3("bad value", "train-height-grid-no-scene", [*TRAIN, "--set", "env.height_grid=7"],
+        r"height_grid: needs a scene"),
+    # ------------------------------------------------ a path's own "scene" field (path files through eval)
+    *[_r3("hostile file" if name in HOSTILE_PATH_SCENES else "bad file", f"eval-path-scene-{name}",
+          [*EVAL, "--paths", f"{{fx}}/pathscenes/{name}.json"],
+          rf"{re.escape(name)}\.json: path 0: {pattern}") for name, (_, pattern) in PATH_SCENES.items()],
+    # ------------------------------------------------ play --scene: refused before the server starts
+    *[_r3("hostile file" if name in HOSTILE_SCENES else "bad file", f"play-scene-{name}",
+          [*PLAY, "--scene", f"{{fx}}/scenes/{name}.json"], rf"--scene: .*{re.escape(name)}\.json: .*{pattern}")
+      for name in ("bad", "list", "format", "size-nan", "objects-65", "oversized", "deep", "utf16")
+      for pattern in (SCENES[name][1],)],
+    _r3("bad file", "play-scene-unknown-name", [*PLAY, "--scene", "nowhere_scene"],
+        r"--scene: scene file not found: nowhere_scene \(looked in .*tasks/scenes\)"),
+    _r3("bad file", "play-scene-folder", [*PLAY, "--scene", "{fx}/scenes"], r"--scene: scene file not found: .*scenes"),
+    _r3("hostile file", "play-scene-dev-zero", [*PLAY, "--scene", "/dev/zero"],
+        r"--scene: scene file not found: /dev/zero"),
+    _r3("hostile file", "play-scene-link-to-dev-zero", [*PLAY, "--scene", "{fx}/zero-link.json"],
+        r"--scene: scene file not found: .*zero-link\.json"),
+    _r3("hostile file", "play-scene-etc-passwd", [*PLAY, "--scene", "/etc/passwd"],
+        r"--scene: /etc/passwd: invalid JSON"),
+    _r3("bad file", "play-scene-motion-pt", [*PLAY, "--scene", "{fx}/motion.pt"],
+        r"--scene: .*motion\.pt: not a UTF-8"),
+    _r3("bad value", "play-scene-random", [*PLAY, "--scene", "random_obstacles"],
+        r"--scene: play takes a scene file \(random obstacles are drawn per episode"),
+    _r3("bad value", "play-scene-empty", [*PLAY, "--scene", ""], r"--scene: scene file not found:  \("),
+    # ------------------------------------------------ eval.video_every / eval.video_size
+    *[_r3("bad value", f"train-{value.split('=')[0].replace('.', '-').replace('_', '-')}-{name}",
+          [*TRAIN, "--set", value], pattern)
+      for name, value, pattern in (
+          ("negative", "eval.video_every=-1", r"tiny\.yaml: eval\.video_every: must be >= 0 \(0: no video\), got -1"),
+          ("nan", "eval.video_every=.nan", r"eval\.video_every: Value 'nan' of type 'float' could not be converted"),
+          ("word", "eval.video_every=often", r"eval\.video_every: Value 'often' of type 'str' could not be"),
+          ("100", "eval.video_size=100", r"tiny\.yaml: eval\.video_size: must be a multiple of 16 from 64 to 640, "
+                                         r"got 100"),
+          ("negative", "eval.video_size=-16", r"eval\.video_size: must be a multiple of 16 from 64 to 640, got -16"),
+          ("0", "eval.video_size=0", r"eval\.video_size: must be a multiple of 16 .*got 0"),
+          ("1e6", "eval.video_size=1000000", r"eval\.video_size: must be a multiple of 16 .*got 1000000"),
+          ("nan", "eval.video_size=.nan", r"eval\.video_size: Value 'nan' of type 'float' could not be converted"))],
+]
+ROUND3 += SITS
+ROWS += SITS
 
 
 def _eval_memory_fits() -> bool:

@@ -213,6 +213,9 @@ def evaluate(req: EvalRequest) -> int:
         req.motion = motion_of(env)
     spec, files = eval_suites(req.policy, req.paths)
     evaluator = spec.evaluator
+    if req.scene is not None and evaluator.suite_kind != "paths":  # the others would ignore it and exit 0
+        raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (only reach and path "
+                          "policies are evaluated among objects); leave out --scene")
     stored = stored_eval_choices(policy_file(req.policy))
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
