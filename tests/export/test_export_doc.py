@@ -34,12 +34,18 @@ def _section_snippet(title: str) -> str:
     return re.search(rf"## {title}\n.*?```python\n(.*?)```", DOC.read_text(encoding="utf-8"), flags=re.S).group(1)
 
 
+def _export_and_run_section(policy: str, out: str, title: str) -> dict:
+    """Export ``policy`` to ``out`` as the page does, then run the page's ``title`` section as pasted; its names."""
+    assert main(["export", "onnx", policy, "--out", out, "--text", "walk"]) == 0
+    names: dict = {"__name__": "__export_doc__"}
+    exec(compile(_section_snippet(title), f"docs/export.md {title} block", "exec"), names)  # noqa: S102
+    return names
+
+
 def test_the_joystick_snippet_runs_as_pasted_and_follows_the_command(tmp_path, monkeypatch):
     """Straight on (+y) for 4 s, then a left turn: the pelvis goes +y first, then -x, as the page says."""
     monkeypatch.chdir(tmp_path)
-    assert main(["export", "onnx", "joystick_walk_default", "--out", "joystick.onnx", "--text", "walk"]) == 0
-    names: dict = {"__name__": "__export_doc__"}
-    exec(compile(_section_snippet("Joystick policies"), "docs/export.md joystick block", "exec"), names)  # noqa: S102
+    names = _export_and_run_section("joystick_walk_default", "joystick.onnx", "Joystick policies")
     pelvis = np.concatenate(names["frames"])[:, 0]
     assert pelvis.shape == (240, 3) and np.isfinite(pelvis).all()
     first, second = pelvis[119] - pelvis[0], pelvis[-1] - pelvis[119]
@@ -49,9 +55,7 @@ def test_the_joystick_snippet_runs_as_pasted_and_follows_the_command(tmp_path, m
 
 def test_the_timed_snippet_runs_as_pasted_and_reaches_the_waypoint(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    assert main(["export", "onnx", "timed_walk_default", "--out", "timed.onnx", "--text", "walk"]) == 0
-    names: dict = {"__name__": "__export_doc__"}
-    exec(compile(_section_snippet("Timed policies"), "docs/export.md timed block", "exec"), names)  # noqa: S102
+    names = _export_and_run_section("timed_walk_default", "timed.onnx", "Timed policies")
     pelvis = np.concatenate(names["frames"])[:, 0]
     assert pelvis.shape == (144, 3) and np.isfinite(pelvis).all()
     dist = np.linalg.norm(pelvis[:, :2] - names["goal"][0, :2], axis=1)
