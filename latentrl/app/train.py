@@ -157,8 +157,7 @@ def launch(req: TrainRequest) -> int:
         cfg.validate()
         if cfg.env.compile:
             check_compile(check_device(cfg.ppo.device, "ppo.device"), "env.compile")
-        if not str(cfg.ppo.device).startswith("cuda"):
-            check_training_memory(cfg, ranks=req.nproc)
+        check_training_memory(cfg, check_device(cfg.ppo.device, "ppo.device"), ranks=req.nproc)
         req = dataclasses.replace(req, run_dir=str(default_run_dir(req)))
         check_new_run(Path(req.run_dir))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node", str(req.nproc),
@@ -231,12 +230,16 @@ def train(req: TrainRequest) -> int:
     return 0
 
 
-def check_training_memory(cfg: TrainConfig, ranks: int = 1) -> None:
+def check_training_memory(cfg: TrainConfig, device, ranks: int = 1) -> None:
     """Refuse in one line a CPU run whose memory estimate exceeds what this machine has available.
 
     The estimate is :func:`latentrl.memory.training_bytes` per rank; the line names the setting that costs most.
+    Runs on other devices are not checked: GPU memory is not estimated.
     """
     from latentrl import memory
+
+    if torch.device(device).type != "cpu":
+        return
 
     p = cfg.policy
     params = memory.policy_parameters(p.architecture, p.latent_dim, p.n_blocks, p.mlp_hidden)
@@ -284,8 +287,7 @@ def run_training(cfg: TrainConfig, run_dir: Path, trainer: str = "native", resum
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     cfg.ppo.plan(cfg.env.num_envs)  # batch sizes must fit before anything heavy happens
-    if torch.device(device).type == "cpu":  # GPU memory is not estimated
-        check_training_memory(cfg)
+    check_training_memory(cfg, device)
     run_dir = Path(run_dir)
     check_writable(run_dir, "run directory")
     motion = load_motion(cfg.env, device)
