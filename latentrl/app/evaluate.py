@@ -283,12 +283,14 @@ def _evaluate_physics(req: EvalRequest, spec: Any, files: list[Path], settings: 
         raise ConfigError(f"--physics: runs reach or path policies, this policy's task is '{spec.name}'")
     if req.scene is not None or settings.scene is not None:
         raise ConfigError("--physics: the humanoid walks on the flat floor; evaluate without a scene")
-    for file in files:  # a suite whose paths name their scene (maze, stairs) is not flat either
-        if any(p.scene is not None for p in spec.evaluator.load_suite(file)):
+    from latentrl.evaluation.runner import load_suites, path_seed
+
+    suites = load_suites(files)
+    for file, suite in suites:  # a suite whose paths name their scene (maze, stairs) is not flat either
+        if any(p.scene is not None for p in suite):
             raise ConfigError(f"--physics: {file.stem}'s paths run in a scene; the humanoid walks on the flat floor")
     require_mujoco()
     from latentrl.evaluation.physics_episodes import run_episode, summarize
-    from latentrl.evaluation.runner import load_suites, path_seed
     from latentrl.motion.canonical import features_to_world
     from latentrl.physics.humanoid import build_humanoid
     from latentrl.physics.reference import fit_height
@@ -307,7 +309,7 @@ def _evaluate_physics(req: EvalRequest, spec: Any, files: list[Path], settings: 
     began = time.perf_counter()
     paths = []
     with locked_output(out_dir) as output:
-        for file, suite in load_suites(files):
+        for file, suite in suites:
             for index, path in enumerate(suite):
                 seeds = [path_seed(settings.seed, file.stem, index) + e for e in range(settings.episodes)]
                 kin = [run_episode(act, model, path, settings, s, observe_next) for s in seeds]
