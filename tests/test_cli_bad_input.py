@@ -1388,7 +1388,8 @@ ROWS += SITS
 
 def _eval_memory_fits() -> bool:
     """Whether 65,536 two-step episodes fit in half this machine's RAM (then their row cannot be refused here)."""
-    from latentrl.evaluation.config import EvalSettings, physical_memory
+    from latentrl.evaluation.config import EvalSettings
+    from latentrl.memory import physical_memory
 
     total = physical_memory()
     return total is None or EvalSettings(episodes=65536, max_steps=2).memory_bytes() <= total // 2

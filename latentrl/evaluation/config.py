@@ -15,6 +15,7 @@ from typing import Any
 from latentrl.config import require, require_seed
 from latentrl.constants import SUCCESS_RADIUS_M
 from latentrl.envs.settings import StepSettings
+from latentrl.memory import physical_memory
 from latentrl.motion.rollout import lock_min_weight_problem
 from latentrl.motion.skeleton import FPS
 
@@ -64,16 +65,6 @@ MAX_EPISODES = 1 << 16
 """Episodes per path, at most (they run in parallel, one env each)."""
 MAX_EVAL_STEPS = 100_000
 """Step budget per episode, at most."""
-
-
-def physical_memory() -> int | None:
-    """Bytes of RAM of this machine, or None where the OS does not say."""
-    import os
-
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 @dataclass
