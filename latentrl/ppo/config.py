@@ -147,6 +147,10 @@ class PPOConfig:
     """How many ``iter_N.pt`` files to keep, newest first (0 keeps all)."""
     eval_every: int = 0
     """Iterations between calls of the evaluation hook (0: never)."""
+    init_from: str | None = None
+    """Warm start: a trained policy (shipped name such as ``reach_walk_default``, or a checkpoint path) whose
+    weights a fresh run starts from; observation fields it lacks start silent (:mod:`latentrl.ppo.warm_start`).
+    A resumed run continues its own weights. DART: none."""
 
     def validate(self) -> None:
         """Check every field once; a bad one raises a one-line ``ConfigError`` naming it."""

@@ -70,7 +70,8 @@ class ActionEvaluation(NamedTuple):
 
 
 # --------------------------------------------------------------------------- layout
-def _group_of(name: str) -> str:
+def group_of(name: str) -> str:
+    """The encoder group of an observation field: the first of :data:`KNOWN_GROUPS` among its words, else itself."""
     tokens = re.split(r"[/_.\-]", name)
     for group in KNOWN_GROUPS:
         if group in tokens:
@@ -95,7 +96,7 @@ def group_layout(layout: Mapping[str, Any] | None, obs_dim: int) -> dict[str, li
         if not 0 <= start < stop <= obs_dim:
             raise ConfigError(f"observation_layout['{name}'] = [{start}, {stop}) does not lie in [0, {obs_dim})")
         covered[start:stop] += 1
-        groups.setdefault(_group_of(name), []).append((start, stop))
+        groups.setdefault(group_of(name), []).append((start, stop))
     if not bool((covered == 1).all()):
         bad = int(torch.nonzero(covered != 1)[0])
         what = "not covered" if covered[bad] == 0 else "covered twice"

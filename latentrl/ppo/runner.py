@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from latentrl import interrupts
-from latentrl.errors import NonFiniteError
+from latentrl.errors import ConfigError, NonFiniteError
 from latentrl.monitor import EvalReport, Monitor, RolloutStats
 from latentrl.ppo import checkpoint as ckpt
 from latentrl.ppo import distributed
@@ -38,6 +38,8 @@ from latentrl.ppo.config import BatchPlan, PolicyConfig, PPOConfig
 from latentrl.ppo.policy import ActorCritic
 from latentrl.ppo.progress import RunProgress
 from latentrl.ppo.storage import RolloutBuffer
+from latentrl.ppo.warm_start import warm_start
+from latentrl.resources import policy_file
 
 Evaluator = Callable[[ActorCritic], EvalReport]
 """Evaluation hook: gets the policy (eval mode), returns metrics and figures; must not train it."""
@@ -230,7 +232,19 @@ class Runner:
         self.policy: ActorCritic
         self.optimizer: torch.optim.Optimizer
         self.build(policy_cfg, layout)
+        self.warm_started: list[str] | None = None
+        """The observation fields that started fresh when ``ppo.init_from`` warm-started this run, else None."""
+        if ppo.init_from:
+            self.warm_started = self.warm_start(ppo.init_from)
         self.dist.broadcast_module(self.policy)
+
+    def warm_start(self, spec: str) -> list[str]:
+        """Load ``ppo.init_from``'s weights into the fresh policy; a missing file is a one-line config error."""
+        path = policy_file(spec)
+        if not Path(path).is_file():
+            raise ConfigError(f"ppo.init_from: no policy '{spec}' (expected a shipped policy name such as "
+                              "reach_walk_default or a checkpoint .pt)")
+        return warm_start(self.policy, path, self.motion)
 
     # ------------------------------------------------------------------ backend
     def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:
