@@ -26,6 +26,7 @@ name                  weight   term
 ``timing``            1.0      on reaching a waypoint, 1 - |arrival error| / tolerance, in [0, 1] (TimedPath)
 ``collision``         0        -(joints' depth inside their skin radius of an object), metres (scenes)
 ``terrain_contact``   0        -(lower foot's distance to the terrain beyond 3 cm), x0.1 hop/run (scenes)
+``clearance``         0        -(nearest joint's depth inside 0.25 m beyond its skin of an object), metres (scenes)
 ``joint_dist``        1.0      the goal joint's progress toward its target, metres per step (ReachJoint)
 ``joint_arrival``     5.0      at the goal time, exp(-joint error / 0.1 m), in [0, 1] (ReachJoint)
 ``pelvis_height``     1.0      -|pelvis z - the task's pelvis height target|, metres, mean over the new frames (Sit)
@@ -65,7 +66,7 @@ DART_TERMS: tuple[str, ...] = ("dist", "success", "foot_floor", "skate", "orient
 COMMON_TERMS: tuple[str, ...] = ("prior", "skill")
 
 #: Terms an env computes when it has a scene (docs/scenes.md; weight 0 unless a config sets one).
-SCENE_TERMS: tuple[str, ...] = ("collision", "terrain_contact")
+SCENE_TERMS: tuple[str, ...] = ("collision", "terrain_contact", "clearance")
 
 @dataclass
 class RewardInputs:
@@ -316,6 +317,12 @@ def _terrain_contact(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.terrain_contact` over the new frames, scaled per text."""
     return terms.terrain_contact(x.joints_world[:, x.history_length :], x.scene, cfg.contact_threshold,
                                  x.floor_scale)
+
+
+@reward_term("clearance", 0.0, inputs=('scene',))
+def _clearance(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
+    """:func:`terms.clearance` over the new frames."""
+    return terms.clearance(x.joints_world[:, x.history_length :], x.scene)
 
 
 TERM_NAMES: tuple[str, ...] = tuple(REWARD_TERMS)

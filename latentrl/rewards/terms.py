@@ -30,11 +30,12 @@ from latentrl.motion.contacts import contact_shares, weighted_foot_slide
 from latentrl.motion.contacts import foot_positions as _foot_positions
 from latentrl.motion.skeleton import LEFT_HIP, RIGHT_HIP
 from latentrl.rewards import skills as S
-from latentrl.scenes.contact import collision_cost, contact_cost
+from latentrl.scenes.contact import CLEARANCE_M, clearance_cost, collision_cost, contact_cost
 from latentrl.scenes.scene import SceneBatch
 
 __all__ = [
     "arrival_timing",
+    "clearance",
     "collision",
     "foot_floor",
     "foot_joints",
@@ -384,6 +385,17 @@ def collision(joints: torch.Tensor, scene: SceneBatch) -> torch.Tensor:
         (N,) <= 0; 0 while every joint keeps its skin radius from every object.
     """
     return -collision_cost(joints, scene)
+
+
+def clearance(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEARANCE_M) -> torch.Tensor:
+    """``clearance``: minus :func:`latentrl.scenes.contact.clearance_cost`, a warning before ``collision``.
+
+    ``r = -mean_t min(margin, max(0, margin - min_j (sdf(p_{t,j}) - skin_j)))``  (metres)
+
+    Returns:
+        (N,) in [-margin, 0]; 0 while every joint keeps ``margin`` beyond its skin radius from every object.
+    """
+    return -clearance_cost(joints, scene, margin)
 
 
 def terrain_contact(joints: torch.Tensor, scene: SceneBatch, threshold: float = CONTACT_HEIGHT_M,

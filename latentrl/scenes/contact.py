@@ -62,6 +62,23 @@ def collision_cost(joints: torch.Tensor, scene: SceneBatch, skin: torch.Tensor |
     return penetration(joints, scene, skin).sum(dim=-1).mean(dim=-1)
 
 
+CLEARANCE_M = 0.25
+"""Default margin of :func:`clearance_cost`: how far beyond its skin radius a joint should keep from objects."""
+
+
+def clearance_cost(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEARANCE_M,
+                   skin: torch.Tensor | None = None) -> torch.Tensor:
+    """(N,) how far the body's nearest joint comes inside ``margin`` beyond its skin, averaged over frames (>= 0).
+
+    Why: :func:`collision_cost` is 0 until a joint touches, so it says nothing about an object ahead; this cost
+    grows as the body closes in (0 at ``margin`` from the skin, ``margin`` at contact), a gradient that lets a
+    policy learn to keep away before it collides. Meant for obstacles: on stairs and seats the feet touch on purpose.
+    """
+    skin = skin_radii(joints) if skin is None else skin
+    nearest = (scene.sdf(joints) - skin).amin(dim=-1)  # (N, T)
+    return (margin - nearest).clamp(min=0.0, max=margin).mean(dim=-1)
+
+
 def foot_terrain_gap(joints: torch.Tensor, scene: SceneBatch) -> torch.Tensor:
     """(N, T) the lower foot's height above the terrain under it, metres (negative: sunk into it)."""
     feet = foot_positions(joints)  # (N, T, 2, 3)

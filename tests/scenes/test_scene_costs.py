@@ -11,7 +11,14 @@ from latentrl.optim.losses import constraint_loss, scene_costs, scene_loss
 from latentrl.optim.problems import parse_suite, stack_targets
 from latentrl.rewards import SCENE_TERMS, RewardComposer, RewardInputs
 from latentrl.scenes import Box, Scene, SceneBatch, Stairs, scene_to_dict
-from latentrl.scenes.contact import SKIN_RADIUS_M, collision_cost, contact_cost, foot_terrain_gap, penetration
+from latentrl.scenes.contact import (
+    SKIN_RADIUS_M,
+    clearance_cost,
+    collision_cost,
+    contact_cost,
+    foot_terrain_gap,
+    penetration,
+)
 
 WALL = Box((0.0, 2.0), (4.0, 0.2, 2.0))  # y in [1.9, 2.1], z in [0, 2]
 LEFT, RIGHT = FOOT_JOINTS
@@ -70,6 +77,18 @@ def inputs(joints: torch.Tensor, scene=None) -> RewardInputs:
                         torch.ones(n), scene=scene)
 
 
+def test_clearance_grows_from_the_margin_to_contact_and_caps_there():
+    scene = SceneBatch.from_scenes([Scene((WALL,))])
+    skin = max(SKIN_RADIUS_M.values())  # every joint at one point: the widest skin is nearest
+    at = [0.0, 1.9 - skin - 0.30, 1.9 - skin - 0.10, 1.9 - skin, 2.0]  # far, beyond the margin, 10 cm in, touch, in
+    costs = [float(clearance_cost(pose(y=y), scene)[0]) for y in at]
+    assert costs[0] == 0.0 and costs[1] == 0.0
+    assert costs[2] == pytest.approx(0.25 - 0.10, abs=1e-5) and costs[3] == pytest.approx(0.25, abs=1e-5)
+    assert costs[4] == pytest.approx(0.25, abs=1e-6)  # capped: collision_cost takes over inside the skin
+    two = torch.cat((pose(y=0.0), pose(y=at[2])), dim=1)  # one clear frame, one near: the mean over frames
+    assert float(clearance_cost(two, scene)[0]) == pytest.approx((0.25 - 0.10) / 2, abs=1e-5)
+
+
 def test_reward_terms_are_the_kernels_negated():
     scene = SceneBatch.from_scenes([Scene((WALL, Stairs((3.0, 0.0), 90.0, 1.0, 0.15, 0.3, 3)))])
     joints = torch.cat((pose(y=1.85, feet_z=(0.2, 0.3)), pose(y=0.0)), dim=0)
@@ -77,6 +96,7 @@ def test_reward_terms_are_the_kernels_negated():
     total, values = comp(inputs(joints, scene))
     assert torch.allclose(values["collision"], -collision_cost(joints, scene))
     assert torch.allclose(values["terrain_contact"], -contact_cost(joints, scene))
+    assert torch.allclose(values["clearance"], -clearance_cost(joints, scene))
     assert values["collision"][0] < 0 and values["collision"][1] == 0
     assert float(values["terrain_contact"][0]) == pytest.approx(-(0.2 - 0.03), abs=1e-6)
     assert torch.allclose(total, 2.0 * values["collision"] + 3.0 * values["terrain_contact"])
@@ -84,7 +104,7 @@ def test_reward_terms_are_the_kernels_negated():
 
 def test_scene_terms_weigh_nothing_by_default_and_need_a_scene():
     comp = RewardComposer(terms=SCENE_TERMS)
-    assert comp.weights == {"collision": 0.0, "terrain_contact": 0.0}
+    assert comp.weights == {"collision": 0.0, "terrain_contact": 0.0, "clearance": 0.0}
     with pytest.raises(ValueError, match="reward term 'collision' needs RewardInputs.scene"):
         comp(inputs(pose()))
 
