@@ -3,11 +3,12 @@
 Why: a new task is often an old one plus something (reach among obstacles = reach + rays). Starting from the
 shipped reach policy spends the training on the new part instead of relearning to walk to a goal.
 
-The new network may observe more than the old one: observation groups it has and the old one lacked (e.g.
-``scene_rays``) get fresh encoders whose columns in the shared embedding start at **zero**, so the warm-started
-policy acts exactly as the old one until training moves them. Every other tensor must have the old shape; the
-observation normalizer is copied field by field. Groups must keep their names and sizes, and the architecture
-must match; anything else is refused in one line naming the file and the tensor.
+The new network may observe more than the old one. A new field that joins an old encoder group (``scene_rays``
+joins ``scene``) gets zero input columns; a new group gets a fresh encoder whose columns in the shared embedding
+are zero. Either way the warm-started policy acts exactly as the old one until training moves them. Every other
+tensor must have the old shape. The observation normalizer is copied field by field (with new fields its count
+restarts at :data:`WARM_COUNT` at most). Architecture, widths and field sizes must match; anything else is
+refused in one line naming the file and the setting or tensor.
 """
 
 from __future__ import annotations
@@ -21,6 +22,10 @@ import torch
 from latentrl.errors import CheckpointError
 from latentrl.ppo.checkpoint import check_motion, read_checkpoint
 from latentrl.ppo.policy import ActorCritic, group_of
+
+WARM_COUNT = 10_000
+"""With new observation fields, the normalizer's count restarts at most here (transitions), so the new fields'
+statistics settle within a few iterations instead of being outweighed by the source's whole training."""
 
 EMBEDDING = "trunk.embedding_encoder.layers.0.weight"
 """The shared embedding's first weight: its input columns are the group codes, ``latent_dim`` each."""
@@ -107,6 +112,8 @@ def warm_start(policy: ActorCritic, path: str | Path, motion: Mapping[str, Any] 
             elif key.startswith("obs_normalizer.") and target.dim() == 1:
                 for name, (a, b) in old.items():
                     target[new[name][0]:new[name][0] + b - a] = src[key][a:b]
+            elif key == "obs_normalizer.count" and len(new) > len(old):
+                target.copy_(src[key].clamp(max=WARM_COUNT))
             elif key == EMBEDDING and cfg.architecture == "dart":
                 target.zero_()
                 width, order = cfg.latent_dim, list(groups_new)

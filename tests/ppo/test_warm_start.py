@@ -42,6 +42,10 @@ def test_warm_start_onto_a_scene_env_acts_as_the_source_then_learns_the_rays(tin
     first = ("actor.body.layers.0.weight" if policy.get("architecture") == "mlp"
              else "trunk.scene_encoder.layers.0.weight")
     assert float(trainer.policy.state_dict()[first][:, rays].abs().max()) == 0.0
+    if policy.get("obs_norm"):
+        norm = trainer.policy.obs_normalizer
+        assert torch.equal(norm.mean[size:], torch.zeros(16)) and torch.equal(norm.var[size:], torch.ones(16))
+        assert torch.equal(norm.mean[:size], source.obs_normalizer.mean) and 0 < float(norm.count) <= 10_000
     train(ReachLocationEnv(4, motion=tiny_model, scene=WALL), tmp_path / "run",
           tiny_ppo(total_steps=32, init_from=str(path)), tiny_policy(**policy), progress=False)
     learned = load_policy(tmp_path / "run" / "final.pt").policy.state_dict()
