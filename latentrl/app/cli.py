@@ -73,6 +73,7 @@ EXAMPLES = {
     "physics": "latentrl physics track walk.npz --out tracked-walk",
     "physics track": "latentrl physics track walk.npz --out tracked-walk --assist-hz 2",
     "physics loop": "latentrl physics loop --text walk --seconds 10 --out loop-walk",
+    "physics train-tracker": "latentrl physics train-tracker physics/tracker --run-dir runs/tracker",
 }
 """One example line per command, shown at the end of its ``--help`` (keyed by the words after ``latentrl``)."""
 
@@ -583,7 +584,17 @@ def _physics_commands(sub) -> None:
     tr.add_argument("--out", required=True, help="output folder for motion.npz and report.json")
     tr.add_argument("--height", type=float, help="humanoid height in m (default: fitted to the motion's bones)")
     tr.add_argument("--assist-hz", type=float, default=2.0, help="root assist frequency, 0 = off (default: 2)")
+    tr.add_argument("--tracker", metavar="CHECKPOINT",
+                    help="a physics train-tracker checkpoint: track with the learned tracker (its assist is "
+                         "--assist-hz over the checkpoint's assist_hz, at most full strength)")
     tr.set_defaults(func=_physics_track)
+    tt = psub.add_parser("train-tracker", help="train the learned tracker with PPO on MuJoCo (docs/physics.md)")
+    tt.add_argument("config", nargs="?", metavar="CONFIG", help="tracker config: a YAML path or a packaged name "
+                                                                "(physics/tracker)")
+    tt.add_argument("--run-dir", help="run directory (default: runs/tracker-<time>)")
+    tt.add_argument("--resume", metavar="RUN_DIR", help="continue the run in RUN_DIR from its newest checkpoint")
+    tt.add_argument("--total-steps", type=int, help="override ppo.total_steps (also extends a resumed run)")
+    tt.set_defaults(func=_physics_train_tracker)
     lp = psub.add_parser("loop", help="closed loop: the motion model plans each primitive from the last two simulated "
                                       "frames; beside the open loop of the same noise (docs/physics.md)")
     lp.add_argument("--out", required=True, help="output folder for closed.npz, open_kinematic.npz and report.json")
@@ -600,6 +611,12 @@ def _physics_loop(args: argparse.Namespace) -> int:
     from latentrl.app.physics import LoopRequest, loop_command
 
     return loop_command(request(LoopRequest, args))
+
+
+def _physics_train_tracker(args: argparse.Namespace) -> int:
+    from latentrl.app.physics_tracker import TrainTrackerRequest, train_tracker_command
+
+    return train_tracker_command(request(TrainTrackerRequest, args))
 
 
 def _physics_track(args: argparse.Namespace) -> int:

@@ -81,6 +81,9 @@ def _configs() -> list[str]:
         if name.startswith("motion/"):
             rows.append((name, "latentrl motion train", "-", "-"))
             continue
+        if name.startswith("physics/"):
+            rows.append((name, "latentrl physics train-tracker", "-", "-"))
+            continue
         env = _yaml_env(file)
         texts = ", ".join(map(str, env.get("texts", ["walk"])))
         rows.append((name, "latentrl train", str(env.get("task", "reach")), texts))

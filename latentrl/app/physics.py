@@ -48,6 +48,8 @@ class TrackRequest:
     out: str
     height: float | None = None
     assist_hz: float = 2.0
+    tracker: str | None = None
+    """A ``physics train-tracker`` checkpoint: track with the learned tracker instead of the untrained PD."""
 
 
 def _check(req: TrackRequest) -> None:
@@ -163,6 +165,10 @@ def track_command(req: TrackRequest) -> int:
     require_mujoco()
     out = Path(req.out)
     check_writable(out, "--out")
+    if req.tracker and req.height is None:  # the body the tracker learned on
+        from latentrl.app.physics_tracker import load_tracker
+
+        req.height = load_tracker(req.tracker)[1].tracking.height
     height = req.height if req.height is not None else fit_height(clip.joints)
     if not 1.0 <= height <= 2.5:
         raise DataError(f"{req.motion}: its bone lengths give a body height of {height:.2f} m, outside the "
@@ -171,13 +177,21 @@ def track_command(req: TrackRequest) -> int:
         humanoid = build_humanoid(height)
         ref = build_reference(clip.joints, clip.features, clip.fps, humanoid)
         start = time.perf_counter()
-        result = track(humanoid, ref, req.assist_hz or None)
+        extra = {}
+        if req.tracker:
+            from latentrl.app.physics_tracker import track_with_tracker
+
+            result, extra = track_with_tracker(clip, req, humanoid, ref)
+        else:
+            result = track(humanoid, ref, req.assist_hz or None)
         if not np.isfinite(result.joints).all():
             raise DataError(f"{req.motion}: the simulation diverged (non-finite state)")
         report = track_report(clip, result, kinematic_joints(humanoid.rest_joints, ref), humanoid, req.assist_hz,
                               req.motion)
         report["rotations"] = "joints only" if clip.features is None else "features, swung onto the joints"
-        report["command"] = f"latentrl physics track {req.motion} --out {req.out}"
+        report.update(extra)
+        report["command"] = f"latentrl physics track {req.motion} --out {req.out}" + (
+            f" --tracker {req.tracker}" if req.tracker else "")
         report["date"] = time.strftime("%Y-%m-%d", time.gmtime())
         report["wall_seconds"] = round(time.perf_counter() - start, 3)
         pelvis_delta = humanoid.rest_joints[0] if clip.features is None else (

@@ -3,6 +3,8 @@
 - :mod:`~latentrl.physics.humanoid`: the MJCF humanoid generated from latentrl's SMPL-22 rest skeleton;
 - :mod:`~latentrl.physics.reference`: a motion's PD targets (joint rotations as hinge angles);
 - :mod:`~latentrl.physics.tracker`: the untrained PD tracker with its reported root assist;
+- :mod:`~latentrl.physics.tracking_env`, :mod:`~latentrl.physics.learned`: the learned tracker's env, config and
+  evaluation (PPO on the project's runner);
 - :mod:`~latentrl.physics.loop`: the closed loop, simulated frames fed back as the motion model's history.
 
 Nothing here is imported by the kinematic path; MuJoCo itself is imported only by :func:`require_mujoco`.
