@@ -23,8 +23,10 @@ import json
 import os
 import pickle
 import re
+import signal
 import stat
 import tempfile
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -68,6 +70,23 @@ def save_torch_atomic(obj: Any, path: str | Path) -> Path:
 
 
 @contextlib.contextmanager
+def _signals_held():
+    """Hold Ctrl-C and SIGTERM back (delivered when the block ends) in the main thread, where Python runs handlers.
+
+    Why: a KeyboardInterrupt raised between ``mkstemp`` creating the temporary file and the ``try`` that removes
+    it on failure would leave the file behind; the window is tiny, but an interrupted evaluation hit it.
+    """
+    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+@contextlib.contextmanager
 def _replacing(path: Path, suffix: str):
     """``(fd, name)`` of a fresh sibling of ``path`` that replaces it when the block ends; removed on failure.
 
@@ -75,17 +94,24 @@ def _replacing(path: Path, suffix: str):
     existing file or a link someone placed in advance. The rename replaces a link at ``path``, never follows it.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    tmp, handed_over = None, False
     try:
+        with _signals_held():  # no interrupt between the file's creation and ``tmp`` naming it for the cleanup
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
         if hasattr(os, "fchmod"):  # mkstemp makes 0600; give the file normal permissions
             os.fchmod(fd, 0o666 & ~_umask())
         else:
             os.chmod(tmp, 0o666 & ~_umask())
+        handed_over = True
         yield fd, Path(tmp)
         os.replace(tmp, path)
     except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                if not handed_over:
+                    os.close(fd)
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
         raise
 
 

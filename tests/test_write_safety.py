@@ -229,3 +229,21 @@ def test_a_second_optimize_into_the_same_out_folder_is_refused(eval_files, tmp_p
     refused_while_held(out, argv, capsys)
     assert main(argv) == 0
     assert (out / "report.json").read_text().startswith("{")
+
+
+def test_an_interrupt_during_the_temporary_files_creation_waits_until_cleanup_can_see_it():
+    """SIGTERM arriving while ``mkstemp`` creates the file is held back, then raised where the file is removed."""
+    import os
+    import signal
+
+    from latentrl import safe_io
+
+    seen = []
+    previous = signal.signal(signal.SIGTERM, lambda *_: seen.append("term"))
+    try:
+        with safe_io._signals_held():
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert seen == []  # held back inside
+        assert seen == ["term"]  # delivered once the block ends
+    finally:
+        signal.signal(signal.SIGTERM, previous)
