@@ -115,8 +115,8 @@ def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *
     runner = make_trainer(env, run_dir, ppo, policy, trainer=trainer, config=config, motion=motion,
                           evaluate=evaluate, layout=layout, progress=progress)
     if not distributed.current().is_main:  # under torchrun rank 0 sets up (and locks) the run directory
-        if resume:
-            runner.resume(allow_motion_mismatch=allow_motion_mismatch)
+        if not resume or runner.resume(allow_motion_mismatch=allow_motion_mismatch) is None:
+            runner.warm_start()
         return runner.train()
     lock = RunLock(run_dir)
     with NewOutput(run_dir) as output:  # nothing is written before this point
@@ -126,8 +126,8 @@ def train(env: Any, run_dir: str | Path, ppo: PPOConfig, policy: PolicyConfig, *
             output.keep()  # the folder belongs to the process holding the lock
             raise
         try:
-            if resume:
-                runner.resume(allow_motion_mismatch=allow_motion_mismatch)
+            if not resume or runner.resume(allow_motion_mismatch=allow_motion_mismatch) is None:
+                runner.warm_start()  # ppo.init_from, for a run that starts at step 0
             check_free_space(run_dir, disk_estimate(runner), "run directory")
             if resume:
                 ckpt.remove_temporaries(run_dir)

@@ -234,17 +234,23 @@ class Runner:
         self.build(policy_cfg, layout)
         self.warm_started: list[str] | None = None
         """The observation fields that started fresh when ``ppo.init_from`` warm-started this run, else None."""
-        if ppo.init_from:
-            self.warm_started = self.warm_start(ppo.init_from)
         self.dist.broadcast_module(self.policy)
 
-    def warm_start(self, spec: str) -> list[str]:
-        """Load ``ppo.init_from``'s weights into the fresh policy; a missing file is a one-line config error."""
+    def warm_start(self) -> None:
+        """Load ``ppo.init_from``'s weights into the fresh policy (nothing without it); every rank reads the file.
+
+        Called for a run that starts at step 0, never for a resumed one: a resume continues its own weights, so
+        the source may since have moved or the run have been resumed onto another motion model. A missing file
+        is a one-line config error.
+        """
+        spec = self.cfg.init_from
+        if not spec:
+            return
         path = policy_file(spec)
         if not Path(path).is_file():
             raise ConfigError(f"ppo.init_from: no policy '{spec}' (expected a shipped policy name such as "
                               "reach_walk_default or a checkpoint .pt)")
-        return warm_start(self.policy, path, self.motion)
+        self.warm_started = warm_start(self.policy, path, self.motion)
 
     # ------------------------------------------------------------------ backend
     def build(self, policy_cfg: PolicyConfig, layout: Mapping[str, Any] | None) -> None:

@@ -28,6 +28,7 @@ def test_warm_start_onto_a_scene_env_acts_as_the_source_then_learns_the_rays(tin
     flat, scened = ReachLocationEnv(4, motion=tiny_model), ReachLocationEnv(4, motion=tiny_model, scene=WALL)
     trainer = NativeTrainer(scened, tmp_path / "scene", tiny_ppo(total_steps=32, init_from=str(path)),
                             tiny_policy(**policy), progress=False)
+    trainer.warm_start()  # what ppo.run.train does for a run that starts at step 0
     assert trainer.warm_started == ["scene_rays"]
     flat_obs, _ = flat.reset(seed=2)
     scene_obs, _ = scened.reset(seed=2)
@@ -56,7 +57,21 @@ def test_warm_start_refuses_another_width_and_a_missing_file(tiny_model, tmp_pat
     _, path = trained_flat(tiny_model, tmp_path)
     with pytest.raises(CheckpointError, match=r"init_from policy has policy.latent_dim = 32; this config has 64"):
         NativeTrainer(ReachLocationEnv(4, motion=tiny_model), tmp_path / "b", tiny_ppo(init_from=str(path)),
-                      tiny_policy(latent_dim=64), progress=False)
+                      tiny_policy(latent_dim=64), progress=False).warm_start()
     with pytest.raises(ConfigError, match=r"ppo.init_from: no policy 'nope_default'"):
-        NativeTrainer(ReachLocationEnv(4, motion=tiny_model), tmp_path / "c", tiny_ppo(init_from="nope_default"),
-                      tiny_policy(), progress=False)
+        train(ReachLocationEnv(4, motion=tiny_model), tmp_path / "c", tiny_ppo(init_from="nope_default"),
+              tiny_policy(), progress=False)
+    assert not (tmp_path / "c").exists()  # refused before anything was written
+
+
+def test_a_resumed_run_continues_its_own_weights_without_reading_the_source(tiny_model, tmp_path):
+    _, path = trained_flat(tiny_model, tmp_path)
+    source = tmp_path / "source.pt"
+    path.rename(source)
+    run = tmp_path / "run"
+    train(ReachLocationEnv(4, motion=tiny_model, scene=WALL), run, tiny_ppo(total_steps=32, init_from=str(source)),
+          tiny_policy(), progress=False)
+    source.unlink()  # the source is gone: a resume must not need it
+    result = train(ReachLocationEnv(4, motion=tiny_model, scene=WALL), run,
+                   tiny_ppo(total_steps=64, init_from=str(source)), tiny_policy(), resume=True, progress=False)
+    assert result.env_steps == 64
