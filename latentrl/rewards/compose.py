@@ -102,6 +102,17 @@ class RewardInputs:
     pelvis_target: torch.Tensor | None = None
     """Sit: (N,) the world z the pelvis should be at during the step (seated or standing), NaN where there is none."""
 
+    _sdf: torch.Tensor | None = field(default=None, init=False, repr=False)
+
+    def new_frames_sdf(self) -> torch.Tensor:
+        """(N, F, 22) each new frame's joints' distance to the scene, computed once per step for the scene terms.
+
+        (A plain cached field, not ``functools.cached_property``, whose lock the compiled env step cannot trace.)
+        """
+        if self._sdf is None:
+            self._sdf = self.need("scene", "collision or clearance").sdf(self.joints_world[:, self.history_length :])
+        return self._sdf
+
     def step_seconds(self) -> float:
         """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
         return (self.joints_world.shape[1] - self.history_length) / FPS
@@ -309,7 +320,7 @@ def _pelvis_height(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 @reward_term("collision", 0.0, inputs=('scene',))
 def _collision(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.collision` over the new frames."""
-    return terms.collision(x.joints_world[:, x.history_length :], x.scene)
+    return terms.collision(x.joints_world[:, x.history_length :], x.scene, x.new_frames_sdf())
 
 
 @reward_term("terrain_contact", 0.0, inputs=('scene',))
@@ -322,7 +333,7 @@ def _terrain_contact(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 @reward_term("clearance", 0.0, inputs=('scene',))
 def _clearance(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.clearance` over the new frames."""
-    return terms.clearance(x.joints_world[:, x.history_length :], x.scene)
+    return terms.clearance(x.joints_world[:, x.history_length :], x.scene, sdf=x.new_frames_sdf())
 
 
 TERM_NAMES: tuple[str, ...] = tuple(REWARD_TERMS)

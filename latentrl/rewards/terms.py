@@ -372,7 +372,7 @@ def joint_arrival(error_at_goal: torch.Tensor, scale: float = JOINT_ARRIVAL_SCAL
     return torch.where(at_goal, score, torch.zeros_like(score))
 
 
-def collision(joints: torch.Tensor, scene: SceneBatch) -> torch.Tensor:
+def collision(joints: torch.Tensor, scene: SceneBatch, sdf: torch.Tensor | None = None) -> torch.Tensor:
     """``collision``: minus DART's ``cons_coll`` (:func:`latentrl.scenes.contact.collision_cost`).
 
     ``r = -mean_t sum_j max(0, skin_j - sdf(p_{t,j}))``  (metres)
@@ -380,14 +380,16 @@ def collision(joints: torch.Tensor, scene: SceneBatch) -> torch.Tensor:
     Args:
         joints: (N, F, 22, 3) world joints of the new frames.
         scene: the env's scenes (N rows or one).
+        sdf: (N, F, 22) ``scene.sdf(joints)`` when the caller has it (the scene terms share one).
 
     Returns:
         (N,) <= 0; 0 while every joint keeps its skin radius from every object.
     """
-    return -collision_cost(joints, scene)
+    return -collision_cost(joints, scene, sdf=sdf)
 
 
-def clearance(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEARANCE_M) -> torch.Tensor:
+def clearance(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEARANCE_M,
+              sdf: torch.Tensor | None = None) -> torch.Tensor:
     """``clearance``: minus :func:`latentrl.scenes.contact.clearance_cost`, a warning before ``collision``.
 
     ``r = -mean_t min(margin, max(0, margin - min_j (sdf(p_{t,j}) - skin_j)))``  (metres)
@@ -395,7 +397,7 @@ def clearance(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEARANCE
     Returns:
         (N,) in [-margin, 0]; 0 while every joint keeps ``margin`` beyond its skin radius from every object.
     """
-    return -clearance_cost(joints, scene, margin)
+    return -clearance_cost(joints, scene, margin, sdf=sdf)
 
 
 def terrain_contact(joints: torch.Tensor, scene: SceneBatch, threshold: float = CONTACT_HEIGHT_M,

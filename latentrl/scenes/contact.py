@@ -48,18 +48,20 @@ def skin_radii(like: torch.Tensor) -> torch.Tensor:
     return _SKIN_CACHE[key]
 
 
-def penetration(joints: torch.Tensor, scene: SceneBatch, skin: torch.Tensor | None = None) -> torch.Tensor:
+def penetration(joints: torch.Tensor, scene: SceneBatch, skin: torch.Tensor | None = None,
+                sdf: torch.Tensor | None = None) -> torch.Tensor:
     """(N, T, J) how far each joint is inside its skin radius of the nearest object, metres (0 when clear).
 
-    ``skin``: (J,) radii (default :func:`skin_radii`).
+    ``skin``: (J,) radii (default :func:`skin_radii`); ``sdf``: ``scene.sdf(joints)`` when the caller has it.
     """
     skin = skin_radii(joints) if skin is None else skin
-    return (skin - scene.sdf(joints)).clamp(min=0.0)
+    return (skin - (scene.sdf(joints) if sdf is None else sdf)).clamp(min=0.0)
 
 
-def collision_cost(joints: torch.Tensor, scene: SceneBatch, skin: torch.Tensor | None = None) -> torch.Tensor:
+def collision_cost(joints: torch.Tensor, scene: SceneBatch, skin: torch.Tensor | None = None,
+                   sdf: torch.Tensor | None = None) -> torch.Tensor:
     """(N,) DART's ``cons_coll``: the penetration summed over joints, averaged over frames, metres (>= 0)."""
-    return penetration(joints, scene, skin).sum(dim=-1).mean(dim=-1)
+    return penetration(joints, scene, skin, sdf).sum(dim=-1).mean(dim=-1)
 
 
 CLEARANCE_M = 0.25
@@ -67,7 +69,7 @@ CLEARANCE_M = 0.25
 
 
 def clearance_cost(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEARANCE_M,
-                   skin: torch.Tensor | None = None) -> torch.Tensor:
+                   skin: torch.Tensor | None = None, sdf: torch.Tensor | None = None) -> torch.Tensor:
     """(N,) how far the body's nearest joint comes inside ``margin`` beyond its skin, averaged over frames (>= 0).
 
     Why: :func:`collision_cost` is 0 until a joint touches, so it says nothing about an object ahead; this cost
@@ -75,7 +77,7 @@ def clearance_cost(joints: torch.Tensor, scene: SceneBatch, margin: float = CLEA
     policy learn to keep away before it collides. Meant for obstacles: on stairs and seats the feet touch on purpose.
     """
     skin = skin_radii(joints) if skin is None else skin
-    nearest = (scene.sdf(joints) - skin).amin(dim=-1)  # (N, T)
+    nearest = ((scene.sdf(joints) if sdf is None else sdf) - skin).amin(dim=-1)  # (N, T)
     return (margin - nearest).clamp(min=0.0, max=margin).mean(dim=-1)
 
 

@@ -102,6 +102,24 @@ def test_reward_terms_are_the_kernels_negated():
     assert torch.allclose(total, 2.0 * values["collision"] + 3.0 * values["terrain_contact"])
 
 
+def test_collision_and_clearance_share_one_sdf_query_per_step():
+    calls = []
+
+    class Counted(SceneBatch):
+        def sdf(self, points):
+            calls.append(tuple(points.shape))
+            return super().sdf(points)
+
+    plain = SceneBatch.from_scenes([Scene((WALL,))])
+    scene = Counted.__new__(Counted)
+    scene.__dict__.update(plain.__dict__)  # the same tensors, with sdf() counted
+    joints = torch.cat((pose(y=1.85), pose(y=0.0)), dim=0)
+    _, values = RewardComposer(terms=("collision", "clearance"))(inputs(joints, scene))
+    assert calls == [(2, 1, 22, 3)]  # one query of the new frames, shared
+    assert torch.allclose(values["collision"], -collision_cost(joints, plain))
+    assert torch.allclose(values["clearance"], -clearance_cost(joints, plain))
+
+
 def test_scene_terms_weigh_nothing_by_default_and_need_a_scene():
     comp = RewardComposer(terms=SCENE_TERMS)
     assert comp.weights == {"collision": 0.0, "terrain_contact": 0.0, "clearance": 0.0}
