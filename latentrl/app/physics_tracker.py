@@ -36,8 +36,6 @@ def policy_actor(policy):
 
 def train_tracker_command(req: TrainTrackerRequest) -> int:
     """Train (or resume) a tracker with the native PPO runner; evaluate on held-out motions every ``eval_every``."""
-    import torch
-
     from latentrl.config import load_config, to_yaml
     from latentrl.monitor import EvalReport
     from latentrl.physics import require_mujoco
@@ -63,7 +61,6 @@ def train_tracker_command(req: TrainTrackerRequest) -> int:
         if (run_dir / "config.yaml").is_file():
             raise ConfigError(f"--run-dir {run_dir} already holds a run; continue it with --resume {run_dir}")
     require_mujoco()
-    torch.set_num_threads(max(1, torch.get_num_threads()))
     run_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(run_dir / "config.yaml", to_yaml(cfg))
     t = cfg.tracking
