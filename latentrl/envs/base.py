@@ -98,7 +98,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         compile: run each step's tensor maths (:meth:`_motion_core`) as one ``torch.compile(fullgraph=True)``
             graph, on CUDA captured as a CUDA graph (:mod:`latentrl.envs.compiled`); the first step compiles.
         scene, terminate_on_collision: objects in the world (:mod:`latentrl.envs.scene`: a scene file, a
-            :class:`~latentrl.scenes.Scene` or random obstacles; None: the flat floor alone) and whether a joint
+            :class:`~latentrl.scenes.Scene`, random obstacles or random mazes, the last for the path task only;
+            None: the flat floor alone) and whether a joint
             inside its skin radius of one ends the episode. A scene adds the ``scene_rays`` observation group
             (unless ``observe_scene`` is False: a policy trained without a scene, evaluated among objects) and the
             ``collision`` and ``terrain_contact`` reward terms (docs/scenes.md).
@@ -112,6 +113,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
     """Named fields of the ``goal`` observation group, in order; tasks may extend."""
     reward_terms: tuple[str, ...] = (*DART_TERMS, *COMMON_TERMS)
     """The reward terms this task computes and reports (``infos["reward/<name>"]``)."""
+    walks_courses: bool = False
+    """The task takes its goals from a course's route, so it accepts ``{random_mazes: ...}`` scenes."""
 
     def __init__(
         self,
@@ -186,6 +189,9 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
             self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
         self._core = compile_step_core(self._motion_core, self.device) if self.compiled else self._motion_core
         self.scene = env_scene(scene, self.num_envs, self.device, self.floor_height)
+        require(self.scene is None or not self.scene.courses or type(self).walks_courses, "scene",
+                f"random_mazes: the env walks each maze's route, which only the path task does (got "
+                f"{type(self).__name__})")
         self.terminate_on_collision = bool(terminate_on_collision)
         self.observe_scene = self.scene is not None and bool(observe_scene)
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",

@@ -196,11 +196,15 @@ class FollowPathEnv(LatentMotionVectorEnv):
     ``next_goal_*`` shows at the last waypoint), ``random_waypoints`` (5), ``random_segment``
     ((1.0, 3.0) m), ``random_turn_deg`` (45), ``text_per_waypoint`` (random paths: a text per
     waypoint instead of per path); the rest are :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
+    With ``scene={"random_mazes": {...}}`` each episode draws a maze of the pool and walks its route (cell
+    centres from the origin; ``paths`` must be unset), with a text drawn per episode.
 
     ## Version History
 
     - v0: initial version.
     """
+
+    walks_courses = True
 
     def __init__(
         self,
@@ -242,24 +246,37 @@ class FollowPathEnv(LatentMotionVectorEnv):
         if self.observe_next:
             self.goal_fields = (*type(self).goal_fields, ("next_goal_dir", 3), ("next_goal_dist", 1))
         super().__init__(num_envs, max_episode_steps=max_episode_steps, **kwargs)
+        require(self.paths is None or not self._courses, "paths",
+                "random_mazes brings its own paths (each maze's route); leave paths unset")
         self._setup_paths()
 
     def _all_texts(self, texts: tuple[str, ...]) -> tuple[str, ...]:
         return texts + tuple(t for p in self.paths or () for t in p.texts)
 
+    @property
+    def _courses(self) -> list:
+        """The maze pool of a ``random_mazes`` scene (empty without one)."""
+        return self.scene.courses if self.scene is not None else []
+
     def _setup_paths(self) -> None:
-        """Padded (P, W, 3) waypoints, (P, W) text ids and (P,) lengths; per-env copies (N, W, ...)."""
+        """Padded (P, W, 3) waypoints, (P, W) text ids and (P,) lengths; per-env copies (N, W, ...).
+
+        With random mazes the P paths are the pool's routes (z on the floor), walked with a drawn text.
+        """
         n, dev = self.num_envs, self.device
-        if self.paths is None:
+        routes = [[(x, y, self.floor_height) for x, y in c.waypoints] for c in self._courses]
+        if self.paths is None and not routes:
             width = self.random_waypoints
             self._path_points = None
         else:
-            width = max(len(p.waypoints) for p in self.paths)
-            self._path_points = torch.zeros(len(self.paths), width, 3, device=dev)
-            self._path_texts = torch.zeros(len(self.paths), width, dtype=torch.long, device=dev)
-            self._path_len = torch.tensor([len(p.waypoints) for p in self.paths], device=dev)
-            for i, p in enumerate(self.paths):
-                self._path_points[i, : len(p.waypoints)] = torch.tensor(p.waypoints, device=dev)
+            points = routes or [p.waypoints for p in self.paths]
+            width = max(len(p) for p in points)
+            self._path_points = torch.zeros(len(points), width, 3, device=dev)
+            self._path_texts = torch.zeros(len(points), width, dtype=torch.long, device=dev)
+            self._path_len = torch.tensor([len(p) for p in points], device=dev)
+            for i, p in enumerate(points):
+                self._path_points[i, : len(p)] = torch.tensor(p, dtype=torch.float32, device=dev)
+            for i, p in enumerate(self.paths or ()):
                 self._path_texts[i, : len(p.texts)] = torch.tensor([self.texts.index(t) for t in p.texts], device=dev)
         self._wp = torch.zeros(n, width, 3, device=dev)
         self._wp_text = torch.zeros(n, width, dtype=torch.long, device=dev)
@@ -295,6 +312,10 @@ class FollowPathEnv(LatentMotionVectorEnv):
     def _reset_task(self, idx: torch.Tensor) -> None:
         if self._path_points is None:
             points, texts, lengths = self._random_paths(idx)
+        elif self._courses:  # a maze per episode, and its route
+            pid = self.scene.draw(idx, self._generator)
+            points, lengths = self._path_points[pid], self._path_len[pid]
+            texts = self._sample_texts(len(idx))[:, None].expand(-1, points.shape[1])
         else:
             pid = self._choose_paths(idx)
             points, texts, lengths = self._path_points[pid], self._path_texts[pid], self._path_len[pid]

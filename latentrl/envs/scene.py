@@ -1,4 +1,4 @@
-"""An env's scene: a fixed scene shared by every env, or random obstacles drawn per episode, and its rays.
+"""An env's scene: a fixed scene shared by every env, random obstacles or a maze drawn per episode, and its rays.
 
 The env (:class:`~latentrl.envs.base.LatentMotionVectorEnv`, argument ``scene``) holds one :class:`EnvScene`
 when a scene is set and None otherwise, so a flat-floor env runs exactly the code it ran before scenes existed.
@@ -21,6 +21,7 @@ from latentrl.envs.goal import body_forward
 from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import PELVIS
 from latentrl.resources import packaged, task_file
+from latentrl.scenes.courses import Course, RandomMazes
 from latentrl.scenes.random import RandomObstacles, clear_around
 from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch
 from latentrl.scenes.spec import load_scene, parse_scene
@@ -46,27 +47,33 @@ def height_grid_problem(size: object, spacing: object) -> str | None:
     return None
 
 
-def scene_spec(value: Any) -> Scene | RandomObstacles | None:
-    """The scene ``env.scene`` names: None, a scene file, an inline scene, ``{random_obstacles: {...}}`` or an object.
+RANDOM_KINDS = {"random_obstacles": RandomObstacles, "random_mazes": RandomMazes}
+"""The scenes drawn per episode, by their ``env.scene`` key."""
+
+
+def scene_spec(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
+    """The scene ``env.scene`` names: None, a scene file, an inline scene, ``{random_obstacles: {...}}``,
+    ``{random_mazes: {...}}`` or an object.
 
     One-line :class:`ConfigError` / :class:`~latentrl.errors.DataError` on a bad value.
     """
-    if value is None or isinstance(value, (Scene, RandomObstacles)):
+    if value is None or isinstance(value, (Scene, RandomObstacles, RandomMazes)):
         return value
     if isinstance(value, (str, Path)):
         return load_scene(value)
     if isinstance(value, dict):
-        if "random_obstacles" in value:
-            if len(value) != 1:
-                raise ConfigError(f"scene: random_obstacles stands alone, got the keys {sorted(value)}")
-            return RandomObstacles.of(dict(value["random_obstacles"] or {}))
+        for key, kind in RANDOM_KINDS.items():
+            if key in value:
+                if len(value) != 1:
+                    raise ConfigError(f"scene: {key} stands alone, got the keys {sorted(value)}")
+                return kind.of(dict(value[key] or {}))
         if "format" in value:
             return parse_scene(value, "env.scene")
-    raise ConfigError(f"scene: expected a scene file, a latentrl.scene/1 object or {{random_obstacles: {{...}}}}, "
-                      f"got {str(value)[:60]}")
+    raise ConfigError(f"scene: expected a scene file, a latentrl.scene/1 object, {{random_obstacles: {{...}}}} or "
+                      f"{{random_mazes: {{...}}}}, got {str(value)[:60]}")
 
 
-def resolve_scene(value: Any) -> Scene | RandomObstacles | None:
+def resolve_scene(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
     """:func:`scene_spec` with a file name looked up as task files are: a path, or a name in ``tasks/scenes``."""
     if isinstance(value, str):
         found = task_file(value, "scenes")
@@ -78,14 +85,26 @@ def resolve_scene(value: Any) -> Scene | RandomObstacles | None:
 
 
 class EnvScene:
-    """The scenes of N envs on one device: ``batch`` (one row for a fixed scene, N for random obstacles)."""
+    """The scenes of N envs on one device: ``batch`` (one row for a fixed scene, N for scenes drawn per episode).
 
-    def __init__(self, spec: Scene | RandomObstacles, num_envs: int, device: torch.device, floor_height: float):
+    Random mazes: :attr:`courses` holds the pool and :attr:`pool` its scenes; the path task draws a course per
+    episode (:meth:`draw`) and walks its route, so :meth:`reset` leaves maze rows to it.
+    """
+
+    def __init__(self, spec: Scene | RandomObstacles | RandomMazes, num_envs: int, device: torch.device,
+                 floor_height: float):
         self.spec = spec
         self.floor_height = float(floor_height)
+        self.courses: list[Course] = []
         if isinstance(spec, RandomObstacles):
             self.batch = spec.empty(num_envs, device)
             self.batch.floor_height[:] = self.floor_height
+        elif isinstance(spec, RandomMazes):
+            self.courses = spec.courses()
+            self.pool = SceneBatch.from_scenes([Scene(c.scene.objects, self.floor_height) for c in self.courses],
+                                               device)
+            self._course = torch.zeros(num_envs, dtype=torch.long, device=device)
+            self.batch = self.pool.index(self._course)
         else:
             self.batch = SceneBatch.from_scenes([spec], device)
         angles = torch.linspace(-math.pi / 2, math.pi / 2, NUM_RAYS, device=device)
@@ -98,20 +117,30 @@ class EnvScene:
 
     @property
     def random(self) -> bool:
-        """Obstacles are drawn per episode."""
-        return isinstance(self.spec, RandomObstacles)
+        """Each env has its own scene, drawn per episode (random obstacles or random mazes)."""
+        return isinstance(self.spec, (RandomObstacles, RandomMazes))
+
+    def draw(self, idx: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+        """Random mazes: a course of the pool for each of envs ``idx``, put in place; returns their (M,) ids."""
+        ids = torch.randint(len(self.courses), (len(idx),), generator=generator, device=self._course.device)
+        self._course[idx] = ids
+        self.batch.set_rows(idx, self.pool.index(ids))
+        return ids
 
     def reset(self, idx: torch.Tensor, history_world: torch.Tensor, goal: torch.Tensor,
               generator: torch.Generator) -> None:
-        """New obstacles for envs ``idx`` (random scenes), clear of their start pelvis and ``goal`` ((M, 3))."""
-        if not self.random:
+        """New obstacles for envs ``idx`` (random obstacles), clear of their start pelvis and ``goal`` ((M, 3)).
+
+        A maze is drawn by the path task with its route (:meth:`draw`), before the goal exists.
+        """
+        if not isinstance(self.spec, RandomObstacles):
             return
         forward, pelvis = body_forward(history_world[:, -1])
         self.batch.set_rows(idx, self.spec.sample(pelvis, forward, goal, generator, self.floor_height))
 
     def clear_goals(self, goal: torch.Tensor) -> None:
-        """Random scenes: drop the obstacles a new goal (N, 3) landed on (a fixed scene is never changed)."""
-        if self.random:
+        """Random obstacles: drop those a new goal (N, 3) landed on (fixed scenes and mazes are never changed)."""
+        if isinstance(self.spec, RandomObstacles):
             clear_around(self.batch, goal, self.spec.clearance)
 
     def row(self, i: int) -> SceneBatch:
@@ -122,6 +151,8 @@ class EnvScene:
         """Env ``i``'s scene as objects (random obstacles as they stand now), e.g. to write beside its motion."""
         if not self.random:
             return self.spec
+        if self.courses:
+            return Scene(self.courses[int(self._course[i])].scene.objects, self.floor_height)
         s = self.row(i)
         objects = []
         for (x, y, z), (hx, hy, hz), yaw in zip(s.box_center[0][s.box_mask[0]].tolist(),
@@ -138,10 +169,10 @@ class EnvScene:
 
         Why: ``latentrl play`` drops boxes while the policy walks; collisions, contact, the floor snap and the
         ``scene_rays`` observation all read :attr:`batch`, so they see the new objects at once. Random obstacles
-        are drawn per episode and are not replaced.
+        and mazes are drawn per episode and are not replaced.
         """
         if self.random:
-            raise ConfigError("scene: random obstacles are drawn per episode; only a fixed scene can be replaced")
+            raise ConfigError("scene: random scenes are drawn per episode; only a fixed scene can be replaced")
         device = self.batch.floor_height.device
         self.spec = scene
         self.batch = SceneBatch.from_scenes([scene], device)

@@ -123,6 +123,7 @@ class TimedPathEnv(FollowPathEnv):
     goal_fields = (("goal_dir", 3), ("goal_dist", 1), ("time_left", 1))
     reward_terms = ("dist", "success", "foot_floor", "skate", "orient", "rotation", "jerk", "pace", "timing",
                     *COMMON_TERMS)
+    walks_courses = False  # a maze route has no arrival times
 
     def __init__(
         self,

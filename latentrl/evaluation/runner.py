@@ -48,6 +48,8 @@ from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 from latentrl.scenes.contact import scene_metrics
+from latentrl.scenes.courses import RandomMazes
+from latentrl.scenes.scene import Scene
 from latentrl.scenes.spec import scene_to_json
 
 __all__ = ["EpisodeResult", "EvalSettings", "PathResult", "SuiteResult", "frames_after", "policy_fn", "fit_policy",
@@ -122,10 +124,13 @@ def make_env(
     """The evaluation env: env i follows path ``i % len(paths)``, no autoreset, DART's clips and thresholds.
 
     The scene is the first path's own (its ``scene`` field) when it has one, else ``settings.scene``; the policy
-    observes it only if it was trained with a scene (``settings.scene`` set).
+    observes it only if it was trained with a scene (``settings.scene`` set). Random mazes bring their own
+    routes, so a suite's paths without a scene of their own run on the open floor.
     """
     scene = paths[0].scene if paths[0].scene is not None else (
         resolve_scene(settings.scene) if settings.scene is not None else None)
+    if isinstance(scene, RandomMazes):
+        scene = Scene()
     observe = settings.observe_scene and settings.scene is not None
     return FollowPathEnv(
         num_envs,

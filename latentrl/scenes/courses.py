@@ -19,10 +19,12 @@ straight on (+y) or turned to +x; waypoints on each flight, on the landing and o
 
 from __future__ import annotations
 
+import math
 import random
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+from latentrl.errors import ConfigError
 from latentrl.scenes.scene import Box, Scene, Stairs
 
 WALL_HEIGHT_M = 1.2
@@ -143,6 +145,84 @@ def stairs_up_down(riser: float, count: int = 5, tread: float = 0.3, width: floa
         points = [(0.0, start_y + run / 2), (0.0, mid_y), (side / 2 + run / 2, mid_y), (end + 1.5, mid_y)]
     texts = (up, up, down, down)
     return Course(Scene(tuple(objects)), tuple((round(x, 6), round(y, 6)) for x, y in points), texts)
+
+
+MAX_RANDOM_MAZES = 4096
+MAX_MAZE_CELLS = 12
+"""Largest side of a random maze, cells."""
+MIN_CORRIDOR_M = 1.2
+"""Narrowest corridor (cell minus wall) of a random maze, metres."""
+
+
+@dataclass
+class RandomMazes:
+    """A pool of ``count`` seeded mazes of random size for training (``env.scene: {random_mazes: {...}}``).
+
+    Maze k has ``cols`` x ``rows`` cells (each drawn uniformly from its [min, max]) of side ``cell`` metres
+    (uniform in [min, max]; corridors ``cell - wall`` >= 1.2 m) with walls ``wall`` thick, carved with seed ``seed * 1,000,003 + 1,000 + k``, so the
+    shipped ``maze`` suite (seeds 1-3) stays out of the pool. A path env draws one per episode and walks its route
+    (docs/scenes.md); the pool is made once, when the env is built.
+    """
+
+    count: int = 256
+    cols: list[int] = field(default_factory=lambda: [3, 5])
+    rows: list[int] = field(default_factory=lambda: [3, 5])
+    cell: list[float] = field(default_factory=lambda: [1.4, 2.2])
+    wall: float = 0.2
+    seed: int = 0
+
+    def validate(self) -> None:
+        """Sizes in range; one-line :class:`ConfigError` naming the field."""
+        def pair(name: str, low: float, high: float, integer: bool) -> None:
+            v = getattr(self, name)
+            kind = "integers" if integer else "numbers"
+            ok = isinstance(v, (list, tuple)) and len(v) == 2 and all(
+                isinstance(x, int if integer else (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in v)
+            if not ok or not low <= v[0] <= v[1] <= high:
+                raise ConfigError(f"random_mazes.{name}: expected [min, max] {kind} with {low:g} <= min <= max "
+                                  f"<= {high:g}, got {v}")
+
+        def number(name: str, low: float, high: float, integer: bool = False) -> None:
+            v = getattr(self, name)
+            kind = int if integer else (int, float)
+            if isinstance(v, bool) or not isinstance(v, kind) or not math.isfinite(v) or not low <= v <= high:
+                raise ConfigError(f"random_mazes.{name}: expected {'an integer' if integer else 'a number'} in "
+                                  f"[{low:g}, {high:g}], got {v!r:.30}")
+
+        number("count", 1, MAX_RANDOM_MAZES, integer=True)
+        pair("cols", 1, MAX_MAZE_CELLS, integer=True)
+        pair("rows", 2, MAX_MAZE_CELLS, integer=True)
+        number("wall", 0.01, 1.0)
+        pair("cell", round(self.wall + MIN_CORRIDOR_M, 6), 10.0, integer=False)
+        number("seed", 0, 2**31 - 1, integer=True)
+
+    @classmethod
+    def of(cls, raw: dict) -> RandomMazes:
+        """A checked spec from its YAML/JSON mapping (unknown keys are one-line errors)."""
+        if not isinstance(raw, dict):
+            raise ConfigError(f"random_mazes: expected a mapping of settings, got {raw!r:.40}")
+        known = list(cls.__dataclass_fields__)
+        for k in raw:
+            if k not in known:
+                from latentrl.errors import closest
+
+                raise ConfigError(f"random_mazes.{k}: unknown setting{closest(str(k), known)}; expected "
+                                  f"{', '.join(known)}")
+        spec = cls(**{k: (list(v) if isinstance(v, (list, tuple)) else v) for k, v in raw.items()})
+        spec.validate()
+        return spec
+
+    def courses(self) -> list[Course]:
+        """The pool, in order (the same for the same settings)."""
+        out = []
+        for k in range(self.count):
+            seed = self.seed * 1_000_003 + 1_000 + k
+            rng = random.Random(seed)
+            cols, rows = rng.randint(*self.cols), rng.randint(*self.rows)
+            cell = round(rng.uniform(*self.cell), 3)
+            out.append(maze(cols, rows, seed=seed, cell=cell, wall=self.wall))
+        return out
 
 
 COURSES: dict[str, Callable[[], Course]] = {

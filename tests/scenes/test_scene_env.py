@@ -131,8 +131,8 @@ def test_env_config_scene_from_a_file_a_generator_or_inline(tmp_path, tiny_model
      "c.yaml: scene: random_obstacles.clearance: expected a number in [0, 100], got -1"),
     ("scene: {format: latentrl.scene/1, objects: [{type: box, center: [0, 0], size: [1, 1, 0]}]}\n",
      "c.yaml: scene: env.scene: objects[0].size[2]: expected a number > 0, got 0"),
-    ("scene: 3\n", "c.yaml: scene: expected a scene file, a latentrl.scene/1 object or {random_obstacles: {...}}, "
-                   "got 3"),
+    ("scene: 3\n", "c.yaml: scene: expected a scene file, a latentrl.scene/1 object, {random_obstacles: {...}} "
+                   "or {random_mazes: {...}}, got 3"),
     ("terminate_on_collision: true\n", "c.yaml: terminate_on_collision: needs a scene (env.scene)"),
 ])
 def test_bad_env_scenes_are_one_line(tmp_path, text, message):
