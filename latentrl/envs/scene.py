@@ -52,8 +52,9 @@ RANDOM_KINDS = {"random_obstacles": RandomObstacles, "random_mazes": RandomMazes
 
 
 def scene_spec(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
-    """The scene ``env.scene`` names: None, a scene file, an inline scene, ``{random_obstacles: {...}}``,
-    ``{random_mazes: {...}}`` or an object.
+    """The scene ``env.scene`` names: None, a scene file, an inline scene, a random kind or an object.
+
+    Random kinds: ``{random_obstacles: {...}}`` and ``{random_mazes: {...}}``.
 
     One-line :class:`ConfigError` / :class:`~latentrl.errors.DataError` on a bad value.
     """

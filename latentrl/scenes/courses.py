@@ -159,9 +159,9 @@ class RandomMazes:
     """A pool of ``count`` seeded mazes of random size for training (``env.scene: {random_mazes: {...}}``).
 
     Maze k has ``cols`` x ``rows`` cells (each drawn uniformly from its [min, max]) of side ``cell`` metres
-    (uniform in [min, max]; corridors ``cell - wall`` >= 1.2 m) with walls ``wall`` thick, carved with seed ``seed * 1,000,003 + 1,000 + k``, so the
-    shipped ``maze`` suite (seeds 1-3) stays out of the pool. A path env draws one per episode and walks its route
-    (docs/scenes.md); the pool is made once, when the env is built.
+    (uniform in [min, max]; corridors ``cell - wall`` >= 1.2 m) with walls ``wall`` thick, carved with seed
+    ``seed * 1,000,003 + 1,000 + k``, so the shipped ``maze`` suite (seeds 1-3) stays out of the pool. A path env
+    draws one per episode and walks its route (docs/scenes.md); the pool is made once, when the env is built.
     """
 
     count: int = 256
