@@ -180,10 +180,8 @@ class EnvScene:
 
     def rays(self, history_world: torch.Tensor) -> torch.Tensor:
         """(N, NUM_RAYS) distances from the last history frame's pelvis, right to left, clipped at RAY_RANGE_M."""
-        forward, _ = body_forward(history_world[:, -1])
-        fx, fy = forward[:, :1], forward[:, 1:2]
-        dirs = torch.stack((self._cos * fx - self._sin * fy, self._sin * fx + self._cos * fy), dim=-1)  # (N, R, 2)
-        return self.batch.rays(history_world[:, -1, PELVIS, :2], dirs, RAY_RANGE_M)
+        origin, dirs = ray_fan(history_world, self._cos, self._sin)
+        return self.batch.rays(origin, dirs, RAY_RANGE_M)
 
     def height_grid(self, history_world: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
         """(N, K) terrain height at ``offsets`` (K, 2) (:func:`grid_offsets`) around the last history frame's pelvis.
@@ -197,6 +195,23 @@ class EnvScene:
         xy = torch.stack((pelvis[:, None, 0] + a * fx - b * fy, pelvis[:, None, 1] + a * fy + b * fx), dim=-1)
         ground = self.batch.height(torch.cat((pelvis[:, None, :2], xy), dim=1))  # (N, 1 + K)
         return (ground[:, 1:] - ground[:, :1]).clamp(-HEIGHT_GRID_CLIP_M, HEIGHT_GRID_CLIP_M)
+
+
+def ray_fan(history_world: torch.Tensor, cos: torch.Tensor | None = None, sin: torch.Tensor | None = None
+            ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Where the ``scene_rays`` start and point: (N, 2) origins and (N, R, 2) unit xy directions.
+
+    The origin is the last history frame's pelvis; the directions run right (-90 degrees) to left (+90) of the
+    body's forward axis. ``cos``/``sin`` of the :data:`NUM_RAYS` angles may be given (an env keeps them); an
+    exported controller outputs the fan so an engine casts the rays in its own world.
+    """
+    if cos is None or sin is None:
+        angles = torch.linspace(-math.pi / 2, math.pi / 2, NUM_RAYS, device=history_world.device)
+        cos, sin = torch.cos(angles), torch.sin(angles)
+    forward, _ = body_forward(history_world[:, -1])
+    fx, fy = forward[:, :1], forward[:, 1:2]
+    dirs = torch.stack((cos * fx - sin * fy, sin * fx + cos * fy), dim=-1)
+    return history_world[:, -1, PELVIS, :2], dirs
 
 
 def grid_offsets(size: int, spacing: float, device: torch.device | str = "cpu") -> torch.Tensor:

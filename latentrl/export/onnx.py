@@ -18,6 +18,9 @@ next_goal                 (B, 3)          only for path/timed policies trained w
                                           waypoint: as ``latentrl.settings.next_at_last`` says)
 command_heading_deg       (B,)            joystick: commanded world heading, degrees counter-clockwise from +y
 command_speed             (B,)            joystick: commanded speed, m/s
+scene_rays                (B, 16)         only for policies trained with a scene (``env.scene``): distances to
+                                          the objects along the 16 rays of ``ray_origin``/``ray_directions``,
+                                          metres, clipped at 4 (the engine casts them in its own world)
 text_embedding            (B, E)          only when no prompt was baked in (``--text``)
 ========================  ==============  ===================================================
 
@@ -31,6 +34,9 @@ next_history              (B, 2, 276)     feed back as ``history``
 next_world_rotation       (B, 3, 3)       feed back as ``world_rotation``
 next_world_translation    (B, 3)          feed back as ``world_translation``
 next_airborne             (B,)            feed back as ``airborne``
+next_ray_origin           (B, 2)          scene policies: where the next call's rays start (the pelvis), world xy
+next_ray_directions       (B, 16, 2)      scene policies: their unit world xy directions, right to left over the
+                                          front half-plane
 ========================  ==============  ===================================================
 
 Inside the graph: the env's observation (the task's goal fields, built by the env's own functions:
@@ -69,6 +75,7 @@ from latentrl.envs.config import stored_env_config
 from latentrl.envs.goal import goal_features
 from latentrl.envs.joystick import command_observation, world_angle
 from latentrl.envs.observation import observe
+from latentrl.envs.scene import NUM_RAYS, RAY_RANGE_M, ray_fan
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.timed import timed_observation
 from latentrl.errors import CheckpointError, ConfigError, TextError
@@ -92,6 +99,8 @@ GOAL_SIZES = {"reach": (4,), "path": (4, 8), "timed": (5, 9), "joystick": (3,)}
 EXTRA = "pip install 'latentrl[onnx]' (packages onnx and onnxruntime)"
 OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation",
                 "next_airborne")
+RAY_OUTPUT_NAMES = ("next_ray_origin", "next_ray_directions")
+"""Extra outputs of a scene policy's graph: where the engine casts the next call's ``scene_rays``."""
 _MEANINGS = {
     "history": "canonical, unnormalized history (2 frames x 276 features); start from a seed in latentrl.seeds",
     "world_rotation": "canonical-to-world rotation, p_world = R p + t",
@@ -106,6 +115,11 @@ _MEANINGS = {
                  "waypoint what latentrl.settings.next_at_last says: the last again (repeat) or last + (last - "
                  "previous) (extend; previous = the episode's start pelvis on a one-waypoint path)",
     "text_embedding": "prompt embedding; rows of latentrl.texts",
+    "scene_rays": "distances to the scene's objects along the rays of ray_origin/ray_directions (the previous call's "
+                  "next_ray_*; at the start latentrl.seeds), metres, clipped at latentrl.settings.scene_rays.range_m",
+    "next_ray_origin": "where the next call's scene_rays start: the pelvis, world xy metres",
+    "next_ray_directions": "the next call's scene_rays directions, unit world xy vectors, right (-90 deg) to left "
+                           "(+90 deg) of the body's forward axis",
     "action": "policy mean clamped to +-action_bound: the latent noise the sampler started from",
     "joints_world": "8 new frames of SMPL-22 joints (latentrl.joint_names), world metres, z up, 30 fps",
     "next_history": "feed back as history",
@@ -141,12 +155,16 @@ class ControllerStep(nn.Module):
         text_embedding: (E,) or (1, E) prompt embedding baked in as a constant; ``None`` adds the
             ``text_embedding`` input.
         goal_angle_clip_deg, goal_dist_clip, floor_height: the env's observation settings.
+        scene_rays: the policy observes a scene's rays: adds the ``scene_rays`` input and the ``next_ray_*`` outputs.
+            The graph's floor snap keeps the flat floor, so the scene's objects must not carry the body (walls,
+            obstacles: yes; stairs, seats: no).
     """
 
     def __init__(self, policy: nn.Module, model: MotionModel, batch: int = 1, *, settings: StepSettings | None = None,
                  observe_next: bool = False, text_embedding: torch.Tensor | None = None,
                  goal_angle_clip_deg: float = OBS_GOAL_ANGLE_CLIP_DEG, goal_dist_clip: float = OBS_GOAL_DIST_CLIP_M,
-                 floor_height: float = 0.0, task: str = "reach", time_left_clip: float = 10.0):
+                 floor_height: float = 0.0, task: str = "reach", time_left_clip: float = 10.0,
+                 scene_rays: bool = False):
         super().__init__()
         if int(batch) < 1:
             raise ConfigError(f"--batch must be >= 1, got {batch}")
@@ -161,6 +179,7 @@ class ControllerStep(nn.Module):
         if observe_next and task == "joystick":
             raise ConfigError("a joystick policy observes no next goal (observe_next)")
         self.observe_next = bool(observe_next)
+        self.scene_rays = bool(scene_rays)
         self.goal_angle_clip_deg, self.goal_dist_clip = float(goal_angle_clip_deg), float(goal_dist_clip)
         self.floor_height = float(floor_height)
         self.foot_lock, self.foot_lock_min_weight = self.settings.foot_lock, self.settings.foot_lock_min_weight
@@ -173,8 +192,9 @@ class ControllerStep(nn.Module):
         self.input_names: tuple[str, ...] = ("history", "world_rotation", "world_translation", "airborne",
                                              *TASK_INPUTS[task],
                                              *(("next_goal",) if self.observe_next else ()),
+                                             *(("scene_rays",) if self.scene_rays else ()),
                                              *(() if self.baked_text else ("text_embedding",)))
-        self.output_names = OUTPUT_NAMES
+        self.output_names = OUTPUT_NAMES + (RAY_OUTPUT_NAMES if self.scene_rays else ())
         self.eval()
 
     def train(self, mode: bool = True) -> ControllerStep:
@@ -186,15 +206,17 @@ class ControllerStep(nn.Module):
         b = self.batch
         shapes = {"history": (b, HISTORY_LENGTH, FEATURE_DIM), "world_rotation": (b, 3, 3), "world_translation": (b, 3),
                   "airborne": (b,), "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim),
-                  "time_left": (b,), "command_heading_deg": (b,), "command_speed": (b,)}
+                  "time_left": (b,), "command_heading_deg": (b,), "command_speed": (b,), "scene_rays": (b, NUM_RAYS)}
         return {name: shapes[name] for name in self.input_names}
 
     def output_shapes(self) -> dict[str, tuple[int, ...]]:
         """Output name -> shape, for this batch."""
         b = self.batch
-        return {"action": (b, self.model.latent_dim), "joints_world": (b, FUTURE_LENGTH, NUM_JOINTS, 3),
+        shapes = {"action": (b, self.model.latent_dim), "joints_world": (b, FUTURE_LENGTH, NUM_JOINTS, 3),
                 "next_history": (b, HISTORY_LENGTH, FEATURE_DIM), "next_world_rotation": (b, 3, 3),
-                "next_world_translation": (b, 3), "next_airborne": (b,)}
+                "next_world_translation": (b, 3), "next_airborne": (b,), "next_ray_origin": (b, 2),
+                "next_ray_directions": (b, NUM_RAYS, 2)}
+        return {name: shapes[name] for name in self.output_names}
 
     def observe(self, state: RolloutState, named: Mapping[str, torch.Tensor], text: torch.Tensor) -> torch.Tensor:
         """(B, obs_dim) the env's observation ``[task fields | text | history | scene]`` from the named inputs.
@@ -217,7 +239,8 @@ class ControllerStep(nn.Module):
         else:
             goal_obs = features(named["goal"]) if following is None else torch.cat(
                 (features(named["goal"]), following), dim=1)
-        return observe(state.history, history_world, goal_obs, text, self.floor_height)
+        rays = named["scene_rays"].clamp(0.0, RAY_RANGE_M) if self.scene_rays else None
+        return observe(state.history, history_world, goal_obs, text, self.floor_height, rays)
 
     def post_step(self, step: StepResult) -> StepResult:
         """World-space correction after the motion step; the identity, so the graph is exactly ``rollout_step``.
@@ -242,7 +265,10 @@ class ControllerStep(nn.Module):
         step = self.post_step(step)
         nxt = step.state
         airborne = nxt.airborne_flags().to(torch.float32)
-        return action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation, airborne
+        out = (action, step.joints_world, nxt.history, nxt.world.rotation, nxt.world.translation, airborne)
+        if self.scene_rays:
+            out = (*out, *ray_fan(nxt.world.apply(joints_of(nxt.history))))
+        return out
 
     def initial_state(self, seed_index: torch.Tensor | None = None) -> RolloutState:
         """Start states from the model's seed histories (row i gets seed ``i % K`` unless ``seed_index`` is given)."""
@@ -258,7 +284,8 @@ class ControllerStep(nn.Module):
         values = {"history": state.history, "world_rotation": state.world.rotation,
                   "world_translation": state.world.translation, "airborne": torch.zeros(self.batch), "goal": goal,
                   "next_goal": goal + torch.tensor([1.0, 1.0, 0.0]), "time_left": 2.0 + rows,
-                  "command_heading_deg": 30.0 * rows - 15.0, "command_speed": torch.full_like(rows, 1.2)}
+                  "command_heading_deg": 30.0 * rows - 15.0, "command_speed": torch.full_like(rows, 1.2),
+                  "scene_rays": torch.linspace(0.5, RAY_RANGE_M, NUM_RAYS).expand(self.batch, -1).contiguous()}
         if not self.baked_text:
             emb = torch.zeros(1, self.model.text_dim) if text_embedding is None else text_embedding
             values["text_embedding"] = emb.reshape(-1, self.model.text_dim).expand(self.batch, -1).contiguous()
@@ -291,7 +318,12 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     if task not in EXPORT_TASKS:
         raise CheckpointError(f"{policy_path}: export onnx builds controllers of {', '.join(EXPORT_TASKS)} policies; "
                               f"this policy's task is '{task}', which it cannot export")
-    goal_size = policy.obs_dim - model.text_dim - HISTORY_LENGTH * FEATURE_DIM - 1
+    scene_rays = env_cfg.get("scene") is not None
+    if scene_rays and int(env_cfg.get("height_grid") or 0):
+        raise CheckpointError(f"{policy_path}: export onnx takes scene policies that observe rays; this one also "
+                              f"observes a height grid (env.height_grid {env_cfg.get('height_grid')}), which the "
+                              "graph's inputs do not carry")
+    goal_size = policy.obs_dim - model.text_dim - HISTORY_LENGTH * FEATURE_DIM - 1 - (NUM_RAYS if scene_rays else 0)
     if policy.action_dim != model.latent_dim or goal_size not in GOAL_SIZES[task]:
         raise CheckpointError(
             f"{policy_path}: the policy ({policy.obs_dim}-D observations, {policy.action_dim}-D actions) does not fit "
@@ -317,7 +349,7 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     observe_next = goal_size == GOAL_SIZES[task][-1] and len(GOAL_SIZES[task]) == 2
     time_left_clip = float((env_cfg.get("timed") or {}).get("time_left_clip", 10.0))
     step = ControllerStep(policy, model, batch, settings=settings, observe_next=observe_next, text_embedding=baked,
-                          task=task, time_left_clip=time_left_clip)
+                          task=task, time_left_clip=time_left_clip, scene_rays=scene_rays)
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
                        "iteration": loaded.checkpoint.get("iteration")},
             "motion": ident, "texts": texts, "text": text, "trained_texts": trained,
@@ -366,6 +398,9 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
                 "training_amp": step.settings.amp,
                 "time_left_clip": step.time_left_clip if step.task == "timed" else None,
                 "observe_next": step.observe_next, "next_at_last": info.get("next_at_last"),
+                "scene_rays": {"count": NUM_RAYS, "range_m": RAY_RANGE_M, "from_deg": -90.0, "to_deg": 90.0,
+                               "height": "any (horizontal rays: every object at any height counts)"}
+                if step.scene_rays else None,
                 "text": info.get("text") if step.baked_text else None}
     meta = {
         "latentrl.format": FORMAT,
@@ -374,13 +409,22 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
         "latentrl.joint_names": list(JOINT_NAMES),
         "latentrl.seeds": {"history": _json_array(seeds.history),
                            "world_rotation": "identity",
-                           "world_translation": _json_array(seeds.world.translation)},
+                           "world_translation": _json_array(seeds.world.translation),
+                           **_seed_rays(step, seeds)},
         "latentrl.policy": info.get("policy"),
         "latentrl.motion": info.get("motion"),
     }
     if not step.baked_text:
         meta["latentrl.texts"] = {p: [float(f"{v:.9g}") for v in e.tolist()] for p, e in info.get("texts", {}).items()}
     return {key: json.dumps(value, separators=(",", ":")) for key, value in meta.items()}
+
+
+def _seed_rays(step: ControllerStep, seeds: RolloutState) -> dict:
+    """Scene policies: where each seed state's first ``scene_rays`` start and point (origins, directions)."""
+    if not step.scene_rays:
+        return {}
+    origin, dirs = ray_fan(seeds.world.apply(joints_of(seeds.history)))
+    return {"ray_origin": _json_array(origin), "ray_directions": _json_array(dirs)}
 
 
 def export_onnx(step: ControllerStep, path: str | Path, example: Sequence[torch.Tensor] | None = None,

@@ -60,3 +60,15 @@ def test_the_timed_snippet_runs_as_pasted_and_reaches_the_waypoint(tmp_path, mon
     assert pelvis.shape == (144, 3) and np.isfinite(pelvis).all()
     dist = np.linalg.norm(pelvis[:, :2] - names["goal"][0, :2], axis=1)
     assert dist.min() < 0.3 and dist[-1] < 0.3  # reaches the waypoint (DART's radius) and stays near it
+
+
+def test_the_scene_snippet_runs_as_pasted_and_walks_around_the_pillars(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["export", "onnx", "reach_obstacles_default", "--out", "obstacles.onnx", "--text", "walk"]) == 0
+    names: dict = {"__name__": "__export_doc__"}
+    exec(compile(_section_snippet("Scene policies"), "docs/export.md scene block", "exec"), names)  # noqa: S102
+    joints = np.concatenate(names["frames"])
+    assert joints.shape == (192, 22, 3) and np.isfinite(joints).all()
+    assert np.linalg.norm(joints[:, 0, :2] - names["goal"][0, :2], axis=1).min() < 0.3
+    for x, y, r in names["pillars"]:
+        assert (np.linalg.norm(joints[:, :, :2] - np.array([x, y]), axis=-1) - r).min() > 0.0

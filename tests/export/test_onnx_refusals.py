@@ -90,3 +90,16 @@ def test_a_shipped_policy_exports_by_name(tmp_path, capsys):
     out = tmp_path / "controller.onnx"
     assert main(["export", "onnx", "reach_walk_default", "--out", str(out)]) == 0
     assert out.stat().st_size > 0 and "wrote" in capsys.readouterr().out
+
+
+def test_a_scene_policy_with_a_height_grid_is_refused_in_one_line(tmp_path, capsys):
+    state = torch.load(ROOT / "policies" / "reach_obstacles_default.pt", map_location="cpu", weights_only=True)
+    state["config"]["env"]["height_grid"] = 5
+    state["policy_sha256"], state["config_hash"] = weights_sha256(state["policy"]), config_hash(state["config"])
+    policy = tmp_path / "grid.pt"
+    torch.save(state, policy)
+    out = tmp_path / "controller.onnx"
+    assert main(["export", "onnx", str(policy), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "observes a height grid (env.height_grid 5)" in err, err
+    assert not out.exists()

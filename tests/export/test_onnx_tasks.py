@@ -1,8 +1,9 @@
-"""``latentrl export onnx`` of the shipped joystick and timed policies: onnxruntime and torch agree with the env.
+"""``latentrl export onnx`` of the shipped joystick, timed and obstacle policies: onnxruntime and torch agree with
+the env.
 
-Each graph's task inputs carry what the env observes (joystick: the commanded heading and speed;
-timed: the waypoint and the time left), and the graph builds the observation with the env's own
-functions, so over 4 steps the actions and states match the env's, at batch 2.
+Each graph's task inputs carry what the env observes (joystick: the commanded heading and speed; timed: the
+waypoint and the time left; obstacles: the goal and the scene rays the engine casts), and the graph builds the
+observation with the env's own functions, so over 4 steps the actions and states match the env's, at batch 2.
 """
 
 import contextlib
@@ -52,6 +53,7 @@ def _agree_over_four_steps(name: str, env, task_inputs, expected_names: list[str
         extra = task_inputs(env)
         action, frames, *state = run_session(session, [*_state_feeds(env._state), *extra], names)
         closed_action, _, *closed = run_session(session, [*closed, *extra], names)
+        closed = closed[:4]  # the state; a scene policy's graph also says where to cast the next rays
         with torch.no_grad():
             expected = policy.act(obs, deterministic=True).action
         obs, *_ = env.step(expected)
@@ -81,3 +83,39 @@ def test_shipped_timed_policy_runs_in_onnxruntime_like_the_torch_env(tmp_path):
                                   ["goal", "time_left"], tmp_path)
     settings = meta["latentrl.settings"]
     assert settings["task"] == "timed" and settings["time_left_clip"] == 10.0 and settings["observe_next"] is False
+
+
+def test_shipped_obstacle_policy_takes_the_engines_rays_and_says_where_to_cast_the_next(tmp_path):
+    from latentrl.envs import ReachLocationEnv
+    from latentrl.envs.scene import ray_fan
+    from latentrl.scenes import Box, Cylinder, Scene
+
+    room = Scene((Box((0.4, 1.6), (0.6, 0.5, 1.0)), Cylinder((-0.8, 2.5), 0.3, 1.2), Box((1.5, 0.0), (0.3, 2.0, 1.0))))
+    env = ReachLocationEnv(2, motion="default", texts=["walk"], autoreset_mode="Disabled", foot_lock=True,
+                           scene=room)
+    cast = []
+
+    def inputs(e):
+        rays = e.scene.rays(e.history_world())
+        cast.append(rays)
+        return [e.goal_world.clone(), rays]
+
+    meta = _agree_over_four_steps("reach_obstacles_default", env, inputs, ["goal", "scene_rays"], tmp_path)
+    assert all(float(r.min()) < 4.0 for r in cast)  # the rays saw the room
+    assert meta["latentrl.settings"]["scene_rays"]["count"] == 16
+    seeds = meta["latentrl.seeds"]
+    assert len(seeds["ray_directions"]["shape"]) == 3 and seeds["ray_directions"]["shape"][1:] == [16, 2]
+    # the graph's next_ray_* are the env's fan after the step, so an engine casts exactly the env's rays
+    session = onnx_session(tmp_path / "reach_obstacles_default.onnx")
+    names = [i.name for i in session.get_inputs()]
+    outs = [o.name for o in session.get_outputs()]
+    assert outs[-2:] == ["next_ray_origin", "next_ray_directions"]
+    env.reset(seed=5)
+    feeds = [*_state_feeds(env._state), *inputs(env)]
+    with torch.no_grad():
+        action = load_policy(ROOT / "policies" / "reach_obstacles_default.pt").policy.act(
+            env.observation(), deterministic=True).action
+    *_, origin, dirs = run_session(session, feeds, names)
+    env.step(action)
+    want_origin, want_dirs = ray_fan(env.history_world())
+    assert (origin - want_origin).abs().max() < 1e-4 and (dirs - want_dirs).abs().max() < 1e-4
