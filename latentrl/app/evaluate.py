@@ -196,13 +196,19 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
 
 
 def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
-    """The policy's task spec and the suite files to run: ``paths``, else the task's suites of its prompts."""
+    """The policy's task spec and the suite files to run: ``paths``, else the task's suites of its prompts.
+
+    A policy trained on random mazes runs the ``maze`` suite by default.
+    """
     env = stored_env(policy_file(policy))
     spec = task_spec(env.task if env is not None else UNNAMED_TASK)
     evaluator = spec.evaluator
     if evaluator is None:
         raise ConfigError(f"{policy}: task '{spec.name}' has no evaluator (give its TaskSpec an evaluator)")
     defaults = evaluator.default_suites(spec.suites, env.texts if env is not None else ())
+    scene = env.scene if env is not None else None
+    if isinstance(scene, dict) and "random_mazes" in scene and evaluator.suite_kind == "paths":
+        defaults = ("maze",)  # its training mazes came with their routes: judge it on the shipped mazes
     return spec, resolve_path_files(paths, evaluator.suite_kind, defaults)
 
 
