@@ -35,12 +35,13 @@ def skate_weights(heights: torch.Tensor, threshold: float = CONTACT_HEIGHT_M) ->
 
 
 def weighted_foot_slide(
-    feet: torch.Tensor, floor: float = 0.0, threshold: float = CONTACT_HEIGHT_M, horizontal: bool = False
+    feet: torch.Tensor, floor: float | torch.Tensor = 0.0, threshold: float = CONTACT_HEIGHT_M,
+    horizontal: bool = False
 ) -> torch.Tensor:
     """(..., T, 2, 3) world foot joints -> (..., T-1, 2) contact-weighted displacement per transition, metres.
 
     ``horizontal`` measures the xy displacement only (sliding without lift-off and touch-down); the weight
-    always uses the heights.
+    always uses the heights above ``floor`` (a number, or (..., T, 2) the terrain under each foot).
     """
     delta = feet[..., 1:, :, :] - feet[..., :-1, :, :]
     step = torch.linalg.vector_norm(delta[..., :2] if horizontal else delta, dim=-1)

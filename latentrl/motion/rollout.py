@@ -375,7 +375,8 @@ class MotionModel(nn.Module):
             world = placement.compose(rotation, origin)
             if self.foot_lock if foot_lock is None else foot_lock:
                 before = state.world.apply(foot_positions(joints_of(state.history[:, -1])))
-                joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight)
+                joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight,
+                                                        terrain)
                 world = WorldTransform(world.rotation, world.translation + shift)
         return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
@@ -547,6 +548,7 @@ def lock_feet(
     placement: WorldTransform,
     before: torch.Tensor,
     min_weight: float = LOCK_MIN_WEIGHT,
+    terrain: Terrain | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Slide the whole body back under a planted foot, frame by frame (the *foot lock*).
 
@@ -570,13 +572,15 @@ def lock_feet(
             correction scales with the weight (:data:`LOCK_MIN_WEIGHT`). Why it matters: DART's skate
             counts a foot up to 3 cm high, and at 0.5 a foot in the band's upper half still slides (a run's
             skate 3.7 cm/s, 1.7 of it horizontal; at 0.05: 2.8 and 0.5, docs/motion.md).
+        terrain: the ground a foot's height is measured from (a foot on a tread is planted); None: z = 0.
 
     Returns:
         ``(joints_world, future, shift)``: both shifted, and (B, 3) world shift of the last frame (what
         the next primitive's placement adds).
     """
     feet = torch.cat((before[:, None], foot_positions(joints_world)), dim=1)  # (B, 9, 2, 3)
-    weight = skate_weights(feet[..., 2])  # (B, 8, 2)
+    heights = feet[..., 2] if terrain is None else feet[..., 2] - terrain.height(feet[..., :2])
+    weight = skate_weights(heights)  # (B, 8, 2)
     slide = feet[:, 1:, :, :2] - feet[:, :-1, :, :2]  # (B, 8, 2, 2)
     step = -(weight[..., None] * slide).sum(dim=2) / weight.sum(dim=2).clamp(min=min_weight)[..., None]
     moved = step.cumsum(dim=1)

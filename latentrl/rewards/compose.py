@@ -226,18 +226,27 @@ def _success(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     return terms.success(x.reached)
 
 
+def _ground(x: RewardInputs, feet: torch.Tensor) -> torch.Tensor | float:
+    """The ground under (N, T, 2, 3) feet: (N, T, 2) terrain heights with a scene, else the floor height.
+
+    A tread or a box top carries the foot; where a scene has nothing underfoot its terrain is the floor height
+    itself, so the terms equal the flat floor's there.
+    """
+    return x.floor_height if x.scene is None else x.scene.height(feet[..., :2])
+
+
 @reward_term("foot_floor", 100.0)
 def _foot_floor(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
-    """:func:`terms.foot_floor` over the new frames, scaled per text."""
-    height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2]
-    return terms.foot_floor(height, x.floor_height, cfg.contact_threshold, x.floor_scale)
+    """:func:`terms.foot_floor` over the new frames, scaled per text, against the terrain under each foot."""
+    feet = terms.foot_joints(x.joints_world[:, x.history_length :])
+    return terms.foot_floor(feet[..., 2] - _ground(x, feet), 0.0, cfg.contact_threshold, x.floor_scale)
 
 
 @reward_term("skate", 100.0)
 def _skate(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
-    """:func:`terms.foot_skate` from the last history frame through the new frames."""
+    """:func:`terms.foot_skate` from the last history frame through the new frames, heights over the terrain."""
     feet = terms.foot_joints(x.joints_world[:, x.history_length - 1 :])
-    return terms.foot_skate(feet, x.floor_height, cfg.contact_threshold)
+    return terms.foot_skate(feet, _ground(x, feet), cfg.contact_threshold)
 
 
 @reward_term("orient", 0.1)
@@ -292,7 +301,8 @@ def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 @reward_term("skill", 0.0, inputs=('skill',))
 def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.skill_fidelity` of the step against its text's skill rule (the evaluation's contact height)."""
-    height = terms.foot_joints(x.joints_world[:, x.history_length :])[..., 2] - x.floor_height
+    feet = terms.foot_joints(x.joints_world[:, x.history_length :])
+    height = feet[..., 2] - _ground(x, feet)
     return terms.skill_fidelity(*x.pelvis_before_after(), height, x.skill, x.step_seconds(),
                                 scale=cfg.skill_multipliers() if cfg.skill_scale else None)
 

@@ -114,7 +114,7 @@ def foot_floor(
 
 
 def foot_skate(
-    foot_positions: torch.Tensor, floor_height: float = 0.0, threshold: float = CONTACT_HEIGHT_M
+    foot_positions: torch.Tensor, floor_height: float | torch.Tensor = 0.0, threshold: float = CONTACT_HEIGHT_M
 ) -> torch.Tensor:
     """``skate``: foot displacement weighted by how close the foot is to the floor.
 
@@ -128,7 +128,7 @@ def foot_skate(
     Args:
         foot_positions: (N, T, 2, 3) world foot joints over T consecutive frames (DART: the last
             history frame and the 8 new frames, T = 9), metres.
-        floor_height: floor z, metres.
+        floor_height: floor z, metres, or (N, T, 2) the terrain under each foot.
         threshold: contact height, metres (DART 0.03).
 
     Returns:

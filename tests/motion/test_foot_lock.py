@@ -97,3 +97,19 @@ def test_rollout_with_the_lock_keeps_the_model_input_and_slides_less():
         return weighted_foot_slide(foot_positions(joints), horizontal=True).sum()
 
     assert slide(locked_j) < 0.5 * slide(free_j), (slide(locked_j), slide(free_j))
+
+
+def test_a_foot_planted_on_a_tread_is_locked_against_the_terrain_under_it():
+    from latentrl.scenes import Box, Scene, SceneBatch
+
+    tread = SceneBatch.from_scenes([Scene((Box((1.0, 2.0), (4.0, 4.0, 0.2)),))])  # under the whole primitive
+    future, world, placement, before = primitive(left_z=0.2, right_z=0.4)
+    untouched, _, shift = lock_feet(future, world, placement, before)  # measured from z = 0: in the air
+    assert torch.equal(untouched, world) and torch.equal(shift, torch.zeros(1, 3))
+    locked, _, shift = lock_feet(future, world, placement, before, terrain=tread)
+    assert torch.allclose(locked[0, :, LEFT], before[0, 0].expand(8, 3), atol=1e-6)  # planted on the tread
+    assert torch.allclose(shift, torch.tensor([[0.0, -0.08, 0.0]]), atol=1e-6)
+    far = SceneBatch.from_scenes([Scene((Box((50.0, 50.0), (1.0, 1.0, 0.2)),))])  # nothing underfoot: z = 0
+    future, world, placement, before = primitive(left_z=0.0, right_z=0.2)
+    assert all(torch.equal(a, b) for a, b in zip(lock_feet(future, world, placement, before, terrain=far),
+                                                   lock_feet(future, world, placement, before)))

@@ -10,6 +10,7 @@ from latentrl.motion.skeleton import FOOT_JOINTS, JOINT_NAMES
 from latentrl.optim.losses import constraint_loss, scene_costs, scene_loss
 from latentrl.optim.problems import parse_suite, stack_targets
 from latentrl.rewards import SCENE_TERMS, RewardComposer, RewardInputs
+from latentrl.rewards.skills import skill_code
 from latentrl.scenes import Box, Scene, SceneBatch, Stairs, scene_to_dict
 from latentrl.scenes.contact import (
     SKIN_RADIUS_M,
@@ -70,7 +71,7 @@ def test_foot_terrain_gap_reads_the_stairs():
     assert float(foot_terrain_gap(flat, stairs)[0, 0]) == pytest.approx(0.25, abs=1e-6)
 
 
-def inputs(joints: torch.Tensor, scene=None) -> RewardInputs:
+def _inputs(joints: torch.Tensor, scene=None) -> RewardInputs:
     n = joints.shape[0]
     history = joints[:, :1].expand(n, 2, 22, 3)
     return RewardInputs(torch.cat((history, joints), 1), torch.zeros(n, 3), torch.zeros(n, dtype=torch.bool),
@@ -93,7 +94,7 @@ def test_reward_terms_are_the_kernels_negated():
     scene = SceneBatch.from_scenes([Scene((WALL, Stairs((3.0, 0.0), 90.0, 1.0, 0.15, 0.3, 3)))])
     joints = torch.cat((pose(y=1.85, feet_z=(0.2, 0.3)), pose(y=0.0)), dim=0)
     comp = RewardComposer(terms=SCENE_TERMS, weights={"collision": 2.0, "terrain_contact": 3.0})
-    total, values = comp(inputs(joints, scene))
+    total, values = comp(_inputs(joints, scene))
     assert torch.allclose(values["collision"], -collision_cost(joints, scene))
     assert torch.allclose(values["terrain_contact"], -contact_cost(joints, scene))
     assert torch.allclose(values["clearance"], -clearance_cost(joints, scene))
@@ -114,7 +115,7 @@ def test_collision_and_clearance_share_one_sdf_query_per_step():
     scene = Counted.__new__(Counted)
     scene.__dict__.update(plain.__dict__)  # the same tensors, with sdf() counted
     joints = torch.cat((pose(y=1.85), pose(y=0.0)), dim=0)
-    _, values = RewardComposer(terms=("collision", "clearance"))(inputs(joints, scene))
+    _, values = RewardComposer(terms=("collision", "clearance"))(_inputs(joints, scene))
     assert calls == [(2, 1, 22, 3)]  # one query of the new frames, shared
     assert torch.allclose(values["collision"], -collision_cost(joints, plain))
     assert torch.allclose(values["clearance"], -clearance_cost(joints, plain))
@@ -124,7 +125,7 @@ def test_scene_terms_weigh_nothing_by_default_and_need_a_scene():
     comp = RewardComposer(terms=SCENE_TERMS)
     assert comp.weights == {"collision": 0.0, "terrain_contact": 0.0, "clearance": 0.0}
     with pytest.raises(ValueError, match="reward term 'collision' needs RewardInputs.scene"):
-        comp(inputs(pose()))
+        comp(_inputs(pose()))
 
 
 def suite(scene=None, **extra) -> dict:
@@ -185,3 +186,30 @@ def test_the_scene_loss_pushes_joints_out_of_the_wall():
     pelvis_grad = joints.grad[0, :, 0]
     assert (pelvis_grad[:, 1] > 0).all()  # descending moves -y, away from the wall's face at y = 1.9
     assert torch.allclose(pelvis_grad[:, [0, 2]], torch.zeros(8, 2))
+
+
+def test_foot_floor_skate_and_skill_read_the_tread_under_each_foot():
+    tread = SceneBatch.from_scenes([Scene((Box((0.0, 0.0), (2.0, 2.0, 0.2)),))])  # a 0.2 m platform
+    standing = pose(feet_z=(0.2, 0.2), feet_y=0.0).expand(1, 8, 22, 3).clone()
+    sliding = standing.clone()
+    sliding[:, :, LEFT, 0] += 0.01 * torch.arange(8, dtype=torch.float32)[None]  # the left foot slides 1 cm/frame
+    comp = RewardComposer(terms=("foot_floor", "skate", "skill"), weights={"skill": 1.0})
+
+    def inputs(joints, scene=None):
+        x = _inputs(joints, scene)
+        x.skill = torch.full((joints.shape[0],), skill_code("walk"))
+        return x
+
+    _, on = comp(inputs(standing, tread))
+    _, flat = comp(inputs(standing))
+    assert float(on["foot_floor"][0]) == 0.0 and float(on["skate"][0]) == 0.0  # standing on the tread
+    assert float(flat["foot_floor"][0]) == pytest.approx(-(0.2 - 0.03), abs=1e-6)  # 20 cm over z = 0
+    _, on = comp(inputs(sliding, tread))
+    _, flat = comp(inputs(sliding))
+    assert float(on["skate"][0]) < -1e-3 and float(flat["skate"][0]) == 0.0  # only the tread sees the slide
+    # off the platform a scene's terrain is the floor: the same values as no scene, to the bit
+    off = pose(feet_z=(0.0, 0.1), feet_y=-3.0).expand(1, 8, 22, 3).clone()
+    off[:, :, LEFT, 0] += 0.01 * torch.arange(8, dtype=torch.float32)[None]
+    _, a = comp(inputs(off, tread))
+    _, b = comp(inputs(off))
+    assert all(torch.equal(a[k], b[k]) for k in ("foot_floor", "skate", "skill"))
