@@ -19,13 +19,12 @@ straight on (+y) or turned to +x; waypoints on each flight, on the landing and o
 
 from __future__ import annotations
 
-import math
 import random
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from latentrl.errors import ConfigError
 from latentrl.scenes.scene import Box, Scene, Stairs
+from latentrl.scenes.settings import check_number, check_range, settings_of
 
 WALL_HEIGHT_M = 1.2
 """Height of maze walls: above the pelvis, below the head (the scene rays see every wall at any height)."""
@@ -173,45 +172,17 @@ class RandomMazes:
 
     def validate(self) -> None:
         """Sizes in range; one-line :class:`ConfigError` naming the field."""
-        def pair(name: str, low: float, high: float, integer: bool) -> None:
-            v = getattr(self, name)
-            kind = "integers" if integer else "numbers"
-            ok = isinstance(v, (list, tuple)) and len(v) == 2 and all(
-                isinstance(x, int if integer else (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                for x in v)
-            if not ok or not low <= v[0] <= v[1] <= high:
-                raise ConfigError(f"random_mazes.{name}: expected [min, max] {kind} with {low:g} <= min <= max "
-                                  f"<= {high:g}, got {v}")
-
-        def number(name: str, low: float, high: float, integer: bool = False) -> None:
-            v = getattr(self, name)
-            kind = int if integer else (int, float)
-            if isinstance(v, bool) or not isinstance(v, kind) or not math.isfinite(v) or not low <= v <= high:
-                raise ConfigError(f"random_mazes.{name}: expected {'an integer' if integer else 'a number'} in "
-                                  f"[{low:g}, {high:g}], got {v!r:.30}")
-
-        number("count", 1, MAX_RANDOM_MAZES, integer=True)
-        pair("cols", 1, MAX_MAZE_CELLS, integer=True)
-        pair("rows", 2, MAX_MAZE_CELLS, integer=True)
-        number("wall", 0.01, 1.0)
-        pair("cell", round(self.wall + MIN_CORRIDOR_M, 6), 10.0, integer=False)
-        number("seed", 0, 2**31 - 1, integer=True)
+        check_number("random_mazes.count", self.count, 1, MAX_RANDOM_MAZES, integer=True)
+        check_range("random_mazes.cols", self.cols, 1, MAX_MAZE_CELLS, integer=True)
+        check_range("random_mazes.rows", self.rows, 2, MAX_MAZE_CELLS, integer=True)
+        check_number("random_mazes.wall", self.wall, 0.01, 1.0)
+        check_range("random_mazes.cell", self.cell, round(self.wall + MIN_CORRIDOR_M, 6), 10.0)
+        check_number("random_mazes.seed", self.seed, 0, 2**31 - 1, integer=True)
 
     @classmethod
     def of(cls, raw: dict) -> RandomMazes:
         """A checked spec from its YAML/JSON mapping (unknown keys are one-line errors)."""
-        if not isinstance(raw, dict):
-            raise ConfigError(f"random_mazes: expected a mapping of settings, got {raw!r:.40}")
-        known = list(cls.__dataclass_fields__)
-        for k in raw:
-            if k not in known:
-                from latentrl.errors import closest
-
-                raise ConfigError(f"random_mazes.{k}: unknown setting{closest(str(k), known)}; expected "
-                                  f"{', '.join(known)}")
-        spec = cls(**{k: (list(v) if isinstance(v, (list, tuple)) else v) for k, v in raw.items()})
-        spec.validate()
-        return spec
+        return settings_of(cls, raw, "random_mazes")
 
     def courses(self) -> list[Course]:
         """The pool, in order (the same for the same settings)."""

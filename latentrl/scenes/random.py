@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from latentrl.errors import ConfigError
 from latentrl.scenes.scene import SceneBatch
+from latentrl.scenes.settings import check_number, check_range, settings_of
 
 TRIES = 8
 """Draws per obstacle slot before it is left empty."""
@@ -42,40 +42,17 @@ class RandomObstacles:
 
     def validate(self) -> None:
         """Ranges ordered and positive; one-line :class:`ConfigError` naming the field."""
-        def pair(name: str, low: float, high: float, integer: bool = False) -> None:
-            v = getattr(self, name)
-            kind = "integers" if integer else "numbers"
-            ok = isinstance(v, (list, tuple)) and len(v) == 2 and all(
-                isinstance(x, int if integer else (int, float)) and not isinstance(x, bool)
-                and math.isfinite(x) for x in v)
-            if not ok or not low <= v[0] <= v[1] <= high:
-                raise ConfigError(f"random_obstacles.{name}: expected [min, max] {kind} with {low:g} <= min <= max "
-                                  f"<= {high:g}, got {v}")
-
-        pair("count", 0, MAX_RANDOM_OBSTACLES, integer=True)
-        pair("size", 1e-3, 100.0)
-        pair("height", 1e-3, 100.0)
-        pair("distance", 0.0, 1000.0)
+        check_range("random_obstacles.count", self.count, 0, MAX_RANDOM_OBSTACLES, integer=True)
+        check_range("random_obstacles.size", self.size, 1e-3, 100.0)
+        check_range("random_obstacles.height", self.height, 1e-3, 100.0)
+        check_range("random_obstacles.distance", self.distance, 0.0, 1000.0)
         for name, low, high in (("angle_deg", 0.0, 180.0), ("cylinder_share", 0.0, 1.0), ("clearance", 0.0, 100.0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not low <= v <= high:
-                raise ConfigError(f"random_obstacles.{name}: expected a number in [{low:g}, {high:g}], got {v!r}")
+            check_number(f"random_obstacles.{name}", getattr(self, name), low, high)
 
     @classmethod
     def of(cls, raw: dict) -> RandomObstacles:
         """A checked spec from its YAML/JSON mapping (unknown keys are one-line errors)."""
-        if not isinstance(raw, dict):
-            raise ConfigError(f"random_obstacles: expected a mapping of settings, got {raw!r:.40}")
-        known = [f for f in cls.__dataclass_fields__]
-        for k in raw:
-            if k not in known:
-                from latentrl.errors import closest
-
-                raise ConfigError(f"random_obstacles.{k}: unknown setting{closest(str(k), known)}; expected "
-                                  f"{', '.join(known)}")
-        spec = cls(**{k: (list(v) if isinstance(v, (list, tuple)) else v) for k, v in raw.items()})
-        spec.validate()
-        return spec
+        return settings_of(cls, raw, "random_obstacles")
 
     def empty(self, n: int, device: str | torch.device = "cpu") -> SceneBatch:
         """N empty scenes with a slot per obstacle (each slot is a box or a cylinder)."""
