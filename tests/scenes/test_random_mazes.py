@@ -86,30 +86,6 @@ def test_random_mazes_need_the_path_task_and_no_paths_of_its_own(tiny_model, tmp
     assert env.scene.spec == RandomMazes(count=3, cell=[1.5, 1.5]) and len(env.scene.courses) == 3
 
 
-@pytest.mark.parametrize(("text", "message"), [
-    ("task: reach\nscene: {random_mazes: {}}\n",
-     "c.yaml: scene: random_mazes: the env walks each maze's route, which only the path task does (got task 'reach')"),
-    ("task: path\npath: {paths: dart_walk_long}\nscene: {random_mazes: {}}\n",
-     "c.yaml: path.paths: random_mazes brings its own paths (each maze's route); leave path.paths unset"),
-    ("task: path\nscene: {random_mazes: {cel: [1, 2]}}\n",
-     "c.yaml: scene: random_mazes.cel: unknown setting (did you mean 'cell'?); expected count, cols, rows, cell, "
-     "wall, seed"),
-    ("task: path\nscene: {random_mazes: {cell: [1.0, 2.0]}}\n",
-     "c.yaml: scene: random_mazes.cell: expected [min, max] numbers with 1.4 <= min <= max <= 10, got [1.0, 2.0]"),
-    ("task: path\nscene: {random_mazes: {count: 0}}\n",
-     "c.yaml: scene: random_mazes.count: expected an integer in [1, 4096], got 0"),
-    ("task: path\nscene: {random_mazes: {}, random_obstacles: {}}\n",
-     "c.yaml: scene: random_obstacles stands alone"),
-])
-def test_bad_random_mazes_are_one_line(tmp_path, text, message):
-    f = tmp_path / "c.yaml"
-    f.write_text(text)
-    with pytest.raises(ConfigError) as info:
-        load_config(EnvConfig, f)
-    assert str(info.value).replace(str(tmp_path) + "/", "").startswith(message)
-    assert "\n" not in str(info.value)
-
-
 def test_eval_of_a_maze_policy_runs_a_suite_of_plain_paths_on_the_open_floor(tiny_model):
     settings = EvalSettings(episodes=1, max_steps=2)
     settings.scene = {"random_mazes": {"count": 2}}

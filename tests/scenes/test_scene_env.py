@@ -134,6 +134,19 @@ def test_env_config_scene_from_a_file_a_generator_or_inline(tmp_path, tiny_model
     ("scene: 3\n", "c.yaml: scene: expected a scene file, a latentrl.scene/1 object, {random_obstacles: {...}} "
                    "or {random_mazes: {...}}, got 3"),
     ("terminate_on_collision: true\n", "c.yaml: terminate_on_collision: needs a scene (env.scene)"),
+    ("task: reach\nscene: {random_mazes: {}}\n",
+     "c.yaml: scene: random_mazes: the env walks each maze's route, which only the path task does (got task 'reach')"),
+    ("task: path\npath: {paths: dart_walk_long}\nscene: {random_mazes: {}}\n",
+     "c.yaml: path.paths: random_mazes brings its own paths (each maze's route); leave path.paths unset"),
+    ("task: path\nscene: {random_mazes: {cel: [1, 2]}}\n",
+     "c.yaml: scene: random_mazes.cel: unknown setting (did you mean 'cell'?); expected count, cols, rows, cell, "
+     "wall, seed"),
+    ("task: path\nscene: {random_mazes: {cell: [1.0, 2.0]}}\n",
+     "c.yaml: scene: random_mazes.cell: expected [min, max] numbers with 1.4 <= min <= max <= 10, got [1.0, 2.0]"),
+    ("task: path\nscene: {random_mazes: {count: 0}}\n",
+     "c.yaml: scene: random_mazes.count: expected an integer in [1, 4096], got 0"),
+    ("task: path\nscene: {random_mazes: {}, random_obstacles: {}}\n",
+     "c.yaml: scene: random_obstacles stands alone"),
 ])
 def test_bad_env_scenes_are_one_line(tmp_path, text, message):
     f = tmp_path / "c.yaml"
