@@ -22,6 +22,7 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "reach_hop_left_default": ("dart_hop_long", 128),  # 16.2 s on path 0
     "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m (23.9 s)
     "reach_obstacles_default": ("reach_obstacles", 64),  # one goal 3.4 m ahead among 3-8 random objects: ~5 s
+    "path_maze_default": ("maze", 112),  # maze_a's route of 11 cell centres, 22 m between 1.8 m corridors: ~22 s
 }
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
@@ -61,7 +62,7 @@ def test_shipped_policy_drives_its_first_path(name, tmp_path):
     episode = report["suites"]["first"]["paths"][0]["episodes"][0]
     # the last waypoint is 20 m (mixed: 30 m) ahead: a working policy ends far closer to it than it started
     assert episode["final_dist_m"] < 10.0, episode
-    if name == "reach_obstacles_default":  # among its scene's objects: it gets there without touching one
+    if name in ("reach_obstacles_default", "path_maze_default"):  # among objects: there without touching one
         assert episode["success"] and episode["collision"] == 0, episode
 
 
