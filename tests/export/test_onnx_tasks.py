@@ -1,8 +1,9 @@
-"""``latentrl export onnx`` of the shipped joystick, timed and obstacle policies: onnxruntime and torch agree with
-the env.
+"""``latentrl export onnx`` of the shipped joystick, timed, obstacle and maze policies: onnxruntime and torch agree
+with the env.
 
 Each graph's task inputs carry what the env observes (joystick: the commanded heading and speed; timed: the
-waypoint and the time left; obstacles: the goal and the scene rays the engine casts), and the graph builds the
+waypoint and the time left; obstacles: the goal and the scene rays the engine casts; maze: the waypoint, the next
+one and the rays), and the graph builds the
 observation with the env's own functions, so over 4 steps the actions and states match the env's, at batch 2.
 """
 
@@ -119,3 +120,21 @@ def test_shipped_obstacle_policy_takes_the_engines_rays_and_says_where_to_cast_t
     env.step(action)
     want_origin, want_dirs = ray_fan(env.history_world())
     assert (origin - want_origin).abs().max() < 1e-4 and (dirs - want_dirs).abs().max() < 1e-4
+
+
+def test_shipped_maze_policy_takes_the_next_waypoint_and_the_rays_of_its_maze(tmp_path):
+    from latentrl.envs import FollowPathEnv
+    from latentrl.envs.path import load_paths
+    from latentrl.resources import packaged
+
+    maze = load_paths(packaged("tasks") / "paths" / "maze.json")[0]  # maze_a's route, in maze_a
+    env = FollowPathEnv(2, motion="default", texts=["walk"], paths=[maze], path_assignment="by_env",
+                        observe_next=True, next_at_last="extend", autoreset_mode="Disabled", foot_lock=True,
+                        scene=maze.scene)
+    meta = _agree_over_four_steps("path_maze_default", env,
+                                  lambda e: [e.goal_world.clone(), e._waypoint(1).clone(),
+                                             e.scene.rays(e.history_world())],
+                                  ["goal", "next_goal", "scene_rays"], tmp_path)
+    settings = meta["latentrl.settings"]
+    assert settings["task"] == "path" and settings["observe_next"] is True and settings["next_at_last"] == "extend"
+    assert settings["scene_rays"]["count"] == 16
