@@ -3,8 +3,8 @@ with the env.
 
 Each graph's task inputs carry what the env observes (joystick: the commanded heading and speed; timed: the
 waypoint and the time left; obstacles: the goal and the scene rays the engine casts; maze: the waypoint, the next
-one and the rays), and the graph builds the
-observation with the env's own functions, so over 4 steps the actions and states match the env's, at batch 2.
+one and the rays), and the graph builds the observation with the env's own functions, so over 4 steps the actions
+and states match the env's, at batch 2.
 """
 
 import contextlib
