@@ -103,6 +103,7 @@ class RewardInputs:
     """Sit: (N,) the world z the pelvis should be at during the step (seated or standing), NaN where there is none."""
 
     _sdf: torch.Tensor | None = field(default=None, init=False, repr=False)
+    _feet_ground: torch.Tensor | None = field(default=None, init=False, repr=False)
 
     def new_frames_sdf(self) -> torch.Tensor:
         """(N, F, 22) each new frame's joints' distance to the scene, computed once per step for the scene terms.
@@ -112,6 +113,27 @@ class RewardInputs:
         if self._sdf is None:
             self._sdf = self.need("scene", "collision or clearance").sdf(self.joints_world[:, self.history_length :])
         return self._sdf
+
+    def feet_ground(self) -> torch.Tensor | float:
+        """The ground under the feet of the last history frame and the new frames, for the foot terms.
+
+        With a scene: (N, F + 1, 2) terrain heights, one query per step shared by ``foot_floor``, ``skate``,
+        ``skill`` and ``terrain_contact`` (a tread or a box top carries the foot; where nothing is underfoot the
+        terrain is the floor height itself, so the terms equal the flat floor's there). Without one: the floor
+        height.
+        """
+        if self.scene is None:
+            return self.floor_height
+        if self._feet_ground is None:
+            feet = terms.foot_joints(self.joints_world[:, self.history_length - 1 :])
+            self._feet_ground = self.scene.height(feet[..., :2])
+        return self._feet_ground
+
+    def new_feet_heights(self) -> torch.Tensor:
+        """(N, F, 2) each new frame's foot joints' height over the ground under them (:meth:`feet_ground`)."""
+        ground = self.feet_ground()
+        z = terms.foot_joints(self.joints_world[:, self.history_length :])[..., 2]
+        return z - (ground if isinstance(ground, float) else ground[:, 1:])
 
     def step_seconds(self) -> float:
         """Duration of the step: its new frames / 30 (8 frames = 0.267 s)."""
@@ -226,27 +248,17 @@ def _success(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     return terms.success(x.reached)
 
 
-def _ground(x: RewardInputs, feet: torch.Tensor) -> torch.Tensor | float:
-    """The ground under (N, T, 2, 3) feet: (N, T, 2) terrain heights with a scene, else the floor height.
-
-    A tread or a box top carries the foot; where a scene has nothing underfoot its terrain is the floor height
-    itself, so the terms equal the flat floor's there.
-    """
-    return x.floor_height if x.scene is None else x.scene.height(feet[..., :2])
-
-
 @reward_term("foot_floor", 100.0)
 def _foot_floor(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.foot_floor` over the new frames, scaled per text, against the terrain under each foot."""
-    feet = terms.foot_joints(x.joints_world[:, x.history_length :])
-    return terms.foot_floor(feet[..., 2] - _ground(x, feet), 0.0, cfg.contact_threshold, x.floor_scale)
+    return terms.foot_floor(x.new_feet_heights(), 0.0, cfg.contact_threshold, x.floor_scale)
 
 
 @reward_term("skate", 100.0)
 def _skate(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.foot_skate` from the last history frame through the new frames, heights over the terrain."""
     feet = terms.foot_joints(x.joints_world[:, x.history_length - 1 :])
-    return terms.foot_skate(feet, _ground(x, feet), cfg.contact_threshold)
+    return terms.foot_skate(feet, x.feet_ground(), cfg.contact_threshold)
 
 
 @reward_term("orient", 0.1)
@@ -301,9 +313,7 @@ def _prior(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 @reward_term("skill", 0.0, inputs=('skill',))
 def _skill(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
     """:func:`terms.skill_fidelity` of the step against its text's skill rule (the evaluation's contact height)."""
-    feet = terms.foot_joints(x.joints_world[:, x.history_length :])
-    height = feet[..., 2] - _ground(x, feet)
-    return terms.skill_fidelity(*x.pelvis_before_after(), height, x.skill, x.step_seconds(),
+    return terms.skill_fidelity(*x.pelvis_before_after(), x.new_feet_heights(), x.skill, x.step_seconds(),
                                 scale=cfg.skill_multipliers() if cfg.skill_scale else None)
 
 
@@ -335,9 +345,11 @@ def _collision(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
 
 @reward_term("terrain_contact", 0.0, inputs=('scene',))
 def _terrain_contact(x: RewardInputs, cfg: RewardConfig) -> torch.Tensor:
-    """:func:`terms.terrain_contact` over the new frames, scaled per text."""
-    return terms.terrain_contact(x.joints_world[:, x.history_length :], x.scene, cfg.contact_threshold,
-                                 x.floor_scale)
+    """:func:`terms.terrain_contact` over the new frames, scaled per text, from the step's shared terrain query.
+
+    The same values as the kernel (``-contact_cost``); with a scene ``foot_floor`` measures the same gap.
+    """
+    return terms.foot_floor(x.new_feet_heights(), 0.0, cfg.contact_threshold, x.floor_scale)
 
 
 @reward_term("clearance", 0.0, inputs=('scene',))

@@ -213,3 +213,23 @@ def test_foot_floor_skate_and_skill_read_the_tread_under_each_foot():
     _, a = comp(inputs(off, tread))
     _, b = comp(inputs(off))
     assert all(torch.equal(a[k], b[k]) for k in ("foot_floor", "skate", "skill"))
+
+
+def test_the_foot_terms_share_one_terrain_query_per_step():
+    tread = SceneBatch.from_scenes([Scene((Box((0.0, 0.0), (2.0, 2.0, 0.2)),))])
+    joints = pose(feet_z=(0.22, 0.3), feet_y=0.0).expand(2, 8, 22, 3).clone()
+    calls = []
+    height = tread.height
+
+    def counted(xy):
+        calls.append(xy.shape)
+        return height(xy)
+
+    tread.height = counted
+    x = _inputs(joints, tread)
+    x.skill = torch.full((2,), skill_code("walk"))
+    _, values = RewardComposer(terms=("foot_floor", "skate", "skill", "terrain_contact"))(x)
+    assert len(calls) == 1  # one query for the last history frame and the new frames
+    tread.height = height
+    assert torch.equal(values["terrain_contact"], -contact_cost(joints, tread))
+    assert torch.equal(values["foot_floor"], values["terrain_contact"])  # with a scene they measure the same gap
