@@ -356,28 +356,38 @@ class MotionModel(nn.Module):
             state.history, text_embedding, noise, guidance_scale, sampler, generator=generator
         )
         with torch.no_grad():
-            placement = state.world
-            joints_world = placement.apply(joints_of(sample.future))
-            airborne = state.airborne  # without the snap nothing lands: the flags pass through
-            future = sample.future
-            if self.floor_snap is not None:
-                ground = None
-                if terrain is not None:  # the snap moves z only: the ground under each joint stays the same
-                    stand = state.world.apply(joints_of(state.history))[..., 2].flatten(1).amin(dim=1)
-                    ground = ground_under(joints_world, terrain, stand)
-                joints_world, placement, airborne = self._snap_to_floor(
-                    joints_world, placement, state.airborne_flags(), ground
-                )
-                if self.floor_snap_ramp:
-                    lift = placement.translation[:, 2] - state.world.translation[:, 2]
-                    joints_world, future = ramp_snap(future, joints_world, lift, ground)
-            history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
-            world = placement.compose(rotation, origin)
-            if self.foot_lock if foot_lock is None else foot_lock:
-                before = state.world.apply(foot_positions(joints_of(state.history[:, -1])))
-                joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight,
-                                                        terrain)
-                world = WorldTransform(world.rotation, world.translation + shift)
+            return self._place(state, sample, self.foot_lock if foot_lock is None else foot_lock, lock_min_weight,
+                               terrain)
+
+    def _place(self, state: RolloutState, sample, foot_lock: bool, lock_min_weight: float,
+               terrain: Terrain | None, floor_snap: bool = True) -> StepResult:
+        """Place a sampled primitive in the world: floor snap (the model's setting), canonicalization, foot lock.
+
+        Plain tensor maths: :meth:`rollout_step` runs it without gradients, :meth:`differentiable_step` with
+        them (the snap's shift and the lock's slide are differentiable functions of the joints).
+        """
+        placement = state.world
+        joints_world = placement.apply(joints_of(sample.future))
+        airborne = state.airborne  # without the snap nothing lands: the flags pass through
+        future = sample.future
+        if floor_snap and self.floor_snap is not None:
+            ground = None
+            if terrain is not None:  # the snap moves z only: the ground under each joint stays the same
+                stand = state.world.apply(joints_of(state.history))[..., 2].flatten(1).amin(dim=1)
+                ground = ground_under(joints_world, terrain, stand)
+            joints_world, placement, airborne = self._snap_to_floor(
+                joints_world, placement, state.airborne_flags(), ground
+            )
+            if self.floor_snap_ramp:
+                lift = placement.translation[:, 2] - state.world.translation[:, 2]
+                joints_world, future = ramp_snap(future, joints_world, lift, ground)
+        history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
+        world = placement.compose(rotation, origin)
+        if foot_lock:
+            before = state.world.apply(foot_positions(joints_of(state.history[:, -1])))
+            joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight,
+                                                    terrain)
+            world = WorldTransform(world.rotation, world.translation + shift)
         return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
     def differentiable_step(
@@ -386,8 +396,16 @@ class MotionModel(nn.Module):
         text_embedding: torch.Tensor,
         noise: torch.Tensor,
         guidance_scale: float | torch.Tensor = GUIDANCE_SCALE,
+        post_process: bool = False,
+        foot_lock: bool | None = None,
+        lock_min_weight: float = LOCK_MIN_WEIGHT,
+        terrain: Terrain | None = None,
     ) -> StepResult:
         """:meth:`rollout_step` with gradients from the world joints back to ``noise`` (DDIM, eta 0).
+
+        ``post_process=True`` places the primitive exactly as :meth:`rollout_step` does (floor snap, and the
+        foot lock with ``foot_lock``, ``lock_min_weight``, ``terrain`` as there), gradients flowing through
+        both: what a closed-loop refiner (``latentrl.optim.refine``) needs to predict an env's next step.
 
         Why a second method: the RL path keeps its ``no_grad`` (no autograd cost per env step), while
         noise optimization (``latentrl.optim``) differentiates through sampler, decoder, canonicalization and
@@ -398,12 +416,8 @@ class MotionModel(nn.Module):
         if self.pelvis_delta is None:
             raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")
         sample = self._sample(state.history, text_embedding, noise, guidance_scale)
-        placement = state.world
-        joints_world = placement.apply(joints_of(sample.future))
-        history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
-        world = placement.compose(rotation, origin)
-        return StepResult(sample.future, joints_world, sample.latent, RolloutState(history, world, state.airborne),
-                          placement)
+        lock = post_process and (self.foot_lock if foot_lock is None else foot_lock)
+        return self._place(state, sample, lock, lock_min_weight, terrain, floor_snap=post_process)
 
     def _snap_to_floor(
         self, joints_world: torch.Tensor, world: WorldTransform, airborne: torch.Tensor,
