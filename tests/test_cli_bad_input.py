@@ -285,6 +285,8 @@ ROWS = [
     ("eval-zero-episodes", [*EVAL, "--episodes", "0"], r"--episodes: must be >= 1, got 0"),
     ("eval-negative-max-steps", [*EVAL, "--max-steps", "-1"], r"--max-steps: must be >= 1, got -1"),
     ("eval-negative-render", [*EVAL, "--render", "-1"], r"--render must be >= 0, got -1"),
+    ("eval-refine-a-reach-policy", [*EVAL, "--refine", "4"],
+     r"--refine: only ReachJoint policies are refined \(the optimizer lands joint goals\); the policy's task is "),
     ("eval-device", [*EVAL, "--device", "tpu"], r"argument --device: unknown device 'tpu'"),
     ("eval-missing-suite", [*EVAL, "--paths", "nowhere"],
      r"path file not found: nowhere \(give a file, or one of the suites"),

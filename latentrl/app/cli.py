@@ -473,6 +473,13 @@ def _eval_commands(sub) -> None:
                     help="reach/path policies: execute every primitive on a MuJoCo humanoid and plan from the "
                          "simulated frames, beside the kinematic run of the same seeds (latentrl[physics]; "
                          "docs/physics.md)")
+    ev.add_argument("--refine", type=int, default=None, metavar="STEPS",
+                    help="ReachJoint policies: before every step, STEPS optimizer steps on the policy's noise land "
+                         "the goals due in the next --refine-horizon primitives (default: the policy's stored "
+                         "eval.refine, else 0: off; docs/joint_goals.md)")
+    ev.add_argument("--refine-horizon", type=int, default=None, metavar="H",
+                    help="with --refine: primitives predicted (8 frames each), the first executed (default: the "
+                         "policy's stored eval.refine_horizon, else 3)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

@@ -24,7 +24,7 @@ has the format ``latentrl.eval.task/1`` and its motions are named ``<suite>_<i>_
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,7 @@ from latentrl.evaluation.tasks import RENDER_FORMATS  # (importing it attaches t
 from latentrl.evaluation.trained import motion_of, stored_env, stored_eval_choices
 from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
 from latentrl.motion.rollout import lock_min_weight_problem
+from latentrl.optim.refine import RefineSettings, refining
 from latentrl.ppo import load_policy
 from latentrl.preflight import check_device, check_output_file, check_writable, locked_output
 from latentrl.render import video_problem
@@ -88,6 +89,11 @@ class EvalRequest:
     physics: bool = False
     """Reach/path policies: every primitive executed by the physics tracker, its simulated frames the next history;
     writes ``physics.json`` beside the kinematic run of the same seeds instead of the usual report (docs/physics.md)."""
+    refine: int | None = None
+    """ReachJoint policies: optimizer steps on the policy's noise before every env step (``latentrl.optim.refine``;
+    0: off; None: the policy's stored ``eval.refine``, else off)."""
+    refine_horizon: int | None = None
+    """With ``refine``: primitives predicted, the first executed (None: the stored ``eval.refine_horizon``, else 3)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -97,7 +103,8 @@ class EvalRequest:
                    ("--device", self.device), ("--out", self.out),
                    ("--render", self.render), ("--render-episodes", self.render_episodes if self.render not in
                                                                    ("none", 0) and self.render_episodes != 1 else None),
-                   ("--scene", self.scene))
+                   ("--scene", self.scene), ("--refine", self.refine),
+                   ("--refine-horizon", self.refine_horizon))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -223,6 +230,11 @@ def evaluate(req: EvalRequest) -> int:
         raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (only reach and path "
                           "policies are evaluated among objects); leave out --scene")
     stored = stored_eval_choices(policy_file(req.policy))
+    for name, flag in (("refine", "--refine"), ("refine_horizon", "--refine-horizon")):
+        if getattr(req, name) is None and name in stored:  # what the policy's card used
+            setattr(req, name, int(stored[name]))
+            print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
+    refiner = _refiner(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "
@@ -242,6 +254,11 @@ def evaluate(req: EvalRequest) -> int:
     observe_next = evaluator.fit(policy, model, files, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
+    if refiner is not None:
+        info["refine"] = asdict(refiner)
+        extra_run: dict[str, Any] = {"wrap": lambda env, policy_act: refining(env, policy_act, refiner)}
+    else:
+        extra_run = {}
     # an evaluator written before ``after_entry`` existed still runs, without the bar and the reports in between
     accepts = inspect.signature(evaluator.run).parameters
     stepwise = "after_entry" in accepts
@@ -263,7 +280,7 @@ def evaluate(req: EvalRequest) -> int:
         try:
             results = evaluator.run(act, model, files, settings, observe_next=observe_next, out_dir=out_dir,
                                     render=draw, motions=req.motions,
-                                    **({"after_entry": after_entry} if stepwise else {}), **extra)
+                                    **({"after_entry": after_entry} if stepwise else {}), **extra, **extra_run)
         finally:
             bar.close()
         lines = evaluator.report(results, settings, out_dir, **info)
@@ -272,6 +289,24 @@ def evaluate(req: EvalRequest) -> int:
                      f"{req.render.upper()} and BVH)")
     print("\n".join(lines))
     return 0
+
+
+def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | None:
+    """``--refine``'s settings, checked; None when off. Only joint goals give the optimizer targets."""
+    if not req.refine:
+        return None
+    if getattr(evaluator, "suite_kind", None) != "joint_goals":
+        raise ConfigError(f"--refine: only ReachJoint policies are refined (the optimizer lands joint goals); the "
+                          f"policy's task is {task}; leave out --refine")
+    if req.physics:
+        raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
+    settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon)
+    try:
+        settings.check()
+    except LatentRLError as exc:  # the flags' names, not the settings'
+        flag = str(exc).replace("refine steps:", "--refine:").replace("refine horizon:", "--refine-horizon:")
+        raise ConfigError(flag) from None
+    return settings
 
 
 PHYSICS_TASKS = ("reach", "path")

@@ -438,6 +438,17 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         return goal_features(history_world[:, -1], self._state.world.rotation, goal, self.obs_goal_angle_clip_deg,
                              self.obs_goal_dist_clip)
 
+    def step_inputs(self) -> dict[str, Any]:
+        """What the next :meth:`step` feeds the motion model besides the noise.
+
+        Keyword arguments of :meth:`MotionModel.differentiable_step` (``post_process=True``): a planner that
+        predicts the step outside the env (``latentrl.optim.refine``) places it exactly as the env will.
+        """
+        return {"state": self._require_state(), "text_embedding": self.text_table.embeddings[self._text_idx],
+                "guidance_scale": self.guidance_scale, "foot_lock": bool(self.foot_lock),
+                "lock_min_weight": self.foot_lock_min_weight,
+                "terrain": self.scene.batch if self.scene is not None else None}
+
     def _require_state(self) -> RolloutState:
         if self._state is None:
             raise RuntimeError("call reset() before step() (or before reading the env state)")

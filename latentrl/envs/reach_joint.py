@@ -370,6 +370,22 @@ class ReachJointEnv(LatentMotionVectorEnv):
         return {"target": self._target[self._rows, k], "joint": self._joint_ids[self._joint[self._rows, k]],
                 "planar": self._planar[self._rows, k], "frame": self._frame[self._rows, k]}
 
+    def upcoming_goals(self) -> dict[str, torch.Tensor]:
+        """Every goal not yet due, per env, the current one first (N, W: the widest entry; random goals: W = 1).
+
+        ``target`` (N, W, 3), ``joint`` (N, W) SMPL index, ``planar`` (N, W), ``offset`` (N, W): frames after the
+        last history frame (1 = the next step's first frame), ``valid`` (N, W): a goal of the episode whose time
+        is known (an asap goal gets its time when it becomes current). For planners that look ahead
+        (``latentrl.optim.refine``); random goals after the current one are not drawn yet.
+        """
+        w = self._target.shape[1]
+        cols = (self._gi[:, None] + torch.arange(w, device=self.device)).clamp(max=w - 1)
+        rows = self._rows[:, None]
+        frame = self._frame[rows, cols]
+        valid = (self._gi[:, None] + torch.arange(w, device=self.device) < self._count[:, None]) & (frame >= 0)
+        return {"target": self._target[rows, cols], "joint": self._joint_ids[self._joint[rows, cols]],
+                "planar": self._planar[rows, cols], "offset": frame - self._now_frame()[:, None], "valid": valid}
+
     def _now_frame(self, idx: torch.Tensor | None = None) -> torch.Tensor:
         """Frames from the episode start to the last history frame (0 at reset)."""
         steps = self._ep_len if idx is None else self._ep_len[idx]

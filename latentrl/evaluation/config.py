@@ -40,6 +40,11 @@ class EvalConfig:
     """With the env's foot lock: evaluations (these and ``latentrl eval`` of the checkpoints, which store it) pin
     a foot fully from this contact weight; None: the env's ``foot_lock_min_weight``. A card's figures taken with
     another value than training's are reproduced by the policy alone."""
+    refine: int | None = None
+    """ReachJoint policies: the optimizer steps ``latentrl eval`` of the checkpoints refines with by default (its
+    ``--refine``; the card's figures); None: off. The trainer's periodic evaluation does not refine."""
+    refine_horizon: int | None = None
+    """With ``refine``: its ``--refine-horizon`` (None: 3)."""
     video_every: int = 1
     """Every this many evaluations (the first of each training process included), the first episode of the first
     suite entry goes to TensorBoard as ``eval/episode``: an animated GIF at 10 frames/s with the scene and goals;
@@ -57,6 +62,10 @@ class EvalConfig:
         if self.foot_lock_min_weight is not None:
             problem = lock_min_weight_problem(self.foot_lock_min_weight)
             require(problem is None, "foot_lock_min_weight", str(problem))
+        require(self.refine is None or 0 <= self.refine <= 1000, "refine",
+                f"must be 0-1000 optimizer steps (or null: off), got {self.refine}")
+        require(self.refine_horizon is None or 1 <= self.refine_horizon <= 16, "refine_horizon",
+                f"must be 1-16 primitives (or null: 3), got {self.refine_horizon}")
 
 
 MAX_VIDEO_SIZE = 640

@@ -177,13 +177,17 @@ def entry_label(entry: JointGoalEntry) -> str:
 
 def run_entry(act: Callable, motion, entry: JointGoalEntry, settings: EvalSettings, *, suite: str = "joint_goals",
               index: int = 0, criteria: JointGoalCriteria | None = None, seed: int = 0,
-              sink: Callable[[TaskEpisode, Any], str | None] | None = None) -> JointGoalResult:
-    """``settings.episodes`` episodes of one entry in one batch."""
+              sink: Callable[[TaskEpisode, Any], str | None] | None = None,
+              wrap: Callable[[Any, Callable], Callable] | None = None) -> JointGoalResult:
+    """``settings.episodes`` episodes of one entry in one batch.
+
+    ``wrap(env, act) -> act``: a policy function that also reads the env (``latentrl.optim.refine``).
+    """
     criteria = criteria or JointGoalCriteria()
     t0 = time.perf_counter()
     steps_max = budget(entry, settings, criteria, ReachJointConfig.max_speed)
     env = make_env(motion, entry, settings.episodes, settings, record_history=True, max_steps=steps_max)
-    outcome = rollout(env, act, steps_max, seed)
+    outcome = rollout(env, act if wrap is None else wrap(env, act), steps_max, seed)
     _, frames = env.goal_record()
     episodes, tracks = [], []
     for i in range(settings.episodes):
@@ -203,11 +207,12 @@ def run_entry(act: Callable, motion, entry: JointGoalEntry, settings: EvalSettin
 
 def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: EvalSettings, *,
                criteria: JointGoalCriteria | None = None, sink=None,
-               progress: Callable[[TaskResult], None] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
+               progress: Callable[[TaskResult], None] | None = None,
+               wrap: Callable[[Any, Callable], Callable] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
     """Every entry of every file (all files are parsed first); ``[(suite name, file, results)]``."""
     settings.validate()
     return run_each(files, load_joint_goals, lambda entry, **where: run_entry(
-        act, motion, entry, settings, criteria=criteria, sink=sink, **where), settings.seed, progress)
+        act, motion, entry, settings, criteria=criteria, sink=sink, wrap=wrap, **where), settings.seed, progress)
 
 
 def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_cfg: Any, device: str = "cpu"):

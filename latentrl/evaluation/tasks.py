@@ -217,8 +217,12 @@ class SuiteEvaluator:
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
             out_dir: Path | None = None, render: int = 0, motions: bool = False,
-            after_entry: Callable[[TaskRun], None] | None = None, render_format: str = "gif") -> TaskRun:
-        """Every entry of every suite file with the default criteria; ``after_entry`` gets those done so far."""
+            after_entry: Callable[[TaskRun], None] | None = None, render_format: str = "gif",
+            wrap: Callable[[Any, Callable], Callable] | None = None) -> TaskRun:
+        """Every entry of every suite file with the default criteria; ``after_entry`` gets those done so far.
+
+        ``wrap(env, act) -> act``: a policy function that also reads the env (joint goals only: ``eval --refine``).
+        """
         def sink(ep, clip: MotionClip) -> str | None:
             if motions:
                 clip.meta.update(suite=ep.suite, index=ep.index, episode=ep.episode, end=ep.end)
@@ -240,7 +244,7 @@ class SuiteEvaluator:
 
         suites = self.module.run_suites(act, motion, files, settings, criteria=criteria,
                                         sink=sink if out_dir is not None else None, progress=progress,
-                                        **self._observe_next(observe_next))
+                                        **self._observe_next(observe_next), **({"wrap": wrap} if wrap else {}))
         return TaskRun(suites, criteria)
 
     def report(self, results: TaskRun, settings: Any, out_dir: Path, **info: Any) -> list[str]:

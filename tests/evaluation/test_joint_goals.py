@@ -2,6 +2,7 @@
 suites, the runner's report and paths.png, ``latentrl eval`` of a ReachJoint policy and the training hook."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -120,8 +121,8 @@ def test_env_errors_match_the_offline_metric(tiny_model):
     assert result.episodes[0].detail["error_cm"] == pytest.approx((record[0] * 100).tolist(), abs=1e-3)
 
 
-def test_latentrl_eval_runs_a_reach_joint_policy(eval_files, tiny_model, tmp_path, capsys):
-    from latentrl.app.cli import main
+def reach_joint_policy(eval_files, tiny_model, tmp_path, eval_section: dict | None = None) -> Path:
+    """An untrained ReachJoint policy on the tiny model, saved as a checkpoint (with an ``eval:`` section)."""
     from latentrl.envs.reach_joint import ReachJointEnv
     from latentrl.motion.checkpoint import file_sha256
     from latentrl.ppo.checkpoint import make_checkpoint, save_checkpoint
@@ -135,9 +136,17 @@ def test_latentrl_eval_runs_a_reach_joint_policy(eval_files, tiny_model, tmp_pat
     motion = eval_files["motion"]
     state = make_checkpoint(trainer="native", iteration=0, env_steps=0, elapsed_s=0.0, policy=policy,
                             optimizer=torch.optim.Adam(policy.parameters()),
-                            config={"env": {"task": "reach_joint", "texts": ["walk"]}},
+                            config={"env": {"task": "reach_joint", "texts": ["walk"]},
+                                    **({"eval": eval_section} if eval_section else {})},
                             motion={"path": str(motion), "sha256": file_sha256(motion)})
-    ckpt = save_checkpoint(state, tmp_path / "reach_joint.pt")
+    return save_checkpoint(state, tmp_path / "reach_joint.pt")
+
+
+def test_latentrl_eval_runs_a_reach_joint_policy(eval_files, tiny_model, tmp_path, capsys):
+    from latentrl.app.cli import main
+
+    ckpt = reach_joint_policy(eval_files, tiny_model, tmp_path)
+    motion = eval_files["motion"]
     suite = tmp_path / "goals_mini.json"
     suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.5}]}]))
     out = tmp_path / "out"
@@ -175,3 +184,50 @@ def test_latentrl_list_shows_the_task_and_its_suites(capsys):
     line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.split()[:1] == ["joint_goals"])
     assert "reach_joint" in line
     assert "pelvis_far, pelvis_near, stepping_stones" in line
+
+
+def test_latentrl_eval_refine_runs_the_refiner_and_records_its_settings(eval_files, tiny_model, tmp_path, capsys):
+    from latentrl.app.cli import main
+
+    ckpt = reach_joint_policy(eval_files, tiny_model, tmp_path)
+    suite = tmp_path / "goals_mini.json"
+    suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.2}]}]))
+    args = ["eval", str(ckpt), "--motion", str(eval_files["motion"]), "--paths", str(suite), "--episodes", "2",
+            "--device", "cpu", "--render", "0", "--deterministic"]
+    for refine, out in ((0, tmp_path / "plain"), (3, tmp_path / "refined")):
+        assert main([*args, "--out", str(out), "--refine", str(refine), "--refine-horizon", "1"]) == 0
+    plain, refined = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "refined"))
+    assert "refine" not in plain
+    assert refined["refine"] == {"steps": 3, "horizon": 1, "lr": 0.1, "pace": 0.5, "prior": 0.1}
+    errors = [r["suites"][0]["entries"][0]["episodes"][0]["detail"]["error_cm"][0] for r in (plain, refined)]
+    assert errors[1] < errors[0]  # the refiner moved the noise toward the goal
+    capsys.readouterr()
+    assert main([*args, "--out", str(tmp_path / "bad"), "--refine", "1", "--refine-horizon", "0"]) == 2
+    assert "--refine-horizon: expected 1-16 primitives, got 0" in capsys.readouterr().err
+
+
+def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, tiny_model, tmp_path, capsys):
+    from latentrl.app.cli import main
+
+    ckpt = reach_joint_policy(eval_files, tiny_model, tmp_path, {"refine": 2, "refine_horizon": 1})
+    suite = tmp_path / "goals_mini.json"
+    suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.2}]}]))
+    args = ["eval", str(ckpt), "--motion", str(eval_files["motion"]), "--paths", str(suite), "--episodes", "1",
+            "--device", "cpu", "--render", "0"]
+    assert main([*args, "--out", str(tmp_path / "stored")]) == 0
+    assert "--refine 2 (the policy's stored evaluation setting; --refine overrides)" in capsys.readouterr().out
+    assert json.loads((tmp_path / "stored" / "report.json").read_text())["refine"]["horizon"] == 1
+    assert main([*args, "--out", str(tmp_path / "off"), "--refine", "0"]) == 0
+    assert "refine" not in json.loads((tmp_path / "off" / "report.json").read_text())
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("refine", -1, r"refine: must be 0-1000 optimizer steps \(or null: off\), got -1"),
+    ("refine_horizon", 17, r"refine_horizon: must be 1-16 primitives \(or null: 3\), got 17"),
+])
+def test_eval_config_refine_fields_are_checked(field, value, match):
+    from latentrl.errors import ConfigError
+    from latentrl.evaluation.config import EvalConfig
+
+    with pytest.raises(ConfigError, match=match):
+        EvalConfig(**{field: value}).validate()
