@@ -17,7 +17,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MAX_WHEEL_BYTES = 60 * 1000 * 1000
-MAX_PT_FILES = 9
+MAX_PT_FILES = 10
 
 CHECK = """
 import sys

@@ -119,8 +119,8 @@ def test_landing_loss_costs_a_foot_low_off_its_stone_only():
     joints[1, 6, foot, :2] = torch.tensor([0.0, 0.8])  # ... but episode 1 comes down 20 cm short at frame 6
     joints[2, 6, foot] = torch.tensor([0.0, 0.8, 0.10])  # episode 2 passes 20 cm short, 10 cm up
     joints[3, 6, foot] = torch.tensor([0.0, 0.8, 0.015])  # episode 3 20 cm short, half way into the contact band
-    steps = Footsteps(frame=torch.full((4, 1), 8), joint=torch.full((4, 1), foot), on=torch.ones(4, 1, dtype=torch.bool),
-                      xy=stone.expand(4, 1, 2))
+    steps = Footsteps(frame=torch.full((4, 1), 8), joint=torch.full((4, 1), foot),
+                      on=torch.ones(4, 1, dtype=torch.bool), xy=stone.expand(4, 1, 2))
     loss = landing_loss(joints, steps, floor=0.0)
     huber = (0.2**2 + 0.01**2) ** 0.5 - 0.01
     assert loss.tolist() == pytest.approx([0.0, huber, 0.0, 0.5 * huber], abs=1e-6)
@@ -140,7 +140,7 @@ def test_refine_lands_the_goal_closer_and_predicts_the_env_step_exactly():
     env = ReachJointEnv(3, motion=model, goals=[entry], max_episode_steps=8, autoreset_mode="Disabled",
                         foot_lock=True)
     env.reset(seed=0)
-    refined = refine(env, zero, RefineSettings(steps=12, horizon=2))
+    refined = refine(env, zero, RefineSettings(steps=12, horizon=2, skate=0.0))  # the goal alone
     assert refined.shape == zero.shape and not torch.equal(refined, zero)
     with torch.no_grad():
         predicted = predict(model, env.step_inputs(), refined.reshape(1, 3, *model.latent_shape))
@@ -150,6 +150,24 @@ def test_refine_lands_the_goal_closer_and_predicts_the_env_step_exactly():
     # the prediction (floor snap and foot lock included) is the step the env took
     assert (predicted[:, 5, 0, :2] - torch.tensor(target)).norm(dim=-1).tolist() == pytest.approx(after.tolist(),
                                                                                                abs=1e-4)
+
+
+def test_the_skate_weight_trades_goal_error_for_planted_feet():
+    from latentrl.evaluation.metrics import foot_skate_cm_s
+
+    model = load_motion_model("default")
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.1, 0.45), 16 / FPS),))
+    skate = []
+    for weight in (0.0, 5.0):
+        env = ReachJointEnv(4, motion=model, goals=[entry], max_episode_steps=8, autoreset_mode="Disabled",
+                            foot_lock=True)
+        env.reset(seed=0)
+        action = refine(env, torch.zeros(4, model.latent_dim), RefineSettings(steps=8, horizon=2, skate=weight))
+        with torch.no_grad():
+            plan = predict(model, env.step_inputs(), action.reshape(1, 4, *model.latent_shape))
+        seen = torch.cat((env.history_world()[:, -1:], plan), dim=1)
+        skate.append(float(foot_skate_cm_s(seen, FPS).mean()))
+    assert skate[1] < 0.8 * skate[0], skate
 
 
 def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
@@ -170,6 +188,7 @@ def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
     ("horizon", 0, "refine horizon: expected 1-16 primitives, got 0"),
     ("lr", 0.0, r"refine lr: expected a learning rate in \(0, 10\], got 0.0"),
     ("pace", -1.0, r"refine pace: expected a weight in \[0, 1000\], got -1.0"),
+    ("skate", float("nan"), r"refine skate: expected a weight in \[0, 1000\], got nan"),
 ])
 def test_bad_settings_are_one_line_errors(field, value, match):
     with pytest.raises(LatentRLError, match=match):

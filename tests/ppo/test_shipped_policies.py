@@ -29,7 +29,8 @@ SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_fi
 
 JOYSTICK_POLICIES = ["joystick_walk_default"]
 TIMED_POLICIES = ["timed_walk_default"]
-TASK_POLICIES = {*JOYSTICK_POLICIES, *TIMED_POLICIES}  # tested by their own tests below
+REACH_JOINT_POLICIES = ["reach_joint_default"]
+TASK_POLICIES = {*JOYSTICK_POLICIES, *TIMED_POLICIES, *REACH_JOINT_POLICIES}  # tested by their own tests below
 
 
 def test_every_shipped_policy_is_tested_here():
@@ -89,3 +90,13 @@ def test_shipped_joystick_policy_follows_the_first_timeline(name, tmp_path):
     # at each of its 4 command changes, so a policy that ignores
     # them lands far above these bounds
     assert metrics["heading_err_deg"]["mean"] < 30.0 and metrics["speed_err_m_s"]["mean"] < 0.3, metrics
+
+
+@pytest.mark.parametrize("name", REACH_JOINT_POLICIES)
+def test_shipped_reach_joint_policy_lands_the_first_far_goal_with_its_stored_refinement(name, tmp_path):
+    """A ReachJoint policy (policies/reach_joint_default.md) on pelvis_far's first goal: the pelvis on a spot
+    1.35 m ahead at 2 s, refined as the policy stores it (its card: 0.1-0.2 cm on this entry)."""
+    state, report = _evaluate_first_entry(name, "joint_goals", "pelvis_far", tmp_path)
+    assert report["refine"]["steps"] == state["config"]["eval"]["refine"] > 0
+    metrics = report["suites"][0]["entries"][0]["metrics"]
+    assert metrics["success"]["mean"] == 1.0 and metrics["err_far_cm"]["mean"] < 5.0, metrics
