@@ -60,6 +60,8 @@ part train_to_success 220 "${LR[@]}" bench train --config configs/policies/reach
     --eval-every 4 --no-side-by-side --no-progress --set ppo.device=cuda --set env.num_envs=1024 \
     --set env.compile=true --set ppo.num_minibatches=16 --set ppo.total_steps=3000000 --json "$OUT/train_gpu.json"
 part tests 110 "$PY" -m pytest -q -p no:cacheprovider -rA tests/gpu
+part refine_eval 90 "${LR[@]}" eval reach_joint_default --paths pelvis_far --episodes 32 --device cuda \
+    --no-render --no-motions --no-progress --out "$OUT/refine_eval"
 part rollout 240 "${LR[@]}" bench rollout --models official default --device cuda --batches 1 16 256 1024 4096 \
     --amp bf16 fp16 --repeats 10 --rounds 3 "${DART[@]}" --json "$OUT/rollout.json"
 part env 110 "${LR[@]}" bench env --models default official --device cuda --num-envs 1 256 4096 --amp bf16 \

@@ -480,6 +480,9 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--refine-horizon", type=int, default=None, metavar="H",
                     help="with --refine: primitives predicted (8 frames each), the first executed (default: the "
                          "policy's stored eval.refine_horizon, else 3)")
+    ev.add_argument("--refine-skate", type=float, default=0.0, metavar="W",
+                    help="with --refine: weight of the predicted frames' foot skate (m/s) in the refiner's loss: "
+                         "planted feet for goal error (default 0)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

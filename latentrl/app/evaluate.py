@@ -94,6 +94,8 @@ class EvalRequest:
     0: off; None: the policy's stored ``eval.refine``, else off)."""
     refine_horizon: int | None = None
     """With ``refine``: primitives predicted, the first executed (None: the stored ``eval.refine_horizon``, else 3)."""
+    refine_skate: float = 0.0
+    """With ``refine``: the weight of the predicted frames' foot skate (m/s) in the refiner's loss."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -104,7 +106,8 @@ class EvalRequest:
                    ("--render", self.render), ("--render-episodes", self.render_episodes if self.render not in
                                                                    ("none", 0) and self.render_episodes != 1 else None),
                    ("--scene", self.scene), ("--refine", self.refine),
-                   ("--refine-horizon", self.refine_horizon))
+                   ("--refine-horizon", self.refine_horizon),
+                   ("--refine-skate", self.refine_skate or None))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -300,11 +303,13 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | No
                           f"policy's task is {task}; leave out --refine")
     if req.physics:
         raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
-    settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon)
+    settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
+                              skate=req.refine_skate)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'
-        flag = str(exc).replace("refine steps:", "--refine:").replace("refine horizon:", "--refine-horizon:")
+        flag = str(exc).replace("refine steps:", "--refine:").replace("refine horizon:", "--refine-horizon:") \
+            .replace("refine skate:", "--refine-skate:")
         raise ConfigError(flag) from None
     return settings
 

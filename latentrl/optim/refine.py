@@ -54,10 +54,10 @@ class RefineSettings:
     """Weight of the pace target of a goal beyond the horizon (0: off)."""
     prior: float = 0.1
     """Weight of the noise-shell penalty (the ``prior`` reward term), per primitive."""
-    skate: float = 1.0
-    """Weight of DART's foot skate (m/s) over the predicted frames and the last history frame. At 1 it cut the skate
-    of pelvis_near entry 0 from 8.8 to 5.8 cm/s for 1.3 -> 1.6 cm of goal error; at 3 the slow pelvis_far entry
-    failed (55 cm)."""
+    skate: float = 0.0
+    """Weight of DART's foot skate (m/s) over the predicted frames and the last history frame (``--refine-skate``).
+    At 1 the shipped pelvis policy's skate fell from 7-9 to 4-6.5 cm/s, its pelvis_near error rose from 2.0 to
+    2.4 cm and its hand targets failed more often (docs/joint_goals.md)."""
 
     def check(self) -> None:
         """One-line :class:`LatentRLError` for a value out of range."""

@@ -65,9 +65,12 @@ def test_shipped_suites_load_and_the_spec_has_the_evaluator():
 
     spec = task_spec("reach_joint")
     assert spec.suite_kind == "joint_goals" and spec.evaluator.suite_kind == "joint_goals"
-    for name in ("pelvis_near", "pelvis_far", "stepping_stones"):
+    for name in ("pelvis_near", "pelvis_far", "stepping_stones", "hands_walk"):
         entries = load_joint_goals(suites_folder("joint_goals") / f"{name}.json")
         assert entries and all(e.text == "walk" for e in entries)
+    hands = load_joint_goals(suites_folder("joint_goals") / "hands_walk.json")
+    assert {g.joint for e in hands for g in e.goals} == {"left_hand", "right_hand", "head"}
+    assert not any(g.planar for e in hands for g in e.goals)  # 3-D points
     near = load_joint_goals(suites_folder("joint_goals") / "pelvis_near.json")
     for entry in near:  # every goal within one step of the previous
         times = [0.0, *(g.time for g in entry.goals)]
@@ -199,7 +202,7 @@ def test_latentrl_eval_refine_runs_the_refiner_and_records_its_settings(eval_fil
     plain, refined = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "refined"))
     assert "refine" not in plain
     assert refined["refine"] == {"steps": 3, "horizon": 1, "lr": 0.1, "pace": 0.5, "prior": 0.1,
-                                  "skate": 1.0}
+                                  "skate": 0.0}
     errors = [r["suites"][0]["entries"][0]["episodes"][0]["detail"]["error_cm"][0] for r in (plain, refined)]
     assert errors[1] < errors[0]  # the refiner moved the noise toward the goal
     capsys.readouterr()
