@@ -918,7 +918,7 @@ ROUND3 += [  # scenes, joint goals, physics: the formats and commands added afte
           [*RJ_EVAL, "--paths", f"{{fx}}/goals/{name}.json"], rf"{re.escape(name)}\.json: .*{pattern}")
       for name, (_, pattern) in GOALS.items()],
     _r3("bad file", "eval-joint-goals-missing", [*RJ_EVAL, "--paths", "nowhere_goals"],
-        r"path file not found: nowhere_goals \(give a file, or one of the suites \['pelvis_far'"),
+        r"path file not found: nowhere_goals \(give a file, or one of the suites \['hands_walk', 'pelvis_far'"),
     _r3("hostile file", "eval-joint-goals-link-to-dev-zero", [*RJ_EVAL, "--paths", "{fx}/zero-link.json"],
         r"path file not found: .*zero-link\.json"),
     _r3("bad file", "eval-joint-goals-scene-file", [*RJ_EVAL, "--paths", "{fx}/scenes/ok.json"],

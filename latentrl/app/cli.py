@@ -483,6 +483,9 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--refine-skate", type=float, default=0.0, metavar="W",
                     help="with --refine: weight of the predicted frames' foot skate (m/s) in the refiner's loss: "
                          "planted feet for goal error (default 0)")
+    ev.add_argument("--refine-start", choices=["policy", "zeros"], default="policy",
+                    help="with --refine: start each step's refinement from the policy's action (default) or from "
+                         "zero noise (for joints the policy was not trained on)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

@@ -96,6 +96,8 @@ class EvalRequest:
     """With ``refine``: primitives predicted, the first executed (None: the stored ``eval.refine_horizon``, else 3)."""
     refine_skate: float = 0.0
     """With ``refine``: the weight of the predicted frames' foot skate (m/s) in the refiner's loss."""
+    refine_start: str = "policy"
+    """With ``refine``: each step's refinement starts from the policy's action or from zero noise (``zeros``)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -107,7 +109,8 @@ class EvalRequest:
                                                                    ("none", 0) and self.render_episodes != 1 else None),
                    ("--scene", self.scene), ("--refine", self.refine),
                    ("--refine-horizon", self.refine_horizon),
-                   ("--refine-skate", self.refine_skate or None))
+                   ("--refine-skate", self.refine_skate or None),
+                   ("--refine-start", None if self.refine_start == "policy" else self.refine_start))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -304,12 +307,12 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | No
     if req.physics:
         raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
     settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
-                              skate=req.refine_skate)
+                              skate=req.refine_skate, start=req.refine_start)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'
         flag = str(exc).replace("refine steps:", "--refine:").replace("refine horizon:", "--refine-horizon:") \
-            .replace("refine skate:", "--refine-skate:")
+            .replace("refine skate:", "--refine-skate:").replace("refine start:", "--refine-start:")
         raise ConfigError(flag) from None
     return settings
 

@@ -30,6 +30,8 @@ from latentrl.optim.losses import HUBER_M, constraint_loss, regularizers
 from latentrl.optim.problems import Targets
 from latentrl.rewards.terms import noise_prior
 
+STARTS = ("policy", "zeros")
+"""Where a step's refinement starts (:attr:`RefineSettings.start`)."""
 FEET = (10, 11)
 """SMPL indices of the foot joints (DART's contact joints): no pace target, a footstep height target."""
 FOOT_HOLD = 2
@@ -37,8 +39,8 @@ FOOT_HOLD = 2
 LANDING_FRAMES = 8
 """Frames before a footstep's frame in which a foot low over the floor is pulled onto its stone (``landing_loss``)."""
 FOOT_DOWN_M = 0.02
-"""A foot target asks the foot joint at most this high above the floor at its frame (the evaluation's touchdown
-is below 3 cm)."""
+"""A footstep asks its foot joint to be this high above the floor at its frame: on the floor (a toe base planted
+sits 0-2 cm up; the evaluation's touchdown is below 3 cm)."""
 
 
 @dataclass
@@ -47,6 +49,9 @@ class RefineSettings:
 
     steps: int = 8
     """Adam steps per env step (0: the policy's action unchanged)."""
+    start: str = "policy"
+    """Where each step's refinement starts: ``policy`` (its action) or ``zeros`` (zero noise; for joints the
+    policy was not trained on, whose actions start it off worse: docs/joint_goals.md)."""
     horizon: int = 2
     """Primitives predicted (8 frames each); the first is executed."""
     lr: float = 0.1
@@ -65,6 +70,8 @@ class RefineSettings:
             raise LatentRLError(f"refine steps: expected 0-1000, got {self.steps}")
         if not 1 <= self.horizon <= 16:
             raise LatentRLError(f"refine horizon: expected 1-16 primitives, got {self.horizon}")
+        if self.start not in STARTS:
+            raise LatentRLError(f"refine start: expected one of {', '.join(STARTS)}, got {self.start!r}")
         if not 0 < self.lr <= 10:
             raise LatentRLError(f"refine lr: expected a learning rate in (0, 10], got {self.lr}")
         for name in ("pace", "prior", "skate"):
@@ -172,7 +179,8 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
         return action
     inputs = env.step_inputs()
     last = env.history_world()[:, -1:]
-    start = action.detach().to(torch.float32).reshape(n, *model.latent_shape).clamp(-bound, bound)
+    given = action.detach().to(torch.float32).reshape(n, *model.latent_shape).clamp(-bound, bound)
+    start = torch.zeros_like(given) if settings.start == "zeros" else given
     z = torch.zeros(settings.horizon, *start.shape, device=start.device)
     z[0] = start
     z.requires_grad_(True)
@@ -203,7 +211,7 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
         opt.step()
         with torch.no_grad():
             z.clamp_(-bound, bound)
-    refined = torch.where(active[:, None, None], best, start)
+    refined = torch.where(active[:, None, None], best, given)  # nothing to refine: the policy's action
     return refined.reshape(action.shape).to(action.dtype)
 
 

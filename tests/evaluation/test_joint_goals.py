@@ -201,8 +201,8 @@ def test_latentrl_eval_refine_runs_the_refiner_and_records_its_settings(eval_fil
         assert main([*args, "--out", str(out), "--refine", str(refine), "--refine-horizon", "1"]) == 0
     plain, refined = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "refined"))
     assert "refine" not in plain
-    assert refined["refine"] == {"steps": 3, "horizon": 1, "lr": 0.1, "pace": 0.5, "prior": 0.1,
-                                  "skate": 0.0}
+    assert refined["refine"] == {"steps": 3, "start": "policy", "horizon": 1, "lr": 0.1, "pace": 0.5,
+                                  "prior": 0.1, "skate": 0.0}
     errors = [r["suites"][0]["entries"][0]["episodes"][0]["detail"]["error_cm"][0] for r in (plain, refined)]
     assert errors[1] < errors[0]  # the refiner moved the noise toward the goal
     capsys.readouterr()

@@ -181,6 +181,9 @@ def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
     assert torch.equal(refine(far, action, RefineSettings(steps=4, pace=0.0)), action)
     act = refining(env, lambda obs: torch.zeros(obs.shape[0], tiny_model.latent_dim), RefineSettings(steps=2))
     assert act(env.observation()).shape == (2, tiny_model.latent_dim)
+    # start "zeros": the policy's action is ignored (the same result as a zero action)
+    zeros = RefineSettings(steps=2, start="zeros")
+    assert torch.equal(refine(env, action, zeros), refine(env, torch.zeros_like(action), zeros))
 
 
 @pytest.mark.parametrize("field, value, match", [
@@ -189,6 +192,7 @@ def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
     ("lr", 0.0, r"refine lr: expected a learning rate in \(0, 10\], got 0.0"),
     ("pace", -1.0, r"refine pace: expected a weight in \[0, 1000\], got -1.0"),
     ("skate", float("nan"), r"refine skate: expected a weight in \[0, 1000\], got nan"),
+    ("start", "random", r"refine start: expected one of policy, zeros, got 'random'"),
 ])
 def test_bad_settings_are_one_line_errors(field, value, match):
     with pytest.raises(LatentRLError, match=match):
