@@ -198,6 +198,7 @@ def run_entry(act: Callable, motion, entry: JointGoalEntry, settings: EvalSettin
         if sink is not None:
             clip.waypoints = np.asarray([(*g.target[:2], g.target[2] if not g.planar else env.floor_height)
                                          for g in entry.goals], np.float32)
+            clip.meta["waypoint_joints"] = np.asarray([JOINTS[g.joint] for g in entry.goals], np.int32)  # SMPL
             ep.motion_file = sink(ep, clip)
         episodes.append(ep)
         tracks.append(np.asarray(clip.joints)[:, PELVIS, :2].copy())

@@ -25,7 +25,8 @@ key               shape, dtype        meaning
 ================  ==================  ==========================================================
 
 Any other key is a 0-d (or small) value kept in :attr:`MotionClip.meta` (an evaluation writes
-``suite``, ``path_index``, ``episode``, ``success``, ``end``, ``reach_time_s``; ``motion sample``
+``suite``, ``path_index``, ``episode``, ``success``, ``end``, ``reach_time_s``, and for a joint-goal episode
+``waypoint_joints``, the SMPL joint of each waypoint; ``motion sample``
 writes ``seed``, ``guidance_scale``, ``motion_model``).
 """
 

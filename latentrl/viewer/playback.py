@@ -137,7 +137,7 @@ class Player:
             if clip.waypoints is not None:
                 around = np.concatenate((around, np.asarray(clip.waypoints, dtype=np.float32)))
             self.scene.set_floor(*floor_extent(clip.joints, around))
-            self.scene.set_waypoints(clip.waypoints)
+            self.scene.set_waypoints(clip.waypoints, clip.waypoint_joints)
             self.scene.set_targets(clip.targets, clip.keyframes())
             move_cameras(self.server, *frame_camera(clip.joints, clip.waypoints))
             self._draw()

@@ -99,6 +99,29 @@ def frame_camera(joints: np.ndarray, waypoints: np.ndarray | None = None) -> tup
     return position, centre
 
 
+GOAL_JOINT_COLOURS = {0: (20, 20, 20), 10: (31, 119, 180), 11: (255, 127, 14), 20: (148, 103, 189),
+                      21: (140, 86, 75), 15: (127, 127, 127)}
+"""Joint-goal targets by SMPL joint (pelvis, left/right foot, left/right wrist, head): the colours of a ReachJoint
+evaluation's paths.png, so the two agree."""
+
+
+def waypoint_marks(waypoints: np.ndarray, joints: np.ndarray | None, floor: float
+                   ) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """(W, 3) marker centres and W colours of waypoints.
+
+    Path waypoints (``joints`` None) sit 8 cm above the floor in the waypoint colour. Joint-goal targets sit at
+    their own point (at least 8 cm up: a spot on the floor stays visible), coloured by their joint. ``joints``
+    that do not fit (another length, an unknown index) are ignored: the plain markers.
+    """
+    w = np.asarray(waypoints, dtype=np.float32).reshape(-1, 3)
+    lifted = np.stack((w[:, 0], w[:, 1], np.full(len(w), floor + 0.08, dtype=np.float32)), axis=1)
+    ok = joints is not None and np.shape(joints) == (len(w),) and all(int(j) in GOAL_JOINT_COLOURS for j in joints)
+    if not ok:
+        return lifted, [WAYPOINT] * len(w)
+    lifted[:, 2] = np.maximum(w[:, 2], floor + 0.08)
+    return lifted, [GOAL_JOINT_COLOURS[int(j)] for j in joints]
+
+
 def floor_extent(joints: np.ndarray, waypoints: np.ndarray | None = None, margin: float = 3.0) -> tuple:
     """``(centre_xy, size)`` of a square floor grid under the motion and its waypoints, in whole metres."""
     points = np.asarray(joints, dtype=np.float32)[:, PELVIS, :2]
@@ -187,8 +210,12 @@ class SkeletonScene:
         self.grid.width = self.grid.height = float(size)
         self.grid.position = (float(centre_xy[0]), float(centre_xy[1]), self.floor_height)
 
-    def set_waypoints(self, waypoints: np.ndarray | None) -> None:
-        """Numbered markers for a path's waypoints (replacing any previous path)."""
+    def set_waypoints(self, waypoints: np.ndarray | None, joints: np.ndarray | None = None) -> None:
+        """Numbered markers for a path's waypoints (replacing any previous path).
+
+        With ``joints`` (one SMPL index per waypoint: a joint-goal episode's targets) they are coloured by joint
+        and drawn at their own height (:func:`waypoint_marks`).
+        """
         for handle in self.waypoints:
             handle.remove()
         self.waypoints = []
@@ -196,11 +223,12 @@ class SkeletonScene:
             self.path.visible = False
             return
         z = self.floor_height
-        for i, w in enumerate(np.asarray(waypoints, dtype=np.float32)):
-            self.waypoints.append(self.server.scene.add_icosphere(f"/waypoints/{i}", radius=0.08, color=WAYPOINT,
-                                                                  position=(float(w[0]), float(w[1]), z + 0.08)))
+        positions, colours = waypoint_marks(np.asarray(waypoints, dtype=np.float32), joints, z)
+        for i, (p, colour) in enumerate(zip(positions, colours)):
+            self.waypoints.append(self.server.scene.add_icosphere(f"/waypoints/{i}", radius=0.08, color=colour,
+                                                                  position=tuple(map(float, p))))
             self.waypoints.append(self.server.scene.add_label(f"/waypoint_labels/{i}", str(i),
-                                                              position=(float(w[0]), float(w[1]), z + 0.3)))
+                                                              position=(float(p[0]), float(p[1]), float(p[2]) + 0.22)))
         start = np.zeros((1, 3), dtype=np.float32)
         self.path.points = trail_segments(np.concatenate((start, waypoints)), height=z + 0.005, stride=1)
         self.path.visible = True

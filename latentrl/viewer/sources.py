@@ -49,6 +49,9 @@ class Clip:
     """(K,) the motion frame each target is for."""
     scene: str | None = None
     """The scene the motion moves in, ``latentrl.scene/1`` JSON text as the file carries it, or None."""
+    waypoint_joints: np.ndarray | None = None
+    """(W,) the SMPL joint of each waypoint when they are a joint-goal episode's targets (the file's
+    ``waypoint_joints``), or None."""
 
     @property
     def frames(self) -> int:
@@ -125,7 +128,9 @@ def load_clip(path: str | Path, waypoints: np.ndarray | None = None) -> Clip:
         goals = per_frame_goals(motion.goals, frames, motion.primitive)
     if waypoints is None and motion.waypoints is not None and np.asarray(motion.waypoints).size:
         waypoints = np.asarray(motion.waypoints, dtype=np.float32).reshape(-1, 3)
-    return Clip(joints, motion.fps, motion.texts, goals, waypoints, scene=motion.scene)
+    marks = np.asarray(motion.meta.get("waypoint_joints", np.zeros(0)))
+    marks = marks.astype(np.int64) if marks.dtype.kind in "iu" and marks.ndim == 1 and marks.size else None
+    return Clip(joints, motion.fps, motion.texts, goals, waypoints, scene=motion.scene, waypoint_joints=marks)
 
 
 def motion_metrics(clip: Clip) -> dict[str, float]:

@@ -109,6 +109,14 @@ def test_runner_scores_each_goal_and_writes_the_report_and_png(tiny_model, tmp_p
     assert data["task"] == "reach_joint" and data["overall"]["reached"]["n"] == 2
     assert (tmp_path / "out" / "paths.png").stat().st_size > 1000 and "paths.png" in lines[-1]
     assert any(line.startswith("| mini_goals | 0: walk, 2 goals (pelvis, left_foot), asap goals |") for line in lines)
+    # the motions carry the targets and their joints, for the viewer's markers
+    T.JOINT_GOALS.run(zero_policy, tiny_model, [suite], settings, observe_next=False, out_dir=tmp_path / "m",
+                      motions=True)
+    from latentrl.motion.clip import MotionClip
+
+    clip = MotionClip.load(next((tmp_path / "m").rglob("*.npz")))
+    assert clip.waypoints.tolist() == [pytest.approx([0.0, 0.2, 0.0]), pytest.approx([0.0, 0.5, 0.0])]
+    assert np.asarray(clip.meta["waypoint_joints"]).tolist() == [0, 10]  # pelvis, left foot (SMPL)
 
 
 def test_env_errors_match_the_offline_metric(tiny_model):

@@ -332,3 +332,31 @@ def test_random_obstacles_are_not_replaced(tiny_model):
     fixed = ReachLocationEnv(2, motion=tiny_model, scene=Scene())
     fixed.scene.replace(SCENE)
     assert fixed.scene.spec == SCENE and int(fixed.scene.batch.object_counts()[0]) == 6
+
+
+def test_joint_goal_targets_are_coloured_by_joint_at_their_own_height():
+    from latentrl.render import WAYPOINT
+    from latentrl.viewer.scene import GOAL_JOINT_COLOURS, waypoint_marks
+
+    targets = np.array([[0.0, 1.0, 0.0], [0.1, 2.0, 0.0], [0.3, 2.5, 1.1]], dtype=np.float32)
+    plain, colours = waypoint_marks(targets, None, 0.0)
+    assert plain[:, 2].tolist() == pytest.approx([0.08] * 3) and colours == [WAYPOINT] * 3
+    marks, colours = waypoint_marks(targets, np.array([0, 10, 21]), 0.0)
+    assert marks[:, 2].tolist() == pytest.approx([0.08, 0.08, 1.1])  # the wrist's target at its height
+    assert colours == [GOAL_JOINT_COLOURS[0], GOAL_JOINT_COLOURS[10], GOAL_JOINT_COLOURS[21]]
+    assert len(set(colours)) == 3
+    for bad in (np.array([0, 10]), np.array([0, 10, 5])):  # the wrong length, a joint no goal takes
+        assert waypoint_marks(targets, bad, 0.0)[1] == [WAYPOINT] * 3
+
+
+def test_view_draws_joint_goal_targets_where_they_are(server, tmp_path):
+    from latentrl.viewer.playback import Player
+    from latentrl.viewer.sources import open_source
+
+    joints = walking(40)
+    targets = np.array([[0.0, 0.5, 0.0], [0.3, 1.0, 1.2]], dtype=np.float32)
+    path = save_motion_npz(tmp_path / "goals.npz", joints, texts=["walk"] * 40, waypoints=targets,
+                           waypoint_joints=np.array([0, 21], dtype=np.int32))
+    player = Player(server, open_source(path), None, skeleton=False)
+    spheres = [h for h in player.scene.waypoints if "/waypoints/" in h.name]
+    assert [tuple(np.round(h.position, 3)) for h in spheres] == [(0.0, 0.5, 0.08), (0.3, 1.0, 1.2)]
