@@ -374,17 +374,49 @@ class ReachJointEnv(LatentMotionVectorEnv):
         """Every goal not yet due, per env, the current one first (N, W: the widest entry; random goals: W = 1).
 
         ``target`` (N, W, 3), ``joint`` (N, W) SMPL index, ``planar`` (N, W), ``offset`` (N, W): frames after the
-        last history frame (1 = the next step's first frame), ``valid`` (N, W): a goal of the episode whose time
-        is known (an asap goal gets its time when it becomes current). For planners that look ahead
-        (``latentrl.optim.refine``); random goals after the current one are not drawn yet.
+        last history frame (1 = the next step's first frame), ``valid`` (N, W): a goal of the episode, ``estimated``
+        (N, W): an asap goal not yet current, whose offset is this method's estimate of the time it will get
+        (:meth:`_estimate_asap`). For planners that look ahead (``latentrl.optim.refine``); random goals after the
+        current one are not drawn yet.
         """
         w = self._target.shape[1]
         cols = (self._gi[:, None] + torch.arange(w, device=self.device)).clamp(max=w - 1)
         rows = self._rows[:, None]
         frame = self._frame[rows, cols]
-        valid = (self._gi[:, None] + torch.arange(w, device=self.device) < self._count[:, None]) & (frame >= 0)
-        return {"target": self._target[rows, cols], "joint": self._joint_ids[self._joint[rows, cols]],
-                "planar": self._planar[rows, cols], "offset": frame - self._now_frame()[:, None], "valid": valid}
+        target, planar = self._target[rows, cols], self._planar[rows, cols]
+        joint = self._joint_ids[self._joint[rows, cols]]
+        inside = self._gi[:, None] + torch.arange(w, device=self.device) < self._count[:, None]
+        estimated = inside & (frame < 0)
+        if bool(estimated.any()):
+            frame = self._estimate_asap(frame, estimated, target, joint, planar)
+        return {"target": target, "joint": joint, "planar": planar, "offset": frame - self._now_frame()[:, None],
+                "valid": inside & (frame >= 0), "estimated": estimated}
+
+    def _estimate_asap(self, frame: torch.Tensor, unknown: torch.Tensor, target: torch.Tensor, joint: torch.Tensor,
+                       planar: torch.Tensor) -> torch.Tensor:
+        """The frames the asap goals ``unknown`` (N, W) will get, as :meth:`_activate` will give them.
+
+        A goal becomes current at the end of the step its predecessor is due in, and then gets the time its joint
+        needs at ``max_speed``; the joint is taken to be at its own previous target then (a foot on its last stone),
+        else where it is now.
+        """
+        frame = frame.clone()
+        n, w = frame.shape
+        now = self.history_world()[:, -1]  # (N, 22, 3)
+        for c in range(1, w):
+            todo = unknown[:, c]
+            if not bool(todo.any()):
+                continue
+            same = (joint[:, :c] == joint[:, c:c + 1])  # earlier goals of this joint
+            last = torch.where(same, torch.arange(c, device=self.device), -1).amax(dim=1)  # (N,)
+            anchor = torch.where((last >= 0)[:, None], target[self._rows, last.clamp(min=0)],
+                                 now[self._rows, joint[:, c]])
+            dist = joint_error(anchor, target[:, c], planar[:, c])
+            step_end = torch.div(frame[:, c - 1] + FUTURE_LENGTH - 1, FUTURE_LENGTH, rounding_mode="floor")
+            start = step_end * FUTURE_LENGTH
+            lead = torch.ceil(dist / self.max_speed * FPS).long().clamp(min=1)
+            frame[:, c] = torch.where(todo & (frame[:, c - 1] >= 0), start + lead, frame[:, c])
+        return frame
 
     def _now_frame(self, idx: torch.Tensor | None = None) -> torch.Tensor:
         """Frames from the episode start to the last history frame (0 at reset)."""

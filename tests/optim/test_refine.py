@@ -89,6 +89,25 @@ def test_upcoming_goals_list_the_goals_not_yet_due_with_their_offsets(tiny_model
     assert goals["target"][0, 0].tolist() == pytest.approx([0.1, 0.9, env.floor_height])
 
 
+def test_upcoming_asap_goals_get_the_time_they_will_get(tiny_model):
+    import math
+
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.0, 0.3), 6 / FPS), JointGoal("left_foot", (0.1, 0.9), None),
+                                    JointGoal("left_foot", (0.1, 2.1), None)))
+    env = ReachJointEnv(1, motion=tiny_model, goals=[entry], max_episode_steps=8, autoreset_mode="Disabled")
+    env.reset(seed=0)
+    goals = env.upcoming_goals()
+    assert goals["valid"].all() and goals["estimated"][0].tolist() == [False, True, True]
+    foot = env.history_world()[0, -1, JOINTS["left_foot"], :2]
+    first = 8 + math.ceil(float((torch.tensor([0.1, 0.9]) - foot).norm()) / env.max_speed * FPS)
+    # the second starts from the first's stone (the same foot), at the end of the step the first is due in
+    second = math.ceil(first / 8) * 8 + math.ceil(1.2 / env.max_speed * FPS)
+    assert goals["offset"][0].tolist() == [6, first, second]
+    env.step(torch.zeros(1, tiny_model.latent_dim))  # the pelvis goal is due; the first footstep gets its time
+    goals = env.upcoming_goals()
+    assert goals["estimated"][0].tolist()[:2] == [False, True] and env.goal_record()[1][0, 1] >= 0
+
+
 def test_goal_targets_hold_the_goals_in_the_horizon_footsteps_and_a_pace_target(tiny_model):
     env = make(tiny_model)
     env.reset(seed=0)
