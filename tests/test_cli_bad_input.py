@@ -287,6 +287,8 @@ ROWS = [
     ("eval-negative-render", [*EVAL, "--render", "-1"], r"--render must be >= 0, got -1"),
     ("eval-refine-a-reach-policy", [*EVAL, "--refine", "4"],
      r"--refine: only ReachJoint policies are refined \(the optimizer lands joint goals\); the policy's task is "),
+    ("eval-physics-a-refined-reach-joint-policy", ["eval", "reach_joint_default", "--physics"],
+     r"--physics: runs reach or path policies, this policy's task is 'reach_joint'"),
     ("eval-device", [*EVAL, "--device", "tpu"], r"argument --device: unknown device 'tpu'"),
     ("eval-missing-suite", [*EVAL, "--paths", "nowhere"],
      r"path file not found: nowhere \(give a file, or one of the suites"),

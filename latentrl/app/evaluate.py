@@ -237,10 +237,11 @@ def evaluate(req: EvalRequest) -> int:
                           "policies are evaluated among objects); leave out --scene")
     stored = stored_eval_choices(policy_file(req.policy))
     for name, flag in (("refine", "--refine"), ("refine_horizon", "--refine-horizon")):
-        if getattr(req, name) is None and name in stored:  # what the policy's card used
+        # what the policy's card used; not with --physics (its own check names the task), nor a horizon when off
+        if getattr(req, name) is None and name in stored and not req.physics and (name == "refine" or req.refine):
             setattr(req, name, int(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
-    refiner = _refiner(req, evaluator, spec.name)
+    refiner = None if req.physics and not req.refine else _refiner(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "

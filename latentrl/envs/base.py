@@ -444,9 +444,10 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         Keyword arguments of :meth:`MotionModel.differentiable_step` (``post_process=True``): a planner that
         predicts the step outside the env (``latentrl.optim.refine``) places it exactly as the env will.
         """
+        lock = bool(self.foot_lock)  # as _motion_core: the env's lock, else the model's own setting (None)
         return {"state": self._require_state(), "text_embedding": self.text_table.embeddings[self._text_idx],
-                "guidance_scale": self.guidance_scale, "foot_lock": bool(self.foot_lock),
-                "lock_min_weight": self.foot_lock_min_weight,
+                "guidance_scale": self.guidance_scale, "foot_lock": True if lock else None,
+                "lock_min_weight": self.foot_lock_min_weight if lock else LOCK_MIN_WEIGHT,
                 "terrain": self.scene.batch if self.scene is not None else None}
 
     def _require_state(self) -> RolloutState:

@@ -409,8 +409,10 @@ class ReachJointEnv(LatentMotionVectorEnv):
                 continue
             same = (joint[:, :c] == joint[:, c:c + 1])  # earlier goals of this joint
             last = torch.where(same, torch.arange(c, device=self.device), -1).amax(dim=1)  # (N,)
-            anchor = torch.where((last >= 0)[:, None], target[self._rows, last.clamp(min=0)],
-                                 now[self._rows, joint[:, c]])
+            here = now[self._rows, joint[:, c]]
+            anchor = torch.where((last >= 0)[:, None], target[self._rows, last.clamp(min=0)], here)
+            flat = (last >= 0) & planar[self._rows, last.clamp(min=0)] & ~planar[:, c]  # a 2-D target has no height
+            anchor = torch.cat((anchor[:, :2], torch.where(flat, here[:, 2], anchor[:, 2])[:, None]), dim=1)
             dist = joint_error(anchor, target[:, c], planar[:, c])
             step_end = torch.div(frame[:, c - 1] + FUTURE_LENGTH - 1, FUTURE_LENGTH, rounding_mode="floor")
             start = step_end * FUTURE_LENGTH

@@ -409,9 +409,9 @@ class MotionModel(nn.Module):
 
         Why a second method: the RL path keeps its ``no_grad`` (no autograd cost per env step), while
         noise optimization (``latentrl.optim``) differentiates through sampler, decoder, canonicalization and
-        placement. The floor snap and the foot lock are left out (both are post-processes that move the
-        placement; the optimizer scores the floor and the skate as losses instead, as DART's ``optim_mld`` does),
-        so the motion returned is exactly the motion optimized.
+        placement. With ``post_process=False`` (``latentrl optimize``) the floor snap and the foot lock are left out
+        (both are post-processes that move the placement; the optimizer scores the floor and the skate as losses
+        instead, as DART's ``optim_mld`` does), so the motion returned is exactly the motion optimized.
         """
         if self.pelvis_delta is None:
             raise LatentRLError("this motion model has no pelvis_delta; load a seed history (docs/motion.md)")

@@ -7,7 +7,7 @@ placed exactly as the env places them (floor snap and foot lock included:
 ``MotionModel.differentiable_step(post_process=True)``), and moves the noise so that every goal due within
 them lands: a receding horizon, as model-predictive control does. The policy's action is the start of the
 first primitive's noise (the next ones start at zero); only the first is executed, and the next step plans
-again from where the body really is. A goal beyond the horizon gets a *pace* target at the horizon's end,
+again from where the body really is. The current goal, when beyond the horizon, gets a *pace* target at its end,
 on the straight line from the joint to its target at the pace that arrives on time (pelvis, hands, head;
 not the feet, which step). A foot's target is a footstep: the foot on the floor at its frame, held there the
 frames after, and never low over the floor off its stone the frames before (:func:`landing_loss`).
@@ -26,7 +26,7 @@ from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import LatentRLError
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
-from latentrl.optim.losses import HUBER_M, constraint_loss, regularizers
+from latentrl.optim.losses import HUBER_M, regularizers, target_squared
 from latentrl.optim.problems import Targets
 from latentrl.rewards.terms import noise_prior
 
@@ -52,7 +52,7 @@ class RefineSettings:
     start: str = "policy"
     """Where each step's refinement starts: ``policy`` (its action) or ``zeros`` (zero noise; for joints the
     policy was not trained on, whose actions start it off worse: docs/joint_goals.md)."""
-    horizon: int = 2
+    horizon: int = 3
     """Primitives predicted (8 frames each); the first is executed."""
     lr: float = 0.1
     pace: float = 0.5
@@ -179,7 +179,10 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
         return action
     inputs = env.step_inputs()
     last = env.history_world()[:, -1:]
-    given = action.detach().to(torch.float32).reshape(n, *model.latent_shape).clamp(-bound, bound)
+    if not hasattr(model, "differentiable_step"):
+        raise LatentRLError(f"refine: the motion model {type(model).__name__} has no differentiable_step")
+    given = torch.as_tensor(action, device=env.device).detach().to(torch.float32)
+    given = given.reshape(n, *model.latent_shape).clamp(-bound, bound)
     start = torch.zeros_like(given) if settings.start == "zeros" else given
     z = torch.zeros(settings.horizon, *start.shape, device=start.device)
     z[0] = start
@@ -189,7 +192,8 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
     for step in range(settings.steps + 1):
         with torch.enable_grad():
             joints = predict(model, inputs, z)
-            loss = constraint_loss(joints, targets) * targets.weights.sum(dim=1).clamp(min=1e-9) \
+            d2 = target_squared(joints, targets)  # the weighted sum (constraint_loss's mean divides by 0 weights)
+            loss = ((torch.sqrt(d2 + HUBER_M**2) - HUBER_M) * targets.weights).sum(dim=1) \
                 + landing_loss(joints, steps, env.floor_height) \
                 - settings.prior * noise_prior(z.flatten(2)).mean(dim=0)
             if settings.skate > 0:
@@ -212,7 +216,7 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
         with torch.no_grad():
             z.clamp_(-bound, bound)
     refined = torch.where(active[:, None, None], best, given)  # nothing to refine: the policy's action
-    return refined.reshape(action.shape).to(action.dtype)
+    return refined.reshape(given.shape[0], -1)
 
 
 def refining(env, act: Callable[[torch.Tensor], torch.Tensor], settings: RefineSettings

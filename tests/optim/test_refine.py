@@ -189,6 +189,35 @@ def test_the_skate_weight_trades_goal_error_for_planted_feet():
     assert skate[1] < 0.8 * skate[0], skate
 
 
+def test_an_env_with_nothing_to_refine_leaves_the_others_as_they_would_be_alone(tiny_model):
+    far = JointGoalEntry("walk", (JointGoal("pelvis", (0.0, 3.0), 2.0),))  # beyond the horizon, no pace target
+    both = ReachJointEnv(2, motion=tiny_model, goals=[ENTRY, far], max_episode_steps=8, autoreset_mode="Disabled")
+    alone = ReachJointEnv(1, motion=tiny_model, goals=[ENTRY], max_episode_steps=8, autoreset_mode="Disabled")
+    both.reset(seed=0)
+    alone.reset(seed=0)
+    action = torch.full((2, tiny_model.latent_dim), 0.3)
+    settings = RefineSettings(steps=4, horizon=2, pace=0.0)
+    mixed = refine(both, action, settings)
+    assert torch.isfinite(mixed).all() and torch.equal(mixed[1], action[1])
+    assert torch.allclose(mixed[0], refine(alone, action[:1], settings)[0], atol=1e-6)
+
+
+def test_step_inputs_lock_the_feet_as_the_env_steps_them(tiny_model):
+    import copy
+
+    from latentrl.motion.rollout import LOCK_MIN_WEIGHT
+
+    model = copy.deepcopy(tiny_model)
+    model.foot_lock = True  # a model locked by itself: an env without its own lock steps it locked
+    env = ReachJointEnv(1, motion=model, goals=[ENTRY], foot_lock=False)
+    env.reset(seed=0)
+    inputs = env.step_inputs()
+    assert inputs["foot_lock"] is None and inputs["lock_min_weight"] == LOCK_MIN_WEIGHT
+    locked = ReachJointEnv(1, motion=model, goals=[ENTRY], foot_lock=True, foot_lock_min_weight=0.05)
+    locked.reset(seed=0)
+    assert locked.step_inputs()["foot_lock"] is True and locked.step_inputs()["lock_min_weight"] == 0.05
+
+
 def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
     env = make(tiny_model)
     env.reset(seed=0)
