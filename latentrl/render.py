@@ -50,6 +50,10 @@ LEFT, RIGHT, CENTRE = (60, 120, 220), (225, 105, 60), (90, 90, 100)
 CONTACT, AIRBORNE = (40, 190, 80), (150, 150, 150)
 GOAL, WAYPOINT, TRAIL = (220, 40, 60), (250, 180, 40), (70, 70, 200)
 SKY, FLOOR_LIGHT, FLOOR_DARK, SHADOW = (222, 228, 236), (200, 200, 196), (176, 176, 172), (140, 140, 138)
+GOAL_JOINT_COLOURS = {"pelvis": (0, 0, 0), "left_foot": (31, 119, 180), "right_foot": (255, 127, 14),
+                      "left_hand": (148, 103, 189), "right_hand": (140, 86, 75), "head": (127, 127, 127)}
+"""Joint-goal targets by goal joint (a ReachJoint evaluation's paths.png and the viewer's markers): matplotlib's
+black and tab: colours."""
 SCENE_COLOURS = {Box: (168, 152, 136), Cylinder: (150, 162, 178), Seat: (118, 152, 110), Stairs: (186, 180, 168)}
 """Colour of each scene object type (the viewer's): boxes warm grey, pillars blue-grey, seats green, stairs stone."""
 FACE_SHADES = (1.12, 0.86, 0.7)

@@ -241,7 +241,7 @@ def evaluate(req: EvalRequest) -> int:
         if getattr(req, name) is None and name in stored and not req.physics and (name == "refine" or req.refine):
             setattr(req, name, int(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
-    refiner = None if req.physics and not req.refine else _refiner(req, evaluator, spec.name)
+    refiner = _refiner(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "

@@ -401,7 +401,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         else where it is now.
         """
         frame = frame.clone()
-        n, w = frame.shape
+        w = frame.shape[1]
         now = self.history_world()[:, -1]  # (N, 22, 3)
         for c in range(1, w):
             todo = unknown[:, c]

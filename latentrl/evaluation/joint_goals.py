@@ -39,6 +39,7 @@ from latentrl.evaluation.episodes import end_of, rollout
 from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.render import GOAL_JOINT_COLOURS
 
 UNITS = {"success": "share", "err_near_cm": "cm", "err_far_cm": "cm", "footstep_err_cm": "cm",
          "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm"}
@@ -230,8 +231,8 @@ def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_c
 
 
 # --------------------------------------------------------------------------- figure
-JOINT_COLORS = {"pelvis": "black", "left_foot": "tab:blue", "right_foot": "tab:orange", "left_hand": "tab:purple",
-                "right_hand": "tab:brown", "head": "tab:gray"}
+JOINT_COLORS = {name: tuple(c / 255 for c in rgb) for name, rgb in GOAL_JOINT_COLOURS.items()}
+"""matplotlib colours (0-1) of :data:`latentrl.render.GOAL_JOINT_COLOURS`."""
 
 
 def save_png(path: str | Path, suites: Sequence[tuple[str, str, list]], columns: int = 4, dpi: int = 110) -> Path:

@@ -37,14 +37,20 @@ def target_squared(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
     return diff.square().sum(dim=-1) * targets.valid
 
 
+def pseudo_huber(d2: torch.Tensor) -> torch.Tensor:
+    """The pseudo-Huber distance of squared distances ``d2`` (m^2): ``sqrt(d2 + delta^2) - delta``.
+
+    delta is :data:`HUBER_M`: 0 at 0, about the distance far from it, smooth near it.
+    """
+    return torch.sqrt(d2 + HUBER_M**2) - HUBER_M
+
+
 def constraint_loss(joints: torch.Tensor, targets: Targets) -> torch.Tensor:
     """(B,) weighted mean pseudo-Huber distance of the targets (metres) plus any scene's :func:`scene_loss`.
 
     0 exactly when every target is met (and the scene is kept).
     """
-    d2 = target_squared(joints, targets)
-    huber = torch.sqrt(d2 + HUBER_M**2) - HUBER_M
-    loss = (huber * targets.weights).sum(dim=1) / targets.weights.sum(dim=1)
+    loss = (pseudo_huber(target_squared(joints, targets)) * targets.weights).sum(dim=1) / targets.weights.sum(dim=1)
     return loss if targets.scene is None else loss + scene_loss(joints, targets)
 
 

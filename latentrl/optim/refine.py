@@ -25,15 +25,13 @@ import torch
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.errors import LatentRLError
 from latentrl.motion.representation import FUTURE_LENGTH
-from latentrl.motion.skeleton import FPS
-from latentrl.optim.losses import HUBER_M, regularizers, target_squared
+from latentrl.motion.skeleton import FOOT_JOINTS, FPS
+from latentrl.optim.losses import pseudo_huber, regularizers, target_squared
 from latentrl.optim.problems import Targets
 from latentrl.rewards.terms import noise_prior
 
 STARTS = ("policy", "zeros")
 """Where a step's refinement starts (:attr:`RefineSettings.start`)."""
-FEET = (10, 11)
-"""SMPL indices of the foot joints (DART's contact joints): no pace target, a footstep height target."""
 FOOT_HOLD = 2
 """Frames after a footstep's frame in which the foot is also held on its stone (xy)."""
 LANDING_FRAMES = 8
@@ -106,7 +104,7 @@ def goal_targets(env, horizon_frames: int, pace: float) -> tuple[Targets, Footst
     xy = torch.tensor([1.0, 1.0, 0.0], device=dev)
     masks = torch.where(goals["planar"][..., None], xy, torch.ones(3, device=dev)).expand(n, w, 3)
     frames, points = (offset - 1).clamp(0, horizon_frames - 1), goals["target"]
-    feet = (joint[..., None] == torch.tensor(FEET, device=dev)).any(-1)
+    feet = (joint[..., None] == torch.tensor(FOOT_JOINTS, device=dev)).any(-1)
     # a footstep: on the floor at its frame and still on the target the frames after it
     foot = inside & feet & goals["planar"]
     down = torch.cat((points[..., :2], torch.full_like(offset[..., None], env.floor_height + FOOT_DOWN_M,
@@ -151,7 +149,7 @@ def landing_loss(joints: torch.Tensor, steps: Footsteps, floor: float) -> torch.
         at = joints[rows, f.clamp(min=0), steps.joint]  # (N, W, 3)
         weight = (1.0 - (at[..., 2] - floor) / CONTACT_HEIGHT_M).clamp(0.0, 1.0)
         d2 = (at[..., :2] - steps.xy).square().sum(-1)
-        loss = loss + (ok.float() * weight * (torch.sqrt(d2 + HUBER_M**2) - HUBER_M)).sum(dim=1)
+        loss = loss + (ok.float() * weight * pseudo_huber(d2)).sum(dim=1)
     return loss
 
 
@@ -192,8 +190,8 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
     for step in range(settings.steps + 1):
         with torch.enable_grad():
             joints = predict(model, inputs, z)
-            d2 = target_squared(joints, targets)  # the weighted sum (constraint_loss's mean divides by 0 weights)
-            loss = ((torch.sqrt(d2 + HUBER_M**2) - HUBER_M) * targets.weights).sum(dim=1) \
+            # the weighted sum of the goals' distances (constraint_loss's mean divides by an idle env's 0 weights)
+            loss = (pseudo_huber(target_squared(joints, targets)) * targets.weights).sum(dim=1) \
                 + landing_loss(joints, steps, env.floor_height) \
                 - settings.prior * noise_prior(z.flatten(2)).mean(dim=0)
             if settings.skate > 0:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from latentrl.envs.reach_joint import JOINTS
 from latentrl.motion.skeleton import ANKLE_JOINTS, FOOT_JOINTS, JOINT_NAMES, PARENTS, PELVIS
 from latentrl.render import (  # the colours of the rendered GIFs and MP4s, so both agree  # noqa: F401
     AIRBORNE,
@@ -29,6 +30,7 @@ from latentrl.render import (  # the colours of the rendered GIFs and MP4s, so b
     WAYPOINT,
     side_colour,
 )
+from latentrl.render import GOAL_JOINT_COLOURS as GOAL_COLOURS_BY_NAME
 from latentrl.scenes.scene import Scene
 from latentrl.viewer.body import CapsuleBody
 from latentrl.viewer.objects import SceneObjects
@@ -99,10 +101,8 @@ def frame_camera(joints: np.ndarray, waypoints: np.ndarray | None = None) -> tup
     return position, centre
 
 
-GOAL_JOINT_COLOURS = {0: (20, 20, 20), 10: (31, 119, 180), 11: (255, 127, 14), 20: (148, 103, 189),
-                      21: (140, 86, 75), 15: (127, 127, 127)}
-"""Joint-goal targets by SMPL joint (pelvis, left/right foot, left/right wrist, head): the colours of a ReachJoint
-evaluation's paths.png, so the two agree."""
+GOAL_JOINT_COLOURS = {JOINTS[name]: rgb for name, rgb in GOAL_COLOURS_BY_NAME.items()}
+"""Joint-goal targets by SMPL joint: :data:`latentrl.render.GOAL_JOINT_COLOURS`, the colours of paths.png."""
 
 
 def waypoint_marks(waypoints: np.ndarray, joints: np.ndarray | None, floor: float
