@@ -483,9 +483,10 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--refine-skate", type=float, default=0.0, metavar="W",
                     help="with --refine: weight of the predicted frames' foot skate (m/s) in the refiner's loss: "
                          "planted feet for goal error (default 0)")
-    ev.add_argument("--refine-start", choices=["policy", "zeros"], default="policy",
-                    help="with --refine: start each step's refinement from the policy's action (default) or from "
-                         "zero noise (for joints the policy was not trained on)")
+    ev.add_argument("--refine-start", choices=["policy", "zeros"], default=None,
+                    help="with --refine: start each step's refinement from the policy's action or from zero noise "
+                         "(for joints the policy was not trained on); default: the policy's stored "
+                         "eval.refine_start, else policy")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")
@@ -517,9 +518,10 @@ def _viewer_commands(sub) -> None:
                                              skeleton=a.skeleton))
 
     play = sub.add_parser("play", help="steer a policy live in the browser: clicks set a reach/path policy's goal "
-                                       "and waypoints, arrows or WASD a joystick policy's heading and speed")
-    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach, path or joystick policy, or a "
-                                                       "shipped policy by name (reach_walk_default)")
+                                       "and waypoints or a ReachJoint policy's timed joint goals, arrows or WASD a "
+                                       "joystick policy's heading and speed")
+    play.add_argument("policy", metavar="POLICY", help="PPO checkpoint (.pt) of a reach, path, joystick or ReachJoint "
+                                                       "policy, or a shipped policy by name (reach_walk_default)")
     play.add_argument("--motion", default=None,
                       help="the motion model the policy was trained on (default: the one its stored config names)")
     play.add_argument("--allow-motion-mismatch", action="store_true", help="run on another motion model (experts)")

@@ -96,8 +96,9 @@ class EvalRequest:
     """With ``refine``: primitives predicted, the first executed (None: the stored ``eval.refine_horizon``, else 3)."""
     refine_skate: float = 0.0
     """With ``refine``: the weight of the predicted frames' foot skate (m/s) in the refiner's loss."""
-    refine_start: str = "policy"
-    """With ``refine``: each step's refinement starts from the policy's action or from zero noise (``zeros``)."""
+    refine_start: str | None = None
+    """With ``refine``: each step's refinement starts from the policy's action or from zero noise (``zeros``; None:
+    the stored ``eval.refine_start``, else ``policy``)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -110,7 +111,7 @@ class EvalRequest:
                    ("--scene", self.scene), ("--refine", self.refine),
                    ("--refine-horizon", self.refine_horizon),
                    ("--refine-skate", self.refine_skate or None),
-                   ("--refine-start", None if self.refine_start == "policy" else self.refine_start))
+                   ("--refine-start", self.refine_start))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -236,10 +237,11 @@ def evaluate(req: EvalRequest) -> int:
         raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (only reach and path "
                           "policies are evaluated among objects); leave out --scene")
     stored = stored_eval_choices(policy_file(req.policy))
-    for name, flag in (("refine", "--refine"), ("refine_horizon", "--refine-horizon")):
-        # what the policy's card used; not with --physics (its own check names the task), nor a horizon when off
+    for name, flag in (("refine", "--refine"), ("refine_horizon", "--refine-horizon"),
+                       ("refine_start", "--refine-start")):
+        # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
         if getattr(req, name) is None and name in stored and not req.physics and (name == "refine" or req.refine):
-            setattr(req, name, int(stored[name]))
+            setattr(req, name, str(stored[name]) if name == "refine_start" else int(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
     refiner = _refiner(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
@@ -308,7 +310,7 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | No
     if req.physics:
         raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
     settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
-                              skate=req.refine_skate, start=req.refine_start)
+                              skate=req.refine_skate, start=req.refine_start or "policy")
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'

@@ -591,6 +591,10 @@ class ReachJointEnv(LatentMotionVectorEnv):
             if bool(self._due.any()):
                 self._sample_goals(self._due.nonzero()[:, 0])
             return torch.zeros_like(reached), reached
+        return self._advance_listed()
+
+    def _advance_listed(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The goal tables' due goals scored in order, the next made current; (N,) last goal due, all succeeded."""
         before = self._now_frame() - FUTURE_LENGTH
         due, error = self._due, self._step_error
         ended = torch.zeros_like(due)

@@ -12,7 +12,7 @@ from latentrl.errors import CheckpointError, ConfigError
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
-PLAY_TASKS = ("reach", "path", "joystick")
+PLAY_TASKS = ("reach", "path", "joystick", "reach_joint")
 """Tasks ``latentrl play`` steers: reach and path policies toward clicked goals and waypoints (a path policy
 that also observes the next waypoint is refused), joystick policies by the keyboard."""
 
@@ -51,8 +51,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                  skeleton: bool = False) -> int:
     """Steer a trained policy live in the browser, and pick its text from a list.
 
-    Clicks set a reach/path policy's goal and waypoints; keys set a joystick policy's heading and speed;
-    a ctrl-click (cmd-click) drops a box into the scene.
+    Clicks set a reach/path policy's goal and waypoints and a ReachJoint policy's timed joint goals
+    (:mod:`latentrl.viewer.joint_play`); keys set a joystick policy's heading and speed; a ctrl-click (cmd-click)
+    drops a box into the scene.
 
     ``policy`` is a file or a shipped policy's name (``reach_walk_default``). The text list is ``text``
     (if given), the policy's training texts, then every prompt the motion model's text table knows; the
@@ -73,8 +74,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                               "or a shipped policy's name)")
     task = stored_task(policy)
     if task not in PLAY_TASKS:
-        raise CheckpointError(f"{policy}: play steers reach and path policies toward clicked goals and joystick "
-                              f"policies by the keyboard; this policy's task is '{task}' "
+        raise CheckpointError(f"{policy}: play steers reach and path policies toward clicked goals, ReachJoint "
+                              f"policies to clicked joint goals and joystick policies by the keyboard; this "
+                              f"policy's task is '{task}' "
                               "(evaluate it with latentrl eval)")
     from latentrl.motion.text import prompt_problem
     from latentrl.viewer.record import Recorder, check_record
@@ -106,13 +108,26 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                               "clicked goal (reach policies, path policies trained without observe_next)")
     check_shapes(loaded.checkpoint, policy, env.single_observation_space.shape[0], env.single_action_space.shape[0])
     server = start_server(host, port, label=f"latentrl play {policy.name}", command="play")
-    how = ("Arrows or WASD steer: up/W faster, down/S slower, left/A and right/D turn, space stops"
-           if task == "joystick" else "Click on the floor to set the goal, shift-click to add waypoints")
+    how = {"joystick": "Arrows or WASD steer: up/W faster, down/S slower, left/A and right/D turn, space stops",
+           "reach_joint": "Click on the floor to give the joint picked below a goal in the picked seconds, "
+                          "shift-click to add one more"}.get(task, "Click on the floor to set the goal, shift-click "
+                                                                   "to add waypoints")
     how += "; ctrl-click (cmd-click) drops a box"
     title = f"**latentrl play** {plain(policy)} on motion {plain(motion)}  \n{how}; pick the text below."
     recorder = Recorder(record, "play") if record else None
-    controller = LiveController(server, env, loaded.policy, title, env.texts[0], deterministic=deterministic,
-                                seed=seed, recorder=recorder, skeleton=skeleton)
+    common = dict(deterministic=deterministic, seed=seed, recorder=recorder, skeleton=skeleton)
+    if task == "reach_joint":  # refined as the policy's card was (its stored eval.refine), switchable on the page
+        from latentrl.evaluation.trained import stored_eval_choices
+        from latentrl.viewer.joint_play import JointGoalController
+
+        stored = stored_eval_choices(policy)
+        joints = ((loaded.checkpoint.get("config") or {}).get("env") or {}).get("reach_joint", {}).get("joints")
+        controller = JointGoalController(server, env, loaded.policy, title, env.texts[0], trained=joints or ("pelvis",),
+                                         refine_steps=int(stored.get("refine") or 0),
+                                         refine_horizon=int(stored.get("refine_horizon") or 3),
+                                         refine_start=str(stored.get("refine_start") or "policy"), **common)
+    else:
+        controller = LiveController(server, env, loaded.policy, title, env.texts[0], **common)
     controller.start()
     code = serve_until_interrupted(server, "play", host, controller.stop)
     controller.thread.join(2)

@@ -30,6 +30,7 @@ from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.scenes.scene import Box, Scene
 from latentrl.scenes.spec import MAX_OBJECTS
 from latentrl.viewer.guard import choice, complain, vector
+from latentrl.viewer.joint_queue import joint_play_env
 from latentrl.viewer.markup import plain
 from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
 from latentrl.viewer.scene import SkeletonScene
@@ -192,11 +193,12 @@ def training_scene(env_cfg: Mapping[str, Any]) -> Scene | None:
 
 
 def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str,
-             task: str = "reach", scene: Scene | None = None) -> SteeredReachEnv | SteeredJoystickEnv:
+             task: str = "reach", scene: Scene | None = None) -> Any:
     """The env of ``latentrl play``: one steered env that steps the motion as the policy's training env.
 
     ``task`` 'joystick' gives a :class:`SteeredJoystickEnv` (the policy's trained speed range bounds the
-    keys), any other a :class:`SteeredReachEnv`.
+    keys), 'reach_joint' a :class:`~latentrl.viewer.joint_queue.SteeredReachJointEnv` (its trained joints and
+    targets), any other a :class:`SteeredReachEnv`.
 
     Its texts are ``text``, the training texts and the prompts the model knows; its
     :class:`~latentrl.envs.settings.StepSettings` are the checkpoint's (:func:`stored_step_settings`).
@@ -214,6 +216,8 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     if env_cfg.get("scene") is not None and env_cfg.get("height_grid"):  # a grid is observed with the scene
         common.update(height_grid=int(env_cfg["height_grid"]),
                       height_grid_spacing=float(env_cfg.get("height_grid_spacing") or 0.25))
+    if task == "reach_joint":
+        return joint_play_env(env_cfg, **common)
     if task == "joystick":
         speeds = tuple((env_cfg.get("joystick") or {}).get("speed_range") or (0.7, 1.4))
         return SteeredJoystickEnv(1, speed_range=speeds, **common)
@@ -497,12 +501,15 @@ class LiveController:
         return self.current[PELVIS]
 
     # ------------------------------------------------------------------ the loop
+    def _action(self) -> torch.Tensor:
+        """The noise of the next step: the policy's."""
+        with torch.no_grad():
+            return self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
+
     def _generate(self) -> None:
         """One policy call and env step: 8 new frames (caller holds the lock)."""
         start = time.perf_counter()
-        with torch.no_grad():
-            action = self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
-        self.obs, _, _, _, infos = self.env.step(action)
+        self.obs, _, _, _, infos = self.env.step(self._action())
         new = self.env.last_frames[0].cpu().numpy()
         took = time.perf_counter() - start
         rate = len(new) / max(took, 1e-6)
@@ -511,7 +518,12 @@ class LiveController:
         if bool(infos["diverged"][0]):
             self.message = "the motion diverged; press Reset"
             self.active = False
-        elif not self.joystick and bool(infos["goal_reached"][0]) and len(self.path) > 1:
+        else:
+            self._after_step(infos)
+
+    def _after_step(self, infos: Mapping[str, Any]) -> None:
+        """A reached waypoint moves the goal to the next, the last ends the walk (reach/path policies)."""
+        if not self.joystick and bool(infos["goal_reached"][0]) and len(self.path) > 1:
             self.path.pop(0)
             print(f"latentrl play: reached waypoint ({self.goal[0]:.2f}, {self.goal[1]:.2f}); "
                   f"{len(self.path)} to go", flush=True)
