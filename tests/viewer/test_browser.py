@@ -311,3 +311,25 @@ def wait_text(driver, needle: str, timeout: float = 20.0) -> None:
     while needle not in page_text(driver):
         assert time.monotonic() < end, f"page never showed {needle!r}:\n{page_text(driver)}"
         time.sleep(0.2)
+
+
+def test_play_lands_a_clicked_pelvis_goal_of_the_reach_joint_policy(browser):
+    """``latentrl play reach_joint_default``: a floor click gives the pelvis a goal in 2 s; refined, it lands."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    with serve("play", "reach_joint_default", "--deterministic") as (url, lines):
+        open_page(browser, url, "a goal for the joint picked below")
+        assert "refinement: on (16 steps)" in page_text(browser)
+        canvas = browser.find_element(By.TAG_NAME, "canvas")
+        w, h = canvas.size["width"], canvas.size["height"]
+        # near the middle: a spot about 1-2 m ahead of the start pose (the camera looks past it)
+        ActionChains(browser).move_to_element_with_offset(canvas, int(0.0 * w), int(0.04 * h)).click().perform()
+        line = wait_line(lines, "latentrl play: pelvis goal (", 20)
+        assert "2 s from now" in line, line
+        print(line.strip())
+        landed = wait_line(lines, "latentrl play: pelvis goal", 120)  # 8 refined steps: slow motion on a CPU
+        error = float(re.search(r"goal ([\d.]+) cm off", landed).group(1))
+        assert error < 10.0, landed
+        print(f"play (ReachJoint): {landed.strip()}")
+        keep(browser, "viewer_play_joint.png")
