@@ -213,7 +213,9 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
         opt.step()
         with torch.no_grad():
             z.clamp_(-bound, bound)
-    refined = torch.where(active[:, None, None], best, given)  # nothing to refine: the policy's action
+    # nothing to refine, or a non-finite policy action (the env's own check must see it): the policy's action
+    keep = ~active | ~torch.isfinite(given).flatten(1).all(dim=1)
+    refined = torch.where(keep[:, None, None], given, best)
     return refined.reshape(given.shape[0], -1)
 
 

@@ -232,6 +232,17 @@ def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
     # start "zeros": the policy's action is ignored (the same result as a zero action)
     zeros = RefineSettings(steps=2, start="zeros")
     assert torch.equal(refine(env, action, zeros), refine(env, torch.zeros_like(action), zeros))
+    # ... but a non-finite policy action is passed on for the env to refuse, whatever the start
+    broken = action.clone()
+    broken[1, 3] = float("nan")
+    for start in ("zeros", "policy"):
+        out = refine(env, broken, RefineSettings(steps=2, start=start))
+        assert torch.isnan(out[1, 3]) and torch.isfinite(out[0]).all()
+        assert torch.equal(out[0], refine(env, action, RefineSettings(steps=2, start=start))[0])
+    from latentrl.errors import NonFiniteError
+
+    with pytest.raises(NonFiniteError):
+        env.step(refine(env, broken, zeros))
 
 
 @pytest.mark.parametrize("field, value, match", [
