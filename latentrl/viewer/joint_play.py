@@ -39,6 +39,8 @@ HEIGHT_RANGE = (0.1, 2.2)
 DEFAULT_HEIGHT = 1.2
 DEFAULT_REFINE_STEPS = 16
 """Refinement steps when the policy stores none (the shipped pelvis policy stores 16)."""
+MAX_REFINE_STEPS = 64
+"""The most refinement steps the panel offers."""
 HEIGHT_JOINTS = ("left_hand", "right_hand", "head")
 """Joints whose clicked target is lifted to the panel's height; the others aim at the floor point."""
 
@@ -64,7 +66,9 @@ class JointGoalController(LiveController):
         self.joint = gui.add_dropdown("goal joint", list(JOINTS), initial_value=self.trained[0])
         self.seconds = gui.add_slider("seconds (0: as soon as possible)", 0.0, MAX_SECONDS, 0.1, DEFAULT_SECONDS)
         self.height = gui.add_slider("hand/head height (m)", *HEIGHT_RANGE, 0.05, DEFAULT_HEIGHT)
-        self.refining = gui.add_checkbox(f"refine ({self.settings.steps} steps a primitive)", refine_steps > 0)
+        self.refining = gui.add_checkbox("refine", refine_steps > 0)
+        self.refine_steps = gui.add_slider("refine steps (fewer: faster)", 1, MAX_REFINE_STEPS, 1,
+                                           min(self.settings.steps, MAX_REFINE_STEPS))
         self.refine_from = gui.add_dropdown("refine from", list(STARTS), initial_value=refine_start)
 
     def _idle_message(self) -> str:
@@ -141,8 +145,13 @@ class JointGoalController(LiveController):
         action = super()._action()
         if not self.refining.value or self.env.pending() == 0:
             return action
-        start = choice(self.refine_from.value, STARTS) or "policy"
-        self.settings.start = start
+        steps = self.refine_steps.value
+        if isinstance(steps, (int, float)) and not isinstance(steps, bool) and 1 <= steps <= MAX_REFINE_STEPS:
+            self.settings.steps = int(steps)
+        else:  # a page may send anything: keep the last good value
+            complain("play", f"ignored refine steps {str(steps)[:40]!r}: expected 1-{MAX_REFINE_STEPS}")
+            self.refine_steps.value = self.settings.steps
+        self.settings.start = choice(self.refine_from.value, STARTS) or "policy"
         return refine(self.env, action, self.settings)
 
     def _after_step(self, infos: Mapping[str, Any]) -> None:

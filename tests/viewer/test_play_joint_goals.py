@@ -140,6 +140,7 @@ def test_clicks_from_a_page_queue_goals_for_the_panels_joint_and_bad_panel_value
     env = joint_env(shipped)
     live = JointGoalController(guarded_server, env, loaded.policy, "test", "walk", trained=("pelvis",))
     assert not live.refining.value  # a policy storing no refinement starts without it
+    assert live.refine_steps.value == 16
     client = RawClient(guarded_server.get_port())  # the loop is not started: the queue stays as clicked
 
     def click(xy, modifier):  # a ray from 3 m above straight down onto xy
@@ -171,6 +172,18 @@ def test_clicks_from_a_page_queue_goals_for_the_panels_joint_and_bad_panel_value
         click((1.0, 1.0), "shift")
         wait_for(lambda: "ignored a goal" in capsys.readouterr().err, "a bad panel value is one line")
         assert env.pending() == 2
+        client.gui(live.refine_steps, 4)
+        wait_for(lambda: live.refine_steps.value == 4, "the refinement steps arrive")
+        live.refining.value = True
+        with live.lock:
+            live._action()
+        assert live.settings.steps == 4
+        client.gui(live.refine_steps, 1000)  # beyond the slider (Viser itself drops values of another type)
+        wait_for(lambda: live.refine_steps.value == 1000, "the bad steps arrive")
+        with live.lock:
+            live._action()
+        assert live.settings.steps == 4 and live.refine_steps.value == 4
+        assert "ignored refine steps '1000': expected 1-64" in capsys.readouterr().err
     finally:
         client.close()
 
