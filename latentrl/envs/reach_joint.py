@@ -58,6 +58,8 @@ RUN_LOST_M = 0.5
 """A run of near goals ends early when a goal is missed by more than this (metres): the next goal starts afresh
 from the body."""
 MAX_RUN = 1_000
+TIME_LEFT_CLIP_S = 10.0
+"""The observation's ``time_left`` is clipped to +- this many seconds (the env's ``time_left_clip`` default)."""
 _ENTRY_FIELDS = ("text", "goals")
 _GOAL_FIELDS = ("joint", "target", "time")
 
@@ -146,6 +148,24 @@ def _parse_goal(goal: Any, where: str) -> JointGoal:
 def goal_frame(seconds: float) -> int:
     """The frame (1-based from the episode start) a goal time falls on: the nearest, at least 1."""
     return max(1, round(seconds * FPS))
+
+
+def joint_goal_observation(position: torch.Tensor, rotation: torch.Tensor, target: torch.Tensor,
+                           one_hot: torch.Tensor, planar: torch.Tensor, time_left: torch.Tensor, dist_clip: float,
+                           time_left_clip: float = TIME_LEFT_CLIP_S) -> torch.Tensor:
+    """(N, 12) the goal fields of a ReachJoint observation: goal_vec, goal_dist, joint, planar, time_left.
+
+    ``position`` (N, 3): the goal joint at the last history frame, world; ``rotation`` (N, 3, 3): the body frame
+    (canonical-to-world); ``one_hot`` (N, 6) over :data:`JOINTS`; ``planar`` (N,) bool; ``time_left`` (N,) seconds.
+    One function for the env and the exported ONNX graph (``latentrl.export.onnx``), so both observe alike.
+    """
+    vec = target - position
+    vec = torch.cat((vec[:, :2], torch.where(planar[:, None], 0.0, vec[:, 2:])), dim=-1)
+    dist = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
+    local = (vec[:, None, :] @ rotation)[:, 0] * (dist_clip / dist.clamp(min=dist_clip))
+    left = time_left.clamp(-time_left_clip, time_left_clip)
+    return torch.cat((local, dist.clamp(max=dist_clip), one_hot, planar.to(local.dtype)[:, None], left[:, None]),
+                     dim=1)
 
 
 def joint_error(position: torch.Tensor, target: torch.Tensor, planar: torch.Tensor) -> torch.Tensor:
@@ -295,7 +315,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         height_offset: Sequence[float] = (0.0, 0.0),
         planar: Sequence[str] = (),
         goals: str | Path | Sequence[JointGoalEntry] | None = None,
-        time_left_clip: float = 10.0,
+        time_left_clip: float = TIME_LEFT_CLIP_S,
         **kwargs,
     ):
         section = ReachJointConfig(list(joints), radius, near_share, list(near_run), turn_deg_s,
@@ -538,14 +558,10 @@ class ReachJointEnv(LatentMotionVectorEnv):
     def _goal_observation(self, history_world: torch.Tensor) -> torch.Tensor:
         goal = self.current_goal()
         position = history_world[self._rows, -1, goal["joint"]]
-        vec = goal["target"] - position
-        vec = torch.cat((vec[:, :2], torch.where(goal["planar"][:, None], 0.0, vec[:, 2:])), dim=-1)
-        dist = torch.linalg.vector_norm(vec, dim=-1, keepdim=True)
-        clip = self.obs_goal_dist_clip
-        local = (vec[:, None, :] @ self._state.world.rotation)[:, 0] * (clip / dist.clamp(min=clip))
         one_hot = torch.nn.functional.one_hot(self._joint[self._rows, self._gi], len(JOINTS)).float()
-        left = ((goal["frame"] - self._now_frame()).float() / FPS).clamp(-self.time_left_clip, self.time_left_clip)
-        return torch.cat((local, dist.clamp(max=clip), one_hot, goal["planar"].float()[:, None], left[:, None]), dim=1)
+        left = (goal["frame"] - self._now_frame()).float() / FPS
+        return joint_goal_observation(position, self._state.world.rotation, goal["target"], one_hot, goal["planar"],
+                                      left, self.obs_goal_dist_clip, self.time_left_clip)
 
     # ------------------------------------------------------------------ stepping
     def _reached(self, future: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:

@@ -13,7 +13,13 @@ world_translation         (B, 3)          canonical-to-world translation, metres
 airborne                  (B,)            1 where the last step left the body in the air (the floor snap's flag), else 0
 goal                      (B, 3)          reach, path, timed: goal or current waypoint, world metres, z up (z unused)
 time_left                 (B,)            timed: seconds until the current waypoint's arrival time (negative
-                                          when late; the graph clips it to +-``time_left_clip``)
+                                          when late; the graph clips it to +-``time_left_clip``); reach_joint:
+                                          seconds until the joint goal's time
+joint_target              (B, 3)          reach_joint: the goal joint's target, world metres, z up (z unused when
+                                          planar)
+goal_joint                (B,)            reach_joint: the goal joint's index in ``latentrl.settings.joints``
+                                          (pelvis, left_foot, right_foot, left_hand, right_hand, head)
+goal_planar               (B,)            reach_joint: 1 where only the target's xy counts (feet), else 0
 next_goal                 (B, 3)          only for path/timed policies trained with observe_next (at the last
                                           waypoint: as ``latentrl.settings.next_at_last`` says)
 command_heading_deg       (B,)            joystick: commanded world heading, degrees counter-clockwise from +y
@@ -75,6 +81,7 @@ from latentrl.envs.config import stored_env_config
 from latentrl.envs.goal import goal_features
 from latentrl.envs.joystick import command_observation, world_angle
 from latentrl.envs.observation import observe
+from latentrl.envs.reach_joint import JOINTS, TIME_LEFT_CLIP_S, joint_goal_observation
 from latentrl.envs.scene import NUM_RAYS, RAY_RANGE_M, ray_fan
 from latentrl.envs.settings import StepSettings
 from latentrl.envs.timed import timed_observation
@@ -89,12 +96,13 @@ MIN_OPSET = 17
 DEFAULT_OPSET = 17
 MAX_DIFF = 1e-3
 """``export_command`` fails when onnxruntime and torch differ by more than this after one step."""
-EXPORT_TASKS = ("reach", "path", "joystick", "timed")
+EXPORT_TASKS = ("reach", "path", "joystick", "timed", "reach_joint")
 """Tasks whose observation the graph builds, each from its own inputs (:data:`TASK_INPUTS`)."""
 TASK_INPUTS = {"reach": ("goal",), "path": ("goal",), "timed": ("goal", "time_left"),
-               "joystick": ("command_heading_deg", "command_speed")}
+               "joystick": ("command_heading_deg", "command_speed"),
+               "reach_joint": ("joint_target", "goal_joint", "goal_planar", "time_left")}
 """Task -> the graph inputs its observation is built from (``next_goal`` follows for observe_next policies)."""
-GOAL_SIZES = {"reach": (4,), "path": (4, 8), "timed": (5, 9), "joystick": (3,)}
+GOAL_SIZES = {"reach": (4,), "path": (4, 8), "timed": (5, 9), "joystick": (3,), "reach_joint": (12,)}
 """Task -> the goal-observation sizes its policies may have (the larger: observe_next)."""
 EXTRA = "pip install 'latentrl[onnx]' (packages onnx and onnxruntime)"
 OUTPUT_NAMES = ("action", "joints_world", "next_history", "next_world_rotation", "next_world_translation",
@@ -107,8 +115,12 @@ _MEANINGS = {
     "world_translation": "canonical-to-world translation, metres",
     "airborne": "1 where the previous step ended in the air (the floor snap lands it this step), else 0; start at 0",
     "goal": "goal or current waypoint, world metres, z up (z is not used)",
-    "time_left": "seconds until the current waypoint's arrival time, negative when late (clipped in the graph to "
-                 "+-latentrl.settings.time_left_clip)",
+    "time_left": "seconds until the current waypoint's arrival time (timed) or the joint goal's time (reach_joint), "
+                 "negative when late (clipped in the graph to +-latentrl.settings.time_left_clip)",
+    "joint_target": "the goal joint's target, world metres, z up (z is not used when goal_planar is 1)",
+    "goal_joint": "the goal joint: its index in latentrl.settings.joints (0 pelvis, 1 left_foot, 2 right_foot, "
+                  "3 left_hand, 4 right_hand, 5 head; hands are the wrists)",
+    "goal_planar": "1 where only the target's xy counts (feet on the floor), else 0",
     "command_heading_deg": "commanded world heading, degrees counter-clockwise from +y (the body's start facing)",
     "command_speed": "commanded speed, m/s",
     "next_goal": "the waypoint after the current one, world metres (FollowPath observe_next policies); at the last "
@@ -206,7 +218,8 @@ class ControllerStep(nn.Module):
         b = self.batch
         shapes = {"history": (b, HISTORY_LENGTH, FEATURE_DIM), "world_rotation": (b, 3, 3), "world_translation": (b, 3),
                   "airborne": (b,), "goal": (b, 3), "next_goal": (b, 3), "text_embedding": (b, self.model.text_dim),
-                  "time_left": (b,), "command_heading_deg": (b,), "command_speed": (b,), "scene_rays": (b, NUM_RAYS)}
+                  "time_left": (b,), "command_heading_deg": (b,), "command_speed": (b,), "scene_rays": (b, NUM_RAYS),
+                  "joint_target": (b, 3), "goal_joint": (b,), "goal_planar": (b,)}
         return {name: shapes[name] for name in self.input_names}
 
     def output_shapes(self) -> dict[str, tuple[int, ...]]:
@@ -234,6 +247,14 @@ class ControllerStep(nn.Module):
         if self.task == "joystick":
             goal_obs = command_observation(history_world, world_angle(named["command_heading_deg"]),
                                            named["command_speed"])
+        elif self.task == "reach_joint":
+            slot = named["goal_joint"].round()[:, None]
+            one_hot = (slot == torch.arange(len(JOINTS), device=slot.device, dtype=slot.dtype)).to(torch.float32)
+            ids = torch.tensor(list(JOINTS.values()), device=slot.device)
+            position = (one_hot[..., None] * history_world[:, -1, ids]).sum(dim=1)  # the goal joint, as a gather
+            goal_obs = joint_goal_observation(position, state.world.rotation, named["joint_target"], one_hot,
+                                              named["goal_planar"] > 0.5, named["time_left"], self.goal_dist_clip,
+                                              self.time_left_clip)
         elif self.task == "timed":
             goal_obs = timed_observation(features(named["goal"]), named["time_left"], self.time_left_clip, following)
         else:
@@ -285,6 +306,8 @@ class ControllerStep(nn.Module):
                   "world_translation": state.world.translation, "airborne": torch.zeros(self.batch), "goal": goal,
                   "next_goal": goal + torch.tensor([1.0, 1.0, 0.0]), "time_left": 2.0 + rows,
                   "command_heading_deg": 30.0 * rows - 15.0, "command_speed": torch.full_like(rows, 1.2),
+                  "joint_target": goal + torch.tensor([0.0, 0.0, 0.9]), "goal_joint": rows % len(JOINTS),
+                  "goal_planar": ((rows % len(JOINTS) == 1) | (rows % len(JOINTS) == 2)).float(),
                   "scene_rays": torch.linspace(0.5, RAY_RANGE_M, NUM_RAYS).expand(self.batch, -1).contiguous()}
         if not self.baked_text:
             emb = torch.zeros(1, self.model.text_dim) if text_embedding is None else text_embedding
@@ -347,7 +370,8 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     except ConfigError as exc:  # name the checkpoint and the stored field
         raise CheckpointError(f"{policy_path}: stored env: {exc}") from None
     observe_next = goal_size == GOAL_SIZES[task][-1] and len(GOAL_SIZES[task]) == 2
-    time_left_clip = float((env_cfg.get("timed") or {}).get("time_left_clip", 10.0))
+    time_left_clip = float((env_cfg.get("timed") or {}).get("time_left_clip", 10.0)) if task == "timed" \
+        else TIME_LEFT_CLIP_S
     step = ControllerStep(policy, model, batch, settings=settings, observe_next=observe_next, text_embedding=baked,
                           task=task, time_left_clip=time_left_clip, scene_rays=scene_rays)
     info = {"policy": {"file": Path(policy_path).name, "sha256": file_sha256(policy_path),
@@ -396,7 +420,8 @@ def controller_metadata(step: ControllerStep, info: Mapping[str, Any] | None = N
                 "goal_dist_clip": step.goal_dist_clip, "floor_height": step.floor_height,
                 "foot_lock": step.foot_lock, "foot_lock_min_weight": step.foot_lock_min_weight,
                 "training_amp": step.settings.amp,
-                "time_left_clip": step.time_left_clip if step.task == "timed" else None,
+                "time_left_clip": step.time_left_clip if step.task in ("timed", "reach_joint") else None,
+                "joints": list(JOINTS) if step.task == "reach_joint" else None,
                 "observe_next": step.observe_next, "next_at_last": info.get("next_at_last"),
                 "scene_rays": {"count": NUM_RAYS, "range_m": RAY_RANGE_M, "from_deg": -90.0, "to_deg": 90.0,
                                "height": "any (horizontal rays: every object at any height counts)"}

@@ -1,6 +1,7 @@
 """docs/export.md's onnxruntime snippets run as pasted: the reach one on exports of the shipped walk policy made
-with and without ``--text`` (its pelvis comes near the goal), the joystick and timed ones on exports of the shipped
-joystick and timed policies (the pelvis follows the command; it reaches the waypoint), as the page says."""
+with and without ``--text`` (its pelvis comes near the goal), the joystick, timed and ReachJoint ones on exports of
+the shipped joystick, timed and ReachJoint policies (the pelvis follows the command; it reaches the waypoint; it comes
+near its target), as the page says."""
 
 import re
 from pathlib import Path
@@ -72,3 +73,14 @@ def test_the_scene_snippet_runs_as_pasted_and_walks_around_the_pillars(tmp_path,
     assert np.linalg.norm(joints[:, 0, :2] - names["goal"][0, :2], axis=1).min() < 0.3
     for x, y, r in names["pillars"]:
         assert (np.linalg.norm(joints[:, :, :2] - np.array([x, y]), axis=-1) - r).min() > 0.0
+
+
+def test_the_reach_joint_snippet_runs_as_pasted_and_brings_the_pelvis_near_its_target(tmp_path, monkeypatch):
+    """The pelvis goal 2.5 s ahead: the graph is the policy alone, so near (the page: 26 cm at the goal frame)."""
+    monkeypatch.chdir(tmp_path)
+    names = _export_and_run_section("reach_joint_default", "reach_joint.onnx", "ReachJoint policies")
+    pelvis = names["pelvis"]
+    assert pelvis.shape == (80, 3) and np.isfinite(pelvis).all()
+    assert np.linalg.norm(pelvis[0, :2] - names["target"][0, :2]) > 1.5
+    assert np.linalg.norm(pelvis[-1, :2] - names["target"][0, :2]) < 0.5
+    assert abs(float(names["error"]) - 0.261) < 0.05  # the page's figure

@@ -1,10 +1,10 @@
-"""``latentrl export onnx`` of the shipped joystick, timed, obstacle and maze policies: onnxruntime and torch agree
-with the env.
+"""``latentrl export onnx`` of the shipped joystick, timed, obstacle, maze and ReachJoint policies: onnxruntime and
+torch agree with the env.
 
-Each graph's task inputs carry what the env observes (joystick: the commanded heading and speed; timed: the
-waypoint and the time left; obstacles: the goal and the scene rays the engine casts; maze: the waypoint, the next
-one and the rays), and the graph builds the observation with the env's own functions, so over 4 steps the actions
-and states match the env's, at batch 2.
+Each graph's task inputs carry what the env observes (joystick: the commanded heading and speed; timed: the waypoint
+and the time left; obstacles: the goal and the scene rays the engine casts; maze: the waypoint, the next one and the
+rays; ReachJoint: the joint, its target, whether it is planar and the time left), and the graph builds the
+observation with the env's own functions, so over 4 steps the actions and states match the env's, at batch 2.
 """
 
 import contextlib
@@ -84,6 +84,30 @@ def test_shipped_timed_policy_runs_in_onnxruntime_like_the_torch_env(tmp_path):
                                   ["goal", "time_left"], tmp_path)
     settings = meta["latentrl.settings"]
     assert settings["task"] == "timed" and settings["time_left_clip"] == 10.0 and settings["observe_next"] is False
+
+
+def test_shipped_reach_joint_policy_runs_in_onnxruntime_like_the_torch_env(tmp_path):
+    """Goals of several joints (planar and 3-D) fall due within the 4 steps: the graph's one-hot and gather of the
+    goal joint observe as the env does."""
+    from latentrl.envs.reach_joint import JOINTS, JointGoal, JointGoalEntry, ReachJointEnv
+    from latentrl.motion.skeleton import FPS
+
+    entries = [JointGoalEntry("walk", (JointGoal("pelvis", (0.1, 0.4), 0.2), JointGoal("left_foot", (-0.1, 0.6), 0.5),
+                                       JointGoal("right_hand", (0.3, 1.0, 1.0), 1.0))),
+               JointGoalEntry("walk", (JointGoal("head", (0.0, 0.5, 1.6), 0.3), JointGoal("pelvis", (0.2, 1.2), 1.2)))]
+    env = ReachJointEnv(2, motion="default", goals=entries, autoreset_mode="Disabled", foot_lock=True,
+                        joints=("pelvis",), planar=("pelvis",))
+
+    def task_inputs(e):
+        g = e.current_goal()
+        slot = e._joint[e._rows, e._gi].float()
+        return [g["target"].clone(), slot, g["planar"].float(), (g["frame"] - e._now_frame()).float() / FPS]
+
+    meta = _agree_over_four_steps("reach_joint_default", env, task_inputs,
+                                  ["joint_target", "goal_joint", "goal_planar", "time_left"], tmp_path)
+    settings = meta["latentrl.settings"]
+    assert settings["task"] == "reach_joint" and settings["joints"] == list(JOINTS)
+    assert settings["time_left_clip"] == 10.0 and settings["observe_next"] is False
 
 
 def test_shipped_obstacle_policy_takes_the_engines_rays_and_says_where_to_cast_the_next(tmp_path):
