@@ -1302,8 +1302,8 @@ SITS = [
         r"ok\.json: path 0: unknown field 'center'"),
     _r3("bad value", "eval-sit-scene", [*SIT_EVAL, "--paths", "{fx}/seats/ok.json", "--scene", "maze_a"],
         r"--scene: the sit task's evaluation runs without a scene .*leave out --scene"),
-    _r3("bad value", "eval-reach-joint-scene", [*RJ_EVAL, "--paths", "{fx}/goals/ok.json", "--scene", "maze_a"],
-        r"--scene: the reach_joint task's evaluation runs without a scene"),
+    _r3("bad value", "eval-reach-joint-scene", [*RJ_EVAL, "--paths", "{fx}/goals/ok.json", "--scene", "maze_b_"],
+        r"--scene: scene file not found: maze_b_ \(looked in .*tasks/scenes\)"),
     # ------------------------------------------------ env.task: sit settings (train --set env.options.*)
     *[_r3("bad value", f"train-sit-{value.split('=')[0]}-{name}", [*SIT_TRAIN, "--set", f"env.options.{value}"],
           rf"tiny\.yaml: env\.options\.{value.split('=')[0]}: {pattern}")

@@ -205,7 +205,7 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
         try:
             resolve_scene(settings.scene)
         except LatentRLError as exc:
-            raise ConfigError(f"--scene: {exc}") from None
+            raise ConfigError(f"--scene: {str(exc).removeprefix('scene: ')}") from None
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 
@@ -233,9 +233,9 @@ def evaluate(req: EvalRequest) -> int:
         req.motion = motion_of(env)
     spec, files = eval_suites(req.policy, req.paths)
     evaluator = spec.evaluator
-    if req.scene is not None and evaluator.suite_kind != "paths":  # the others would ignore it and exit 0
-        raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (only reach and path "
-                          "policies are evaluated among objects); leave out --scene")
+    if req.scene is not None and evaluator.suite_kind not in ("paths", "joint_goals"):  # others would ignore it
+        raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (reach, path and "
+                          "ReachJoint policies are evaluated among objects); leave out --scene")
     stored = stored_eval_choices(policy_file(req.policy))
     for name, flag in (("refine", "--refine"), ("refine_horizon", "--refine-horizon"),
                        ("refine_start", "--refine-start")):

@@ -17,7 +17,10 @@ Metrics of an episode:
 - ``err_near_cm`` / ``err_far_cm``: mean error at the goal time of the near / far goals (cm);
 - ``footstep_err_cm``: mean touchdown error of the footsteps reached or not (the goal-time error where missed);
 - ``steps_reached``: share of footsteps touched down within ``radius_m``; ``reached``: share of all goals;
-- ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`).
+- ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`; with a
+  scene, over the terrain under each foot);
+- with a scene (``latentrl eval --scene``): ``collision``, ``scene_penetration_cm``, ``scene_penetration_max_cm``
+  (:func:`~latentrl.scenes.contact.scene_metrics`). A footstep's touchdown is judged against the flat floor.
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ import numpy as np
 
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.envs.reach_joint import FEET, JOINTS, JointGoalEntry, ReachJointConfig, ReachJointEnv, load_joint_goals
+from latentrl.envs.scene import resolve_scene
+from latentrl.errors import ConfigError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import end_of, rollout
@@ -40,10 +45,15 @@ from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip,
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.render import GOAL_JOINT_COLOURS
+from latentrl.scenes.contact import scene_metrics
+from latentrl.scenes.courses import RandomMazes
+from latentrl.scenes.spec import scene_to_json
 
 UNITS = {"success": "share", "err_near_cm": "cm", "err_far_cm": "cm", "footstep_err_cm": "cm",
          "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm"}
 """Metric -> unit, in report order."""
+SCENE_UNITS = {"collision": "share", "scene_penetration_cm": "cm", "scene_penetration_max_cm": "cm"}
+"""Added to :data:`UNITS` when the episodes ran in a scene."""
 
 
 @dataclass
@@ -91,10 +101,11 @@ def touchdown(heights: np.ndarray, frame: int, low: int, high: int, contact_heig
 
 
 def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int], criteria: JointGoalCriteria,
-                 floor: float = 0.0) -> tuple[dict[str, float | None], dict[str, Any]]:
+                 floor: float = 0.0, terrain: Any = None) -> tuple[dict[str, float | None], dict[str, Any]]:
     """The metrics of one episode (module docstring) from its clip joints and each goal's frame (-1: never due).
 
-    ``joints``: (T, 22, 3) world joints of the clip, seed history first.
+    ``joints``: (T, 22, 3) world joints of the clip, seed history first; ``terrain``: the episode's one-row scene
+    (None: the flat floor), which adds the scene metrics.
     """
     j = np.asarray(joints, dtype=np.float64)
     last = len(j) - 1
@@ -129,7 +140,7 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
     foot_err = [e for e in foot_err if e is not None]
     near_err = [e * 100 for e, n in zip(errors, near) if e is not None and n]
     far_err = [e * 100 for e, n in zip(errors, near) if e is not None and not n]
-    quality = M.episode_metrics(joints, FPS, floor)
+    quality = M.episode_metrics(joints, FPS, floor, terrain)
     metrics = {
         "success": float(all(hit)),
         "err_near_cm": float(np.mean(near_err)) if near_err else None,
@@ -140,6 +151,8 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
     }
+    if terrain is not None:
+        metrics.update(scene_metrics(np.asarray(joints, dtype=np.float32), terrain))
     detail = {"error_cm": [None if e is None else e * 100 for e in errors],
               "touchdown_err_cm": [None if s is None else s * 100 for s in steps], "frame": list(map(int, frames))}
     return metrics, detail
@@ -148,10 +161,23 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
 # --------------------------------------------------------------------------- running
 def make_env(motion, entry: JointGoalEntry, num_envs: int, settings: EvalSettings, record_history: bool = False,
              max_steps: int | None = None) -> ReachJointEnv:
-    """The evaluation env: every env runs ``entry``, no autoreset, the policy's guidance and bound."""
+    """The evaluation env: every env runs ``entry``, no autoreset, the policy's guidance and bound.
+
+    ``settings.scene`` (``latentrl eval --scene``: a scene file or name, or random obstacles, drawn clear of the
+    start and the first goal) puts objects around the goals; the policy observes them only when it was trained with
+    a scene (``settings.observe_scene``).
+    """
+    scene = resolve_scene(settings.scene) if settings.scene is not None else None
+    if isinstance(scene, RandomMazes):
+        raise ConfigError("scene: random mazes bring their own routes (path suites); joint goals take a scene file "
+                          "or random_obstacles")
+    observe = scene is not None and settings.observe_scene
+    extra: dict[str, Any] = {"scene": scene, "observe_scene": observe} if scene is not None else {}
+    if observe and settings.height_grid:
+        extra.update(height_grid=settings.height_grid, height_grid_spacing=settings.height_grid_spacing)
     return ReachJointEnv(num_envs, motion=motion, goals=[entry], texts=(entry.text,), device=settings.device,
                          max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
-                         record_history=record_history, **settings.motion_kwargs())
+                         record_history=record_history, **settings.motion_kwargs(), **extra)
 
 
 def budget(entry: JointGoalEntry, settings: EvalSettings, criteria: JointGoalCriteria, max_speed: float) -> int:
@@ -194,8 +220,11 @@ def run_entry(act: Callable, motion, entry: JointGoalEntry, settings: EvalSettin
     for i in range(settings.episodes):
         steps = int(outcome["steps"][i])
         clip = episode_clip(env, i, steps)
-        metrics, detail = goal_metrics(clip.joints, entry, frames[i].tolist(), criteria, env.floor_height)
+        row = env.scene.row(i) if env.scene is not None else None
+        metrics, detail = goal_metrics(clip.joints, entry, frames[i].tolist(), criteria, env.floor_height, row)
         ep = TaskEpisode(suite, index, i, end_of(outcome, i), steps, metrics, detail)
+        if env.scene is not None:
+            clip.scene = scene_to_json(env.scene.scene_of(i))
         if sink is not None:
             clip.waypoints = np.asarray([(*g.target[:2], g.target[2] if not g.planar else env.floor_height)
                                          for g in entry.goals], np.float32)

@@ -170,6 +170,41 @@ def test_latentrl_eval_runs_a_reach_joint_policy(eval_files, tiny_model, tmp_pat
     assert "wrote" in capsys.readouterr().out
 
 
+def test_latentrl_eval_scene_puts_joint_goals_among_objects_and_reports_collisions(eval_files, tiny_model, tmp_path):
+    """A box around the start pose: every episode collides, and the motions carry the scene; a box far away changes
+    no metric; without --scene the report has no scene metrics."""
+    from latentrl.app.cli import main
+    from latentrl.render import load_motion_npz
+    from latentrl.scenes import scene_from_json
+
+    ckpt = reach_joint_policy(eval_files, tiny_model, tmp_path)
+    suite = tmp_path / "goals_mini.json"
+    suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.5}]}]))
+    scene = tmp_path / "crate.json"
+    scene.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [0.0, 0.0], "size": [1.5, 1.5, 2.5]}]}))
+    args = ["eval", str(ckpt), "--motion", str(eval_files["motion"]), "--paths", str(suite), "--episodes", "2",
+            "--device", "cpu", "--render", "0", "--deterministic"]
+    assert main([*args, "--out", str(tmp_path / "flat")]) == 0
+    assert main([*args, "--out", str(tmp_path / "boxed"), "--scene", str(scene)]) == 0
+    flat, boxed = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("flat", "boxed"))
+    assert "collision" not in flat["overall"] and "collision" not in flat["units"]
+    assert boxed["overall"]["collision"]["mean"] == 1.0 and boxed["units"]["collision"] == "share"
+    assert boxed["overall"]["scene_penetration_max_cm"]["mean"] > 10
+    episode = boxed["suites"][0]["entries"][0]["episodes"][0]
+    clip = load_motion_npz(tmp_path / "boxed" / episode["motion_file"])
+    assert scene_from_json(str(clip["scene"])).objects[0].size[2] == 2.5
+    # the policy was trained without a scene and does not observe it: a box far away changes nothing but the report
+    far = tmp_path / "far.json"
+    far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [8.0, 8.0], "size": [0.5, 0.5, 1.0]}]}))
+    assert main([*args, "--out", str(tmp_path / "far"), "--scene", str(far)]) == 0
+    away = json.loads((tmp_path / "far" / "report.json").read_text())
+    assert away["overall"]["collision"]["mean"] == 0.0
+    for key in ("err_far_cm", "skate_cm_s", "floor_cm"):
+        assert away["overall"][key]["mean"] == pytest.approx(flat["overall"][key]["mean"], abs=1e-6)
+
+
 def test_training_runs_the_joint_goal_evaluator_periodically(tiny_model, tmp_path):
     from latentrl.app.train import TrainConfig, make_eval_hook
     from latentrl.envs.config import build
