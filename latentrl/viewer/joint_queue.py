@@ -15,12 +15,13 @@ import torch
 
 from latentrl.envs.reach_joint import JOINTS, ReachJointConfig, ReachJointEnv, goal_frame
 from latentrl.errors import LatentRLError
+from latentrl.viewer.steered import Steered
 
 MAX_QUEUED = 32
 """Goals the queue holds at once (done ones are dropped to make room); clicks beyond it are ignored."""
 
 
-class SteeredReachJointEnv(ReachJointEnv):
+class SteeredReachJointEnv(Steered, ReachJointEnv):
     """``ReachJoint`` with one env whose goals come from outside, a queue of up to :data:`MAX_QUEUED`.
 
     Until a goal is added nothing is due. Goals are scored at their frames as a goal file's are; the queue never
@@ -30,8 +31,6 @@ class SteeredReachJointEnv(ReachJointEnv):
     """
 
     def __init__(self, num_envs: int = 1, *, slots: int = MAX_QUEUED, **kwargs):
-        self._text_choice: int | None = None
-        self.last_frames: torch.Tensor | None = None
         kwargs.pop("goals", None)
         super().__init__(num_envs, **kwargs)
         n, dev = self.num_envs, self.device
@@ -42,17 +41,6 @@ class SteeredReachJointEnv(ReachJointEnv):
         self._gap = torch.full((n, slots), -1, dtype=torch.long, device=dev)  # frames after the goal before
         self._record = torch.full((n, slots), math.nan, device=dev)
         self._count = torch.zeros(n, dtype=torch.long, device=dev)
-
-    # ------------------------------------------------------------------ text
-    def set_text(self, text: str) -> None:
-        """Use ``text`` (one of :attr:`texts`) from now on, across resets."""
-        self._text_choice = self.texts.index(text)
-        self._text_idx[:] = self._text_choice
-
-    @property
-    def text(self) -> str:
-        """The text the env steps with now."""
-        return self.texts[int(self._text_idx[0])]
 
     # ------------------------------------------------------------------ the queue
     def planar_joint(self, joint: str) -> bool:
@@ -155,15 +143,12 @@ class SteeredReachJointEnv(ReachJointEnv):
         for i in idx.tolist():
             self._clear(i)
         self._run_left[idx] = 0
-        self._text_idx[idx] = 0 if self._text_choice is None else self._text_choice
+        self._text_idx[idx] = 0
+        self._keep_text(idx)
 
     def _advance_task(self, reached: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         ended, success = self._advance_listed()
         return torch.zeros_like(ended), success
-
-    def _finish_step(self, reward, terms, reached, diverged, nonfinite, future, goal):
-        self.last_frames = future
-        return super()._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
 
 
 def joint_play_env(env_cfg: Mapping[str, Any], **common) -> SteeredReachJointEnv:

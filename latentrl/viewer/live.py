@@ -34,6 +34,7 @@ from latentrl.viewer.joint_queue import joint_play_env
 from latentrl.viewer.markup import plain
 from latentrl.viewer.playback import TRAIL_EVERY, CameraFollower, move_cameras
 from latentrl.viewer.scene import SkeletonScene
+from latentrl.viewer.steered import Steered
 
 MAX_GOAL_DISTANCE_M = 50.0
 """Clicks farther than this from the body are ignored (the env ends episodes 100 m from the goal)."""
@@ -59,7 +60,7 @@ START_CAMERA = ((0.0, -4.5, 3.2), (0.0, 1.2, 0.6))
 """Camera (position, look_at) behind the start pose (the body starts at the origin facing +y)."""
 
 
-class SteeredReachEnv(ReachLocationEnv):
+class SteeredReachEnv(Steered, ReachLocationEnv):
     """``ReachLocation`` whose goal and text are set from outside (:meth:`set_goal`, :meth:`set_text`).
 
     Until a goal is set, the goal is the pelvis itself. Reaching the goal keeps it (no new goal is
@@ -68,8 +69,6 @@ class SteeredReachEnv(ReachLocationEnv):
 
     def __init__(self, num_envs: int = 1, **kwargs):
         self._user_goal: torch.Tensor | None = None
-        self._text_choice: int | None = None
-        self.last_frames: torch.Tensor | None = None
         super().__init__(num_envs, **kwargs)
 
     def set_goal(self, xy: Sequence[float]) -> None:
@@ -82,16 +81,6 @@ class SteeredReachEnv(ReachLocationEnv):
         """No goal: the next reset puts the goal at the pelvis."""
         self._user_goal = None
 
-    def set_text(self, text: str) -> None:
-        """Use ``text`` (one of :attr:`texts`) from now on, across resets."""
-        self._text_choice = self.texts.index(text)
-        self._text_idx[:] = self._text_choice
-
-    @property
-    def text(self) -> str:
-        """The text the env steps with now."""
-        return self.texts[int(self._text_idx[0])]
-
     def _sample_goals(self, idx: torch.Tensor) -> torch.Tensor:
         if self._user_goal is not None:
             return self._user_goal.expand(len(idx), 3).clone()
@@ -100,18 +89,13 @@ class SteeredReachEnv(ReachLocationEnv):
 
     def _reset_task(self, idx: torch.Tensor) -> None:
         super()._reset_task(idx)
-        if self._text_choice is not None:  # keep the chosen text across resets
-            self._text_idx[idx] = self._text_choice
+        self._keep_text(idx)
 
     def _advance_task(self, reached: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.zeros_like(reached), reached
 
-    def _finish_step(self, reward, terms, reached, diverged, nonfinite, future, goal):
-        self.last_frames = future
-        return super()._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
 
-
-class SteeredJoystickEnv(JoystickEnv):
+class SteeredJoystickEnv(Steered, JoystickEnv):
     """``Joystick`` whose command (heading, speed) and text are set from outside (:meth:`set_command`).
 
     The command holds until set again (no random or timeline changes); :attr:`last_frames` holds the
@@ -119,9 +103,7 @@ class SteeredJoystickEnv(JoystickEnv):
     """
 
     def __init__(self, num_envs: int = 1, **kwargs):
-        self._text_choice: int | None = None
         self._user_command = (0.0, 1.0)
-        self.last_frames: torch.Tensor | None = None
         super().__init__(num_envs, **kwargs)
         self.set_command(0.0, sum(self.speed_range) / 2)
 
@@ -137,23 +119,12 @@ class SteeredJoystickEnv(JoystickEnv):
         """(heading degrees wrapped to (-180, 180], speed m/s) of env 0."""
         return float(heading_deg(self._heading)[0]), float(self._speed[0])
 
-    def set_text(self, text: str) -> None:
-        """Use ``text`` (one of :attr:`texts`) from now on, across resets."""
-        self._text_choice = self.texts.index(text)
-        self._text_idx[:] = self._text_choice
-
     def clear_goal(self) -> None:
         """Nothing to clear: the command is kept (the controller sets it on reset)."""
 
-    @property
-    def text(self) -> str:
-        """The text the env steps with now."""
-        return self.texts[int(self._text_idx[0])]
-
     def _reset_task(self, idx: torch.Tensor) -> None:
         super()._reset_task(idx)
-        if self._text_choice is not None:
-            self._text_idx[idx] = self._text_choice
+        self._keep_text(idx)
         self._heading[idx] = world_angle(self._user_command[0])
         self._speed[idx] = self._user_command[1]
 
@@ -161,10 +132,6 @@ class SteeredJoystickEnv(JoystickEnv):
         self._changed = torch.zeros_like(reached)
         none = torch.zeros_like(reached)
         return none, none
-
-    def _finish_step(self, reward, terms, reached, diverged, nonfinite, future, goal):
-        self.last_frames = future
-        return super()._finish_step(reward, terms, reached, diverged, nonfinite, future, goal)
 
 
 def floor_point(origin: Sequence[float], direction: Sequence[float], floor: float = 0.0) -> np.ndarray | None:

@@ -187,16 +187,3 @@ def test_clicks_from_a_page_queue_goals_for_the_panels_joint_and_bad_panel_value
     finally:
         client.close()
 
-
-def test_play_takes_a_reach_joint_policy(capsys):
-    """The shipped ReachJoint policy gets past the task check (as far as a busy port)."""
-    import socket
-
-    from tests.viewer.test_commands import one_line_error
-
-    pytest.importorskip("viser")
-    with socket.socket() as busy:
-        busy.bind(("127.0.0.1", 0))
-        busy.listen()
-        port = busy.getsockname()[1]
-        one_line_error(capsys, ["play", "reach_joint_default", "--port", str(port)], f"--port {port}: already in use")

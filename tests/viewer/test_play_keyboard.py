@@ -158,8 +158,9 @@ def test_shift_clicks_form_a_path_followed_in_order(server):
     assert np.linalg.norm(live.pelvis()[:2] - second) < 0.6
 
 
-def test_play_takes_a_joystick_policy_and_still_refuses_a_timed_one(capsys):
-    """The joystick policy gets past the task check (as far as a busy port); a timed policy is one line, exit 2."""
+def test_play_takes_joystick_and_reach_joint_policies_and_still_refuses_a_timed_one(capsys):
+    """The joystick and ReachJoint policies get past the task check (as far as a busy port); a timed policy is one
+    line, exit 2."""
     import socket
 
     from tests.viewer.test_commands import one_line_error
@@ -169,7 +170,8 @@ def test_play_takes_a_joystick_policy_and_still_refuses_a_timed_one(capsys):
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        one_line_error(capsys, ["play", "joystick_walk_default", "--port", str(port)], f"--port {port}: already in use")
+        for name in ("joystick_walk_default", "reach_joint_default"):
+            one_line_error(capsys, ["play", name, "--port", str(port)], f"--port {port}: already in use")
     one_line_error(capsys, ["play", "timed_walk_default"], "this policy's task is 'timed'")
 
 
