@@ -480,9 +480,9 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--refine-horizon", type=int, default=None, metavar="H",
                     help="with --refine: primitives predicted (8 frames each), the first executed (default: the "
                          "policy's stored eval.refine_horizon, else 3)")
-    ev.add_argument("--refine-skate", type=float, default=0.0, metavar="W",
+    ev.add_argument("--refine-skate", type=float, default=None, metavar="W",
                     help="with --refine: weight of the predicted frames' foot skate (m/s) in the refiner's loss: "
-                         "planted feet for goal error (default 0)")
+                         "planted feet for goal error (default: the policy's stored eval.refine_skate, else 0)")
     ev.add_argument("--refine-start", choices=["policy", "zeros"], default=None,
                     help="with --refine: start each step's refinement from the policy's action or from zero noise "
                          "(for joints the policy was not trained on); default: the policy's stored "

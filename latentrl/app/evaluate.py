@@ -94,8 +94,9 @@ class EvalRequest:
     0: off; None: the policy's stored ``eval.refine``, else off)."""
     refine_horizon: int | None = None
     """With ``refine``: primitives predicted, the first executed (None: the stored ``eval.refine_horizon``, else 3)."""
-    refine_skate: float = 0.0
-    """With ``refine``: the weight of the predicted frames' foot skate (m/s) in the refiner's loss."""
+    refine_skate: float | None = None
+    """With ``refine``: the weight of the predicted frames' foot skate (m/s) in the refiner's loss (None: the stored
+    ``eval.refine_skate``, else 0)."""
     refine_start: str | None = None
     """With ``refine``: each step's refinement starts from the policy's action or from zero noise (``zeros``; None:
     the stored ``eval.refine_start``, else ``policy``)."""
@@ -110,7 +111,7 @@ class EvalRequest:
                                                                    ("none", 0) and self.render_episodes != 1 else None),
                    ("--scene", self.scene), ("--refine", self.refine),
                    ("--refine-horizon", self.refine_horizon),
-                   ("--refine-skate", self.refine_skate or None),
+                   ("--refine-skate", self.refine_skate),
                    ("--refine-start", self.refine_start))
         for flag, value in options:
             if value is not None:
@@ -237,11 +238,11 @@ def evaluate(req: EvalRequest) -> int:
         raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (reach, path and "
                           "ReachJoint policies are evaluated among objects); leave out --scene")
     stored = stored_eval_choices(policy_file(req.policy))
-    for name, flag in (("refine", "--refine"), ("refine_horizon", "--refine-horizon"),
-                       ("refine_start", "--refine-start")):
+    for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
+                             ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
         if getattr(req, name) is None and name in stored and not req.physics and (name == "refine" or req.refine):
-            setattr(req, name, str(stored[name]) if name == "refine_start" else int(stored[name]))
+            setattr(req, name, kind(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
     refiner = _refiner(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
@@ -310,7 +311,7 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | No
     if req.physics:
         raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
     settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
-                              skate=req.refine_skate, start=req.refine_start or "policy")
+                              skate=req.refine_skate or 0.0, start=req.refine_start or "policy")
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'

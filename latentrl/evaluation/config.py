@@ -45,6 +45,8 @@ class EvalConfig:
     ``--refine``; the card's figures); None: off. The trainer's periodic evaluation does not refine."""
     refine_horizon: int | None = None
     """With ``refine``: its ``--refine-horizon`` (None: 3)."""
+    refine_skate: float | None = None
+    """With ``refine``: its ``--refine-skate`` weight (None: 0)."""
     refine_start: str | None = None
     """With ``refine``: its ``--refine-start``, ``policy`` or ``zeros`` (None: policy). A policy whose goals are
     joints it was not trained on refines from zero noise better (docs/joint_goals.md)."""
@@ -69,6 +71,8 @@ class EvalConfig:
                 f"must be 0-1000 optimizer steps (or null: off), got {self.refine}")
         require(self.refine_horizon is None or 1 <= self.refine_horizon <= 16, "refine_horizon",
                 f"must be 1-16 primitives (or null: 3), got {self.refine_horizon}")
+        require(self.refine_skate is None or 0 <= self.refine_skate <= 1000, "refine_skate",
+                f"must be a weight in [0, 1000] (or null: 0), got {self.refine_skate}")
         require(self.refine_start in (None, "policy", "zeros"), "refine_start",
                 f"must be policy or zeros (or null: policy), got {self.refine_start!r:.40}")
 

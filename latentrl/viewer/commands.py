@@ -125,7 +125,8 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
         controller = JointGoalController(server, env, loaded.policy, title, env.texts[0], trained=joints or ("pelvis",),
                                          refine_steps=int(stored.get("refine") or 0),
                                          refine_horizon=int(stored.get("refine_horizon") or 3),
-                                         refine_start=str(stored.get("refine_start") or "policy"), **common)
+                                         refine_start=str(stored.get("refine_start") or "policy"),
+                                         refine_skate=float(stored.get("refine_skate") or 0.0), **common)
     else:
         controller = LiveController(server, env, loaded.policy, title, env.texts[0], **common)
     controller.start()

@@ -49,14 +49,14 @@ class JointGoalController(LiveController):
     """:class:`~latentrl.viewer.live.LiveController` for a :class:`SteeredReachJointEnv` (module docstring).
 
     Extra args: ``trained`` (the joints the policy was trained on: the panel starts on the first),
-    ``refine_steps`` (0: refinement off at the start), ``refine_horizon``, ``refine_start``.
+    ``refine_steps`` (0: refinement off at the start), ``refine_horizon``, ``refine_start``, ``refine_skate``.
     """
 
     def __init__(self, server: Any, env: SteeredReachJointEnv, policy: Any, title: str, text: str,
                  trained: Sequence[str] = ("pelvis",), refine_steps: int = 0, refine_horizon: int = 3,
-                 refine_start: str = "policy", **kwargs):
+                 refine_start: str = "policy", refine_skate: float = 0.0, **kwargs):
         self.settings = RefineSettings(steps=refine_steps or DEFAULT_REFINE_STEPS, horizon=refine_horizon,
-                                       start=refine_start)
+                                       start=refine_start, skate=refine_skate)
         self.settings.check()
         self.trained = tuple(trained) or ("pelvis",)
         self.scored = 0

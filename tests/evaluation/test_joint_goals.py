@@ -257,7 +257,7 @@ def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, ti
     from latentrl.app.cli import main
 
     ckpt = reach_joint_policy(eval_files, tiny_model, tmp_path, {"refine": 2, "refine_horizon": 1,
-                                                                 "refine_start": "zeros"})
+                                                                 "refine_start": "zeros", "refine_skate": 0.5})
     suite = tmp_path / "goals_mini.json"
     suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.2}]}]))
     args = ["eval", str(ckpt), "--motion", str(eval_files["motion"]), "--paths", str(suite), "--episodes", "1",
@@ -267,9 +267,10 @@ def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, ti
     assert "--refine 2 (the policy's stored evaluation setting; --refine overrides)" in out
     assert "--refine-start zeros (the policy's stored evaluation setting; --refine-start overrides)" in out
     stored = json.loads((tmp_path / "stored" / "report.json").read_text())["refine"]
-    assert stored["horizon"] == 1 and stored["start"] == "zeros"
-    assert main([*args, "--out", str(tmp_path / "flag"), "--refine-start", "policy"]) == 0
-    assert json.loads((tmp_path / "flag" / "report.json").read_text())["refine"]["start"] == "policy"
+    assert stored["horizon"] == 1 and stored["start"] == "zeros" and stored["skate"] == 0.5
+    assert main([*args, "--out", str(tmp_path / "flag"), "--refine-start", "policy", "--refine-skate", "0"]) == 0
+    flagged = json.loads((tmp_path / "flag" / "report.json").read_text())["refine"]
+    assert flagged["start"] == "policy" and flagged["skate"] == 0.0
     assert main([*args, "--out", str(tmp_path / "off"), "--refine", "0"]) == 0
     assert "refine" not in json.loads((tmp_path / "off" / "report.json").read_text())
 
@@ -277,6 +278,7 @@ def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, ti
 @pytest.mark.parametrize("field, value, match", [
     ("refine", -1, r"refine: must be 0-1000 optimizer steps \(or null: off\), got -1"),
     ("refine_horizon", 17, r"refine_horizon: must be 1-16 primitives \(or null: 3\), got 17"),
+    ("refine_skate", -1.0, r"refine_skate: must be a weight in \[0, 1000\] \(or null: 0\), got -1.0"),
     ("refine_start", "random", r"refine_start: must be policy or zeros \(or null: policy\), got 'random'"),
 ])
 def test_eval_config_refine_fields_are_checked(field, value, match):
