@@ -101,4 +101,4 @@ def test_eval_command_with_a_scene_for_a_policy_trained_without_one(eval_files, 
     capsys.readouterr()
     assert main([*base, "--out", str(tmp_path / "bad"), "--scene", "nowhere.json"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--scene: scene: scene file not found: nowhere.json" in err[0]
+    assert len(err) == 1 and "--scene: scene file not found: nowhere.json" in err[0]
