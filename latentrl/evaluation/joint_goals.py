@@ -52,8 +52,6 @@ from latentrl.scenes.spec import scene_to_json
 UNITS = {"success": "share", "err_near_cm": "cm", "err_far_cm": "cm", "footstep_err_cm": "cm",
          "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm"}
 """Metric -> unit, in report order."""
-SCENE_UNITS = {"collision": "share", "scene_penetration_cm": "cm", "scene_penetration_max_cm": "cm"}
-"""Added to :data:`UNITS` when the episodes ran in a scene."""
 
 
 @dataclass
@@ -223,9 +221,9 @@ def run_entry(act: Callable, motion, entry: JointGoalEntry, settings: EvalSettin
         row = env.scene.row(i) if env.scene is not None else None
         metrics, detail = goal_metrics(clip.joints, entry, frames[i].tolist(), criteria, env.floor_height, row)
         ep = TaskEpisode(suite, index, i, end_of(outcome, i), steps, metrics, detail)
-        if env.scene is not None:
-            clip.scene = scene_to_json(env.scene.scene_of(i))
         if sink is not None:
+            if env.scene is not None:
+                clip.scene = scene_to_json(env.scene.scene_of(i))
             clip.waypoints = np.asarray([(*g.target[:2], g.target[2] if not g.planar else env.floor_height)
                                          for g in entry.goals], np.float32)
             clip.meta["waypoint_joints"] = np.asarray([JOINTS[g.joint] for g in entry.goals], np.int32)  # SMPL

@@ -94,15 +94,23 @@ def aggregate(episodes: Sequence[TaskEpisode]) -> dict[str, dict[str, float]]:
     return out
 
 
+SCENE_UNITS = {"collision": "share", "scene_penetration_cm": "cm", "scene_penetration_max_cm": "cm"}
+"""Units of the scene metrics (:func:`latentrl.scenes.contact.scene_metrics`), reported when episodes carry them."""
+
+
 def build_task_report(task: str, suites: Sequence[tuple[str, str, list[TaskResult]]], settings: Any,
                       metric_units: dict[str, str], definitions: str, **extra: Any) -> dict[str, Any]:
-    """``report.json`` content: per entry, per suite and overall aggregates, and every episode."""
+    """``report.json`` content: per entry, per suite and overall aggregates, and every episode.
+
+    The units are ``metric_units``, and :data:`SCENE_UNITS` when the episodes ran in a scene.
+    """
     everything = [ep for _, _, results in suites for r in results for ep in r.episodes]
+    scene = {k: u for k, u in SCENE_UNITS.items() if any(k in ep.metrics for ep in everything)}
     return {
         "format": FORMAT,
         "task": task,
         "settings": asdict(settings),
-        "units": metric_units,
+        "units": {**metric_units, **scene},
         "definitions": definitions,
         "overall": aggregate(everything),
         "suites": [

@@ -282,14 +282,8 @@ class JointGoalEvaluator(SuiteEvaluator):
         self.suite_kind = "joint_goals"
 
     def report(self, results: TaskRun, settings: Any, out_dir: Path, **info: Any) -> list[str]:
-        """report.json, report.md and paths.png; the results table (with the scene metrics when there was a scene)."""
-        units = dict(joint_goals.UNITS)
-        if any("collision" in ep.metrics for _, _, rs in results.suites for r in rs for ep in r.episodes):
-            units.update(joint_goals.SCENE_UNITS)
-        data = build_task_report(self.task, results.suites, settings, units, joint_goals.DEFINITIONS,
-                                 criteria=dataclasses.asdict(results.criteria), **info)
-        js, md = write_task_report(out_dir, data)
-        lines = [*results_table(data), f"wrote {js}, {md}"]
+        """report.json, report.md and paths.png; the results table."""
+        lines = super().report(results, settings, out_dir, **info)
         png = joint_goals.save_png(out_dir / report.PATHS_PNG, results.suites)
         return [*lines[:-1], f"{lines[-1]}, {png}"]
 

@@ -121,8 +121,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
         from latentrl.viewer.joint_play import JointGoalController
 
         stored = stored_eval_choices(policy)
-        joints = ((loaded.checkpoint.get("config") or {}).get("env") or {}).get("reach_joint", {}).get("joints")
-        controller = JointGoalController(server, env, loaded.policy, title, env.texts[0], trained=joints or ("pelvis",),
+        controller = JointGoalController(server, env, loaded.policy, title, env.texts[0],
                                          refine_steps=int(stored.get("refine") or 0),
                                          refine_horizon=int(stored.get("refine_horizon") or 3),
                                          refine_start=str(stored.get("refine_start") or "policy"),

@@ -48,22 +48,21 @@ HEIGHT_JOINTS = ("left_hand", "right_hand", "head")
 class JointGoalController(LiveController):
     """:class:`~latentrl.viewer.live.LiveController` for a :class:`SteeredReachJointEnv` (module docstring).
 
-    Extra args: ``trained`` (the joints the policy was trained on: the panel starts on the first),
-    ``refine_steps`` (0: refinement off at the start), ``refine_horizon``, ``refine_start``, ``refine_skate``.
+    The panel's joint starts on the first the policy was trained on (``env.joints``). Extra args: ``refine_steps``
+    (0: refinement off at the start), ``refine_horizon``, ``refine_start``, ``refine_skate``.
     """
 
     def __init__(self, server: Any, env: SteeredReachJointEnv, policy: Any, title: str, text: str,
-                 trained: Sequence[str] = ("pelvis",), refine_steps: int = 0, refine_horizon: int = 3,
+                 refine_steps: int = 0, refine_horizon: int = 3,
                  refine_start: str = "policy", refine_skate: float = 0.0, **kwargs):
         self.settings = RefineSettings(steps=refine_steps or DEFAULT_REFINE_STEPS, horizon=refine_horizon,
                                        start=refine_start, skate=refine_skate)
         self.settings.check()
-        self.trained = tuple(trained) or ("pelvis",)
         self.scored = 0
         """Goals already reported (``env.scored_goals()``)."""
         super().__init__(server, env, policy, title, text, **kwargs)
         gui = server.gui
-        self.joint = gui.add_dropdown("goal joint", list(JOINTS), initial_value=self.trained[0])
+        self.joint = gui.add_dropdown("goal joint", list(JOINTS), initial_value=env.joints[0])
         self.seconds = gui.add_slider("seconds (0: as soon as possible)", 0.0, MAX_SECONDS, 0.1, DEFAULT_SECONDS)
         self.height = gui.add_slider("hand/head height (m)", *HEIGHT_RANGE, 0.05, DEFAULT_HEIGHT)
         self.refining = gui.add_checkbox("refine", refine_steps > 0)

@@ -112,7 +112,7 @@ def test_the_shipped_pelvis_policy_lands_clicked_goals_with_refinement(shipped, 
 
     loaded, _ = shipped
     env = joint_env(shipped)
-    live = JointGoalController(guarded_server, env, loaded.policy, "test", "walk", trained=("pelvis",),
+    live = JointGoalController(guarded_server, env, loaded.policy, "test", "walk",
                                refine_steps=16, deterministic=True)
     assert live.refining.value and live.joint.value == "pelvis"
     live.set_goal((0.3, 1.5))
@@ -138,7 +138,7 @@ def test_clicks_from_a_page_queue_goals_for_the_panels_joint_and_bad_panel_value
 
     loaded, _ = shipped
     env = joint_env(shipped)
-    live = JointGoalController(guarded_server, env, loaded.policy, "test", "walk", trained=("pelvis",))
+    live = JointGoalController(guarded_server, env, loaded.policy, "test", "walk")
     assert not live.refining.value  # a policy storing no refinement starts without it
     assert live.refine_steps.value == 16
     client = RawClient(guarded_server.get_port())  # the loop is not started: the queue stays as clicked
