@@ -467,7 +467,8 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--no-progress", action="store_true", help="hide the progress bar (paths x episodes)")
     ev.add_argument("--scene", metavar="SCENE",
                     help="evaluate among objects: a latentrl.scene/1 file or a name in tasks/scenes, or "
-                         "random_obstacles (3-8 per episode); the report adds collision rate and penetration "
+                         "random_obstacles (3-8 per episode; not for joystick policies); reach, path, timed, "
+                         "joystick and ReachJoint policies; the report adds collision rate and penetration "
                          "(docs/scenes.md). Default: the policy's training scene")
     ev.add_argument("--physics", action="store_true",
                     help="reach/path policies: execute every primitive on a MuJoCo humanoid and plan from the "

@@ -210,6 +210,10 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     return model, loaded.policy, motion, policy, None if env is None else env.observe_next
 
 
+SCENE_SUITES = ("paths", "joint_goals", "timed", "joystick")
+"""Suite kinds whose evaluation runs in a scene given by ``--scene`` (sit brings its own seat)."""
+
+
 def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
     """The policy's task spec and the suite files to run: ``paths``, else the task's suites of its prompts.
 
@@ -234,9 +238,12 @@ def evaluate(req: EvalRequest) -> int:
         req.motion = motion_of(env)
     spec, files = eval_suites(req.policy, req.paths)
     evaluator = spec.evaluator
-    if req.scene is not None and evaluator.suite_kind not in ("paths", "joint_goals"):  # others would ignore it
-        raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (reach, path and "
-                          "ReachJoint policies are evaluated among objects); leave out --scene")
+    if req.scene is not None and evaluator.suite_kind not in SCENE_SUITES:  # others would ignore it
+        raise ConfigError(f"--scene: the {spec.name} task's evaluation runs without a scene (reach, path, timed, "
+                          "joystick and ReachJoint policies are evaluated among objects); leave out --scene")
+    if req.scene == "random_obstacles" and evaluator.suite_kind == "joystick":
+        raise ConfigError("--scene: a joystick policy takes a scene file or name, e.g. maze_a (random obstacles are "
+                          "cleared around each goal, and a joystick's goal sweeps ahead of the body)")
     stored = stored_eval_choices(policy_file(req.policy))
     for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
                              ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str)):

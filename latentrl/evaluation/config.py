@@ -132,6 +132,20 @@ class EvalSettings(StepSettings):
         self.height_grid = int(getattr(env_cfg, "height_grid", 0) or 0)
         self.height_grid_spacing = float(getattr(env_cfg, "height_grid_spacing", 0.25))
 
+    def scene_kwargs(self, scene: Any) -> dict[str, Any]:
+        """The eval env's scene arguments for ``scene`` (resolved; None: the flat floor, no arguments).
+
+        The policy observes the scene (rays, and its height grid) only when it was trained with one
+        (:attr:`observe_scene` and a training scene in :attr:`scene`); a flat-floor policy walks it blind.
+        """
+        if scene is None:
+            return {}
+        observe = bool(self.observe_scene and self.scene is not None)
+        out: dict[str, Any] = {"scene": scene, "observe_scene": observe}
+        if observe and self.height_grid:
+            out.update(height_grid=self.height_grid, height_grid_spacing=self.height_grid_spacing)
+        return out
+
     def take_eval_config(self, eval_cfg: Any) -> None:
         """The ``eval:`` section's deployment choices that differ from training (``foot_lock_min_weight``)."""
         weight = getattr(eval_cfg, "foot_lock_min_weight", None)

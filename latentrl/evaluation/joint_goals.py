@@ -41,13 +41,12 @@ from latentrl.errors import ConfigError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import end_of, rollout
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each, scene_row
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.render import GOAL_JOINT_COLOURS
 from latentrl.scenes.contact import scene_metrics
 from latentrl.scenes.courses import RandomMazes
-from latentrl.scenes.spec import scene_to_json
 
 UNITS = {"success": "share", "err_near_cm": "cm", "err_far_cm": "cm", "footstep_err_cm": "cm",
          "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm"}
@@ -80,6 +79,8 @@ class JointGoalResult(TaskResult):
 
     entry: JointGoalEntry | None = None
     tracks: list[np.ndarray] = field(default_factory=list)
+    scenes: list[str | None] = field(default_factory=list)
+    """Each episode's scene JSON (None: the flat floor), drawn in paths.png."""
 
 
 # --------------------------------------------------------------------------- kernels
@@ -169,13 +170,9 @@ def make_env(motion, entry: JointGoalEntry, num_envs: int, settings: EvalSetting
     if isinstance(scene, RandomMazes):
         raise ConfigError("scene: random mazes bring their own routes (path suites); joint goals take a scene file "
                           "or random_obstacles")
-    observe = scene is not None and settings.observe_scene
-    extra: dict[str, Any] = {"scene": scene, "observe_scene": observe} if scene is not None else {}
-    if observe and settings.height_grid:
-        extra.update(height_grid=settings.height_grid, height_grid_spacing=settings.height_grid_spacing)
     return ReachJointEnv(num_envs, motion=motion, goals=[entry], texts=(entry.text,), device=settings.device,
                          max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
-                         record_history=record_history, **settings.motion_kwargs(), **extra)
+                         record_history=record_history, **settings.motion_kwargs(), **settings.scene_kwargs(scene))
 
 
 def budget(entry: JointGoalEntry, settings: EvalSettings, criteria: JointGoalCriteria, max_speed: float) -> int:
@@ -214,24 +211,24 @@ def run_entry(act: Callable, motion, entry: JointGoalEntry, settings: EvalSettin
     env = make_env(motion, entry, settings.episodes, settings, record_history=True, max_steps=steps_max)
     outcome = rollout(env, act if wrap is None else wrap(env, act), steps_max, seed)
     _, frames = env.goal_record()
-    episodes, tracks = [], []
+    episodes, tracks, scenes = [], [], []
     for i in range(settings.episodes):
         steps = int(outcome["steps"][i])
         clip = episode_clip(env, i, steps)
-        row = env.scene.row(i) if env.scene is not None else None
-        metrics, detail = goal_metrics(clip.joints, entry, frames[i].tolist(), criteria, env.floor_height, row)
+        metrics, detail = goal_metrics(clip.joints, entry, frames[i].tolist(), criteria, env.floor_height,
+                                       scene_row(env, i))
         ep = TaskEpisode(suite, index, i, end_of(outcome, i), steps, metrics, detail)
         if sink is not None:
-            if env.scene is not None:
-                clip.scene = scene_to_json(env.scene.scene_of(i))
             clip.waypoints = np.asarray([(*g.target[:2], g.target[2] if not g.planar else env.floor_height)
                                          for g in entry.goals], np.float32)
             clip.meta["waypoint_joints"] = np.asarray([JOINTS[g.joint] for g in entry.goals], np.int32)  # SMPL
             ep.motion_file = sink(ep, clip)
         episodes.append(ep)
         tracks.append(np.asarray(clip.joints)[:, PELVIS, :2].copy())
+        scenes.append(clip.scene)
     env.close()
-    return JointGoalResult(suite, index, entry_label(entry), episodes, time.perf_counter() - t0, entry, tracks)
+    return JointGoalResult(suite, index, entry_label(entry), episodes, time.perf_counter() - t0, entry, tracks,
+                           scenes)
 
 
 def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: EvalSettings, *,
@@ -262,21 +259,26 @@ JOINT_COLORS = {name: tuple(c / 255 for c in rgb) for name, rgb in GOAL_JOINT_CO
 """matplotlib colours (0-1) of :data:`latentrl.render.GOAL_JOINT_COLOURS`."""
 
 
-def save_png(path: str | Path, suites: Sequence[tuple[str, str, list]], columns: int = 4, dpi: int = 110) -> Path:
-    """Top-down pelvis tracks (green: success, red: not) and each goal's target, coloured by joint, numbered."""
+def goals_figure(suites: Sequence[tuple[str, str, list]], columns: int = 4):
+    """A matplotlib figure with one panel per entry: pelvis tracks and goal targets, from above.
+
+    Tracks are green for a success, red otherwise; each goal's target is a marker coloured by its joint, numbered.
+    Scene objects are grey footprints, as in the path evaluation's paths.png.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from latentrl.safe_io import atomic_write_with
+    from latentrl.evaluation.plots import draw_scenes
 
     results = [r for _, _, rs in suites for r in rs if getattr(r, "entry", None) is not None]
     cols = max(1, min(columns, len(results)))
     rows = max(1, math.ceil(len(results) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.2 * rows), squeeze=False)
     for ax, r in zip(axes.flat, results):
+        draw_scenes(ax, r.scenes)
         for ep, track in zip(r.episodes, r.tracks):
             ax.plot(track[:, 0], track[:, 1], color="tab:green" if ep.metrics["success"] else "tab:red", lw=0.8,
                     alpha=0.45)
@@ -299,6 +301,16 @@ def save_png(path: str | Path, suites: Sequence[tuple[str, str, list]], columns:
     fig.supxlabel("x (m)", fontsize=8)
     fig.supylabel("y (m)", fontsize=8)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.25 / (3.2 * rows)))
+    return fig
+
+
+def save_png(path: str | Path, suites: Sequence[tuple[str, str, list]], columns: int = 4, dpi: int = 110) -> Path:
+    """Write :func:`goals_figure` as paths.png (through a fresh temporary file, then renamed)."""
+    import matplotlib.pyplot as plt
+
+    from latentrl.safe_io import atomic_write_with
+
+    fig = goals_figure(suites, columns)
     try:
         return atomic_write_with(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
     finally:

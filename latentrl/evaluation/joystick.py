@@ -14,7 +14,10 @@ Metrics of an episode:
 - ``settle_s``: mean over command changes of the time from the change to the end of the first step
   whose heading and speed errors are both within tolerance (``heading_tolerance_deg``,
   ``speed_tolerance_m_s``); ``unsettled``: the share of changes that never settle before the next;
-- ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`).
+- ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`; with a
+  scene, over the terrain under each foot);
+- with a scene (``latentrl eval --scene``, a scene file or name): ``collision``, ``scene_penetration_cm``,
+  ``scene_penetration_max_cm`` (:func:`~latentrl.scenes.contact.scene_metrics`).
 """
 
 from __future__ import annotations
@@ -30,12 +33,15 @@ import numpy as np
 import torch
 
 from latentrl.envs.joystick import STEP_SECONDS, CommandTimeline, JoystickEnv, load_timelines, world_angle
+from latentrl.envs.scene import resolve_scene
+from latentrl.errors import ConfigError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import end_of, rollout
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each, scene_row, with_scene_metrics
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.scenes.scene import Scene
 
 UNITS = {"heading_err_deg": "deg", "speed_err_m_s": "m/s", "settle_s": "s", "unsettled": "share",
          "skate_cm_s": "cm/s", "floor_cm": "cm"}
@@ -102,8 +108,11 @@ def command_schedule(timeline: CommandTimeline, steps: int) -> tuple[torch.Tenso
 
 
 def joystick_metrics(joints, timeline: CommandTimeline, steps: int, criteria: TrackingCriteria,
-                     floor: float = 0.0) -> tuple[dict[str, float | None], dict[str, Any]]:
-    """Every metric of one episode (module docstring) and its per-change settle times."""
+                     floor: float = 0.0, terrain: Any = None) -> tuple[dict[str, float | None], dict[str, Any]]:
+    """Every metric of one episode (module docstring) and its per-change settle times.
+
+    ``terrain``: the episode's one-row scene (None: the flat floor), which adds the scene metrics.
+    """
     velocity = step_velocity(joints, steps)
     angle, speed, starts = command_schedule(timeline, steps)
     head_err, speed_err = tracking_errors(velocity, angle, speed)
@@ -114,7 +123,7 @@ def joystick_metrics(joints, timeline: CommandTimeline, steps: int, criteria: Tr
     ok = (head_err <= criteria.heading_tolerance_deg) & (speed_err <= criteria.speed_tolerance_m_s)
     changes = settle_times(ok, starts)[1:]  # the first command starts the episode: it is not a change
     reached = [t for t in changes if t is not None]
-    quality = M.episode_metrics(joints, FPS, floor)
+    quality = M.episode_metrics(joints, FPS, floor, terrain)
     metrics = {
         "heading_err_deg": float(head_err[settled].mean()) if bool(settled.any()) else None,
         "speed_err_m_s": float(speed_err[settled].mean()) if bool(settled.any()) else None,
@@ -123,16 +132,25 @@ def joystick_metrics(joints, timeline: CommandTimeline, steps: int, criteria: Tr
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
     }
-    return metrics, {"settle_s": changes}
+    return with_scene_metrics(metrics, joints, terrain), {"settle_s": changes}
 
 
 # --------------------------------------------------------------------------- running
 def make_env(motion, timeline: CommandTimeline, num_envs: int, settings: EvalSettings,
              record_history: bool = False) -> JoystickEnv:
-    """The evaluation env: every env follows ``timeline``, no autoreset, the policy's guidance and bound."""
+    """The evaluation env: every env follows ``timeline``, no autoreset, the policy's guidance and bound.
+
+    ``settings.scene`` (``latentrl eval --scene``) must be a fixed scene: random obstacles are cleared around the
+    goal, and a joystick's goal is a point the command sweeps ahead of the body.
+    """
+    scene = resolve_scene(settings.scene) if settings.scene is not None else None
+    if scene is not None and not isinstance(scene, Scene):
+        raise ConfigError("scene: a joystick timeline takes a scene file or name (random obstacles and mazes are "
+                          "drawn around goals, and the command's goal sweeps ahead of the body)")
     return JoystickEnv(num_envs, motion=motion, commands=[timeline], command_assignment="by_env",
                        texts=(timeline.text,), device=settings.device, max_episode_steps=timeline_steps(timeline),
-                       autoreset_mode="Disabled", record_history=record_history, **settings.motion_kwargs())
+                       autoreset_mode="Disabled", record_history=record_history, **settings.motion_kwargs(),
+                       **settings.scene_kwargs(scene))
 
 
 def timeline_steps(timeline: CommandTimeline) -> int:
@@ -157,7 +175,8 @@ def run_timeline(act: Callable, motion, timeline: CommandTimeline, settings: Eva
     for i in range(settings.episodes):
         steps = int(outcome["steps"][i])
         clip = episode_clip(env, i, steps)
-        metrics, detail = joystick_metrics(clip.joints, timeline, steps, criteria, env.floor_height)
+        metrics, detail = joystick_metrics(clip.joints, timeline, steps, criteria, env.floor_height,
+                                           scene_row(env, i))
         ep = TaskEpisode(suite, index, i, end_of(outcome, i), steps, metrics, detail)
         if sink is not None:
             ep.motion_file = sink(ep, clip)

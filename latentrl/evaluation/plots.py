@@ -20,13 +20,13 @@ MAX_LABELS = 60
 """Paths with more distinct waypoints get numbers only at the first and last (10,000 labels take minutes)."""
 
 
-def _draw_scenes(ax, result: PathResult) -> None:
-    """The footprints of the episodes' scenes (each distinct scene once)."""
+def draw_scenes(ax, scenes: Sequence[str | None]) -> None:
+    """The footprints of the episodes' scenes (JSON texts; each distinct scene once, None: no scene)."""
     from matplotlib.patches import Circle, Polygon
 
     from latentrl.scenes.spec import scene_from_json
 
-    distinct = list(dict.fromkeys(ep.scene for ep in result.episodes if ep.scene))
+    distinct = list(dict.fromkeys(s for s in scenes if s))
     alpha = max(0.06, 0.6 / max(1, len(distinct)))
     for text in distinct:
         boxes, cylinders = scene_from_json(text).primitives()
@@ -40,7 +40,7 @@ def _draw_scenes(ax, result: PathResult) -> None:
 
 def _draw_path(ax, result: PathResult) -> None:
     """One panel: the scene, every episode's pelvis track, then the waypoints on top."""
-    _draw_scenes(ax, result)
+    draw_scenes(ax, [ep.scene for ep in result.episodes])
     for ep in result.episodes:
         color = SUCCESS_COLOR if ep.success else FAILURE_COLOR
         ax.plot(ep.pelvis_xy[:, 0], ep.pelvis_xy[:, 1], color=color, lw=0.8, alpha=0.45)

@@ -131,7 +131,6 @@ def make_env(
         resolve_scene(settings.scene) if settings.scene is not None else None)
     if isinstance(scene, RandomMazes):
         scene = Scene()
-    observe = settings.observe_scene and settings.scene is not None
     return FollowPathEnv(
         num_envs,
         motion=motion,
@@ -147,9 +146,7 @@ def make_env(
         **settings.motion_kwargs(),
         record_history=record_history,
         record_features=record_features,
-        **({"scene": scene, "observe_scene": observe} if scene is not None else {}),
-        **({"height_grid": settings.height_grid, "height_grid_spacing": settings.height_grid_spacing}
-           if scene is not None and observe and settings.height_grid else {}),
+        **settings.scene_kwargs(scene),
     )
 
 

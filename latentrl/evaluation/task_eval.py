@@ -20,6 +20,8 @@ import torch
 
 from latentrl.evaluation.metrics import mean_ci95
 from latentrl.evaluation.video import recorder_for, takes_sink
+from latentrl.scenes.contact import scene_metrics
+from latentrl.scenes.spec import scene_to_json
 
 FORMAT = "latentrl.eval.task/1"
 """``report.json`` format of the Joystick and TimedPath evaluations."""
@@ -76,10 +78,27 @@ def run_each(
 
 
 def episode_clip(env, i: int, steps: int):
-    """Env i's recorded episode cut at its end (envs keep stepping until the whole batch is done)."""
+    """Env i's recorded episode cut at its end (envs keep stepping until the whole batch is done).
+
+    With a scene the clip carries env i's scene (its JSON), so that ``latentrl view`` and the importers show it.
+    """
     clip = env.export_clip(i, episode=0).cut(steps)
     clip.meta.pop("from_reset", None)
+    if env.scene is not None:
+        clip.scene = scene_to_json(env.scene.scene_of(i))
     return clip
+
+
+def scene_row(env, i: int):
+    """Env i's scene as a one-row batch (the terrain of its floor metrics), None on the flat floor."""
+    return env.scene.row(i) if env.scene is not None else None
+
+
+def with_scene_metrics(metrics: dict[str, float | None], joints, row) -> dict[str, float | None]:
+    """``metrics`` plus the scene metrics of ``joints`` (T, 22, 3) in scene ``row`` (:data:`SCENE_UNITS`)."""
+    if row is not None:
+        metrics.update(scene_metrics(np.asarray(joints, dtype=np.float32), row))
+    return metrics
 
 
 # --------------------------------------------------------------------------- report

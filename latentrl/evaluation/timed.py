@@ -11,7 +11,10 @@ Metrics of an episode:
   every arrival within ``time_tolerance_s`` (1 s) of its time;
 - ``arrival_err_s``: mean |arrival error| over the waypoints reached; ``late_s``: mean signed
   error (late > 0, early < 0); ``reached``: share of waypoints reached;
-- ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`).
+- ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`; with a
+  scene, over the terrain under each foot);
+- with a scene (``latentrl eval --scene``): ``collision``, ``scene_penetration_cm``, ``scene_penetration_max_cm``
+  (:func:`~latentrl.scenes.contact.scene_metrics`).
 
 report.json also keeps each waypoint's arrival error per episode (``detail.arrival_err_s``, None
 where not reached).
@@ -30,13 +33,16 @@ import numpy as np
 import torch
 
 from latentrl.envs.joystick import STEP_SECONDS
+from latentrl.envs.scene import resolve_scene
 from latentrl.envs.timed import TimedPath, TimedPathEnv, load_timed_paths
+from latentrl.errors import ConfigError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import end_of, rollout
 from latentrl.evaluation.results import prompts_label
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each
+from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each, scene_row, with_scene_metrics
 from latentrl.motion.skeleton import FPS
+from latentrl.scenes.courses import RandomMazes
 
 UNITS = {"success": "share", "arrival_err_s": "s", "late_s": "s", "reached": "share", "skate_cm_s": "cm/s",
          "floor_cm": "cm"}
@@ -60,28 +66,39 @@ DEFINITIONS = """\
 
 
 def timed_metrics(errors: Sequence[float | None], tolerance_s: float, joints,
-                  floor: float = 0.0) -> dict[str, float | None]:
-    """The metrics of one episode from its per-waypoint arrival errors (None = not reached) and its joints."""
+                  floor: float = 0.0, terrain: Any = None) -> dict[str, float | None]:
+    """The metrics of one episode from its per-waypoint arrival errors (None = not reached) and its joints.
+
+    ``terrain``: the episode's one-row scene (None: the flat floor), which adds the scene metrics.
+    """
     hit = [e for e in errors if e is not None]
-    quality = M.episode_metrics(joints, FPS, floor)
-    return {
+    quality = M.episode_metrics(joints, FPS, floor, terrain)
+    return with_scene_metrics({
         "success": float(len(hit) == len(errors) and all(abs(e) <= tolerance_s for e in hit)),
         "arrival_err_s": sum(abs(e) for e in hit) / len(hit) if hit else None,
         "late_s": sum(hit) / len(hit) if hit else None,
         "reached": len(hit) / len(errors),
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
-    }
+    }, joints, terrain)
 
 
 def make_env(motion, path: TimedPath, num_envs: int, settings: EvalSettings, observe_next: bool = False,
              record_history: bool = False, max_steps: int | None = None) -> TimedPathEnv:
-    """The evaluation env: every env follows ``path``, no autoreset, the policy's guidance and bound."""
+    """The evaluation env: every env follows ``path``, no autoreset, the policy's guidance and bound.
+
+    ``settings.scene`` (``latentrl eval --scene``: a scene file or name, or random obstacles, drawn clear of the
+    start and the first waypoint, then of each waypoint as it becomes the goal) puts objects along the path.
+    """
+    scene = resolve_scene(settings.scene) if settings.scene is not None else None
+    if isinstance(scene, RandomMazes):
+        raise ConfigError("scene: random mazes bring their own routes (path suites); timed paths take a scene file "
+                          "or random_obstacles")
     return TimedPathEnv(num_envs, motion=motion, paths=[path], path_assignment="by_env", observe_next=observe_next,
                         next_at_last=settings.next_at_last, texts=(path.texts[0],), device=settings.device,
                         max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
                         success_threshold=settings.success_threshold, record_history=record_history,
-                        **settings.motion_kwargs())
+                        **settings.motion_kwargs(), **settings.scene_kwargs(scene))
 
 
 def budget(path: TimedPath, settings: EvalSettings, criteria: TimingCriteria) -> int:
@@ -112,7 +129,7 @@ def run_path(act: Callable, motion, path: TimedPath, settings: EvalSettings, *, 
         steps = int(outcome["steps"][i])
         clip = episode_clip(env, i, steps)
         errs = [None if math.isnan(e) else float(e) for e in errors[i].tolist()]
-        metrics = timed_metrics(errs, criteria.time_tolerance_s, clip.joints, env.floor_height)
+        metrics = timed_metrics(errs, criteria.time_tolerance_s, clip.joints, env.floor_height, scene_row(env, i))
         ep = TaskEpisode(suite, index, i, end_of(outcome, i), steps, metrics, {"arrival_err_s": errs})
         if sink is not None:
             clip.waypoints = np.asarray(path.waypoints, np.float32)

@@ -119,6 +119,30 @@ def test_runner_scores_each_goal_and_writes_the_report_and_png(tiny_model, tmp_p
     assert np.asarray(clip.meta["waypoint_joints"]).tolist() == [0, 10]  # pelvis, left foot (SMPL)
 
 
+def test_paths_png_of_joint_goals_draws_each_episodes_scene(tiny_model, tmp_path):
+    """Random obstacles differ per episode: each result keeps its episodes' scenes, and the figure draws every
+    object of each distinct scene as a footprint (the path evaluation's drawing)."""
+    import matplotlib.pyplot as plt
+
+    from latentrl.evaluation.plots import draw_scenes
+    from latentrl.scenes import scene_from_json
+
+    entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.0, 2.0), 1.0),))
+    settings = EvalSettings(episodes=3, max_steps=8)
+    settings.scene, settings.observe_scene = {"random_obstacles": {"count": [3, 3]}}, False
+    result = J.run_entry(zero_policy, tiny_model, entry, settings)
+    assert len(result.scenes) == 3 and len(set(result.scenes)) == 3  # each episode its own obstacles
+    objects = sum(len(scene_from_json(text).objects) for text in result.scenes)
+    fig = J.goals_figure([("s", "f", [result])])
+    assert len(fig.axes[0].patches) == objects
+    plt.close(fig)
+    fig, ax = plt.subplots()
+    draw_scenes(ax, [*result.scenes, result.scenes[0], None])  # a repeat and a flat episode add nothing
+    assert len(ax.patches) == objects
+    plt.close(fig)
+    assert J.save_png(tmp_path / "paths.png", [("s", "f", [result])]).stat().st_size > 1000
+
+
 def test_env_errors_match_the_offline_metric(tiny_model):
     entry = JointGoalEntry("walk", (JointGoal("pelvis", (0.1, 0.3, 0.9), 0.5),
                                     JointGoal("right_hand", (0.2, 0.6, 1.0), 1.0)))

@@ -145,6 +145,49 @@ def test_latentrl_eval_picks_the_evaluator_from_the_stored_env_config(task_polic
     assert "wrote" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("task", ["joystick", "timed"])
+def test_latentrl_eval_scene_puts_joystick_and_timed_episodes_among_objects(task_policies, eval_files, tmp_path, task):
+    """A box around the start pose: every episode collides, and its motions carry the scene; a box far away changes
+    no metric of the blind policy; a flat report has no scene metrics."""
+    from latentrl.app.cli import main
+    from latentrl.render import load_motion_npz
+    from latentrl.scenes import scene_from_json
+
+    suite = tmp_path / f"{task}_mini.json"
+    timeline = [{"text": "walk", "duration": 0.8, "commands": [{"t": 0, "heading_deg": 0, "speed": 1.0}]}]
+    timed_path = [{"goal_location": [[0, 1, 0]], "goal_text": ["walk"], "goal_time": [0.5]}]
+    suite.write_text(json.dumps(timeline if task == "joystick" else timed_path))
+    crate, far = tmp_path / "crate.json", tmp_path / "far.json"
+    crate.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [0.0, 0.0], "size": [1.5, 1.5, 2.5]}]}))
+    far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [8.0, 8.0], "size": [0.5, 0.5, 1.0]}]}))
+    args = ["eval", str(task_policies[task]), "--motion", str(eval_files["motion"]), "--paths", str(suite),
+            "--episodes", "2", "--device", "cpu", "--render", "0", "--deterministic"]
+    for name, extra in (("flat", []), ("boxed", ["--scene", str(crate)]), ("far", ["--scene", str(far)])):
+        assert main([*args, "--out", str(tmp_path / name), *extra]) == 0
+    flat, boxed, away = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("flat", "boxed", "far"))
+    assert "collision" not in flat["overall"] and "collision" not in flat["units"]
+    assert boxed["overall"]["collision"]["mean"] == 1.0 and boxed["units"]["scene_penetration_max_cm"] == "cm"
+    assert boxed["overall"]["scene_penetration_max_cm"]["mean"] > 10
+    episode = boxed["suites"][0]["entries"][0]["episodes"][0]
+    clip = load_motion_npz(tmp_path / "boxed" / episode["motion_file"])
+    assert scene_from_json(str(clip["scene"])).objects[0].size[2] == 2.5
+    assert away["overall"]["collision"]["mean"] == 0.0
+    for key, value in flat["overall"].items():
+        assert away["overall"][key]["mean"] == pytest.approx(value["mean"], abs=1e-6, nan_ok=True), key
+
+
+def test_random_obstacles_for_a_joystick_policy_is_a_one_line_error(task_policies, eval_files, tmp_path, capsys):
+    from latentrl.app.cli import main
+
+    code = main(["eval", str(task_policies["joystick"]), "--motion", str(eval_files["motion"]), "--scene",
+                 "random_obstacles", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--scene: a joystick policy takes a scene file or name" in err
+    assert not (tmp_path / "x").exists()
+
+
 def test_shipped_task_suites_resolve_by_name():
     from latentrl.app.evaluate import resolve_path_files
 
