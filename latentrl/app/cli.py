@@ -74,6 +74,8 @@ EXAMPLES = {
     "physics track": "latentrl physics track walk.npz --out tracked-walk --assist-hz 2",
     "physics loop": "latentrl physics loop --text walk --seconds 10 --out loop-walk",
     "physics train-tracker": "latentrl physics train-tracker physics/tracker --run-dir runs/tracker",
+    "scene": "latentrl scene from-mesh room.glb --up y --out room.json",
+    "scene from-mesh": "latentrl scene from-mesh table.stl --voxel 0.05 --offset 0 2 0 --out table.json",
 }
 """One example line per command, shown at the end of its ``--help`` (keyed by the words after ``latentrl``)."""
 
@@ -641,6 +643,32 @@ def _physics_track(args: argparse.Namespace) -> int:
     return track_command(request(TrackRequest, args))
 
 
+def _scene_commands(sub) -> None:
+    scene = sub.add_parser("scene", help="scene files: build one from a mesh (docs/scenes.md)")
+    ssub = scene.add_subparsers(dest="scene_command", metavar="SUBCOMMAND", parser_class=_Parser)
+    ssub.required = True
+    fm = ssub.add_parser("from-mesh", help="voxelize a mesh (STL, OBJ, PLY, OFF, GLB) into a latentrl.scene/1 file "
+                                           "of boxes (pip install 'latentrl[mesh]')")
+    fm.add_argument("mesh", metavar="MESH", help="the mesh file")
+    fm.add_argument("--out", required=True, help="the scene file to write (.json)")
+    fm.add_argument("--voxel", type=float, default=0.1, help="voxel edge in metres, 0.01-1: the boxes reach at most "
+                                                             "this far beyond the mesh (default: 0.1)")
+    fm.add_argument("--scale", type=float, default=1.0, help="multiply the mesh's coordinates (0.01: centimetres)")
+    fm.add_argument("--up", choices=("z", "y"), default="z", help="the mesh's up axis (y: glTF, most OBJ exports)")
+    fm.add_argument("--offset", type=float, nargs=3, metavar=("X", "Y", "Z"), default=[0.0, 0.0, 0.0],
+                    help="metres added after scaling: where the mesh's origin goes (the body starts at the origin "
+                         "facing +y)")
+    fm.add_argument("--floor-height", type=float, default=0.0, help="the scene's floor; voxels at it are dropped")
+    fm.add_argument("--max-boxes", type=int, default=64, help="refuse a mesh that needs more boxes (at most 64)")
+    fm.set_defaults(func=_scene_from_mesh)
+
+
+def _scene_from_mesh(args: argparse.Namespace) -> int:
+    from latentrl.app.scene import FromMeshRequest, from_mesh_command
+
+    return from_mesh_command(request(FromMeshRequest, args))
+
+
 def _optimize_commands(sub) -> None:
     opt = sub.add_parser("optimize", help="keyframes and joint targets by latent noise optimization (docs/optimize.md)")
     opt.add_argument("suite", metavar="SUITE", help="a latentrl.constraints/1 JSON file or a shipped suite name "
@@ -691,6 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
     _export_commands(sub)
     _list_commands(sub)
     _physics_commands(sub)
+    _scene_commands(sub)
     _add_examples(parser)
     return parser
 
