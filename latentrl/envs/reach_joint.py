@@ -12,8 +12,10 @@ Joint-goal files (docs/joint_goals.md) are a JSON list of entries, each a text a
     [{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 2, 0.86], "time": 2.0},
                                 {"joint": "left_foot", "target": [0.1, 2.6], "time": "asap"}]}]
 
-``"asap"`` (as soon as possible) gets its time when the goal becomes the current one: the time the joint needs
-at ``max_speed`` to cover its distance (at least one frame).
+``"asap"`` (as soon as possible) is due when a point leaving the previous goal's target at that goal's time, at
+``max_speed``, would reach the target (and at least one frame after the goal becomes current): a run of asap
+footsteps keeps the cadence of a walk at ``max_speed``. The first goal, or one added after the previous was
+due (``latentrl play``'s queue), is timed from where its joint is when it becomes current.
 """
 
 from __future__ import annotations
@@ -416,29 +418,30 @@ class ReachJointEnv(LatentMotionVectorEnv):
                        planar: torch.Tensor) -> torch.Tensor:
         """The frames the asap goals ``unknown`` (N, W) will get, as :meth:`_activate` will give them.
 
-        A goal becomes current at the end of the step its predecessor is due in, and then gets the time its joint
-        needs at ``max_speed``; the joint is taken to be at its own previous target then (a foot on its last stone),
-        else where it is now.
+        A goal becomes current at the end of the step its predecessor is due in, and is then timed from the
+        predecessor's target and time (:meth:`_chained_frame`): exact, as the predecessor's frame is.
         """
         frame = frame.clone()
-        w = frame.shape[1]
-        now = self.history_world()[:, -1]  # (N, 22, 3)
-        for c in range(1, w):
-            todo = unknown[:, c]
+        for c in range(1, frame.shape[1]):
+            todo = unknown[:, c] & (frame[:, c - 1] >= 0)
             if not bool(todo.any()):
                 continue
-            same = (joint[:, :c] == joint[:, c:c + 1])  # earlier goals of this joint
-            last = torch.where(same, torch.arange(c, device=self.device), -1).amax(dim=1)  # (N,)
-            here = now[self._rows, joint[:, c]]
-            anchor = torch.where((last >= 0)[:, None], target[self._rows, last.clamp(min=0)], here)
-            flat = (last >= 0) & planar[self._rows, last.clamp(min=0)] & ~planar[:, c]  # a 2-D target has no height
-            anchor = torch.cat((anchor[:, :2], torch.where(flat, here[:, 2], anchor[:, 2])[:, None]), dim=1)
-            dist = joint_error(anchor, target[:, c], planar[:, c])
             step_end = torch.div(frame[:, c - 1] + FUTURE_LENGTH - 1, FUTURE_LENGTH, rounding_mode="floor")
-            start = step_end * FUTURE_LENGTH
-            lead = torch.ceil(dist / self.max_speed * FPS).long().clamp(min=1)
-            frame[:, c] = torch.where(todo & (frame[:, c - 1] >= 0), start + lead, frame[:, c])
+            chained = self._chained_frame(frame[:, c - 1], target[:, c - 1], planar[:, c - 1], target[:, c],
+                                          planar[:, c], step_end * FUTURE_LENGTH)
+            frame[:, c] = torch.where(todo, chained, frame[:, c])
         return frame
+
+    def _chained_frame(self, prev_frame: torch.Tensor, prev_target: torch.Tensor, prev_planar: torch.Tensor,
+                       target: torch.Tensor, planar: torch.Tensor, now: torch.Tensor) -> torch.Tensor:
+        """The frame of an asap goal after a goal due at ``prev_frame``.
+
+        The time from the previous target at ``max_speed`` (xy when either target is 2-D), and at least one frame
+        after ``now``, when the goal becomes current.
+        """
+        gap = joint_error(prev_target, target, prev_planar | planar)
+        lead = torch.ceil(gap / self.max_speed * FPS - 1e-6).long()
+        return torch.maximum(prev_frame + lead, now + 1)
 
     def _now_frame(self, idx: torch.Tensor | None = None) -> torch.Tensor:
         """Frames from the episode start to the last history frame (0 at reset)."""
@@ -528,16 +531,28 @@ class ReachJointEnv(LatentMotionVectorEnv):
         return low + (u * (high - low + 1)).long().clamp(max=high - low)
 
     def _activate(self, idx: torch.Tensor) -> None:
-        """Give the current goals of envs ``idx`` that are asap their time: the distance at ``max_speed``."""
+        """Give the current goals of envs ``idx`` that are asap their time (module docstring).
+
+        After a goal due in the step just run: from that goal's target and time (:meth:`_chained_frame`). The
+        first goal, or one that became current later (a queue's goal added after the previous was due): its
+        joint's distance now at ``max_speed``.
+        """
         k = self._gi[idx]
         asap = self._frame[idx, k] < 0
         if not bool(asap.any()):
             return
         idx, k = idx[asap], k[asap]
         target, planar = self._target[idx, k], self._planar[idx, k]
+        now = self._now_frame(idx)
         dist = joint_error(self._joint_now(idx, self._joint_ids[self._joint[idx, k]]), target, planar)
-        lead = torch.ceil(dist / self.max_speed * FPS).long().clamp(min=1)
-        self._frame[idx, k] = self._now_frame(idx) + lead
+        frame = now + torch.ceil(dist / self.max_speed * FPS).long().clamp(min=1)
+        before = (k - 1).clamp(min=0)
+        prev_frame = self._frame[idx, before]
+        chained = (k > 0) & (prev_frame > now - FUTURE_LENGTH)
+        if bool(chained.any()):
+            frame = torch.where(chained, self._chained_frame(prev_frame, self._target[idx, before],
+                                                             self._planar[idx, before], target, planar, now), frame)
+        self._frame[idx, k] = frame
 
     def _reset_task(self, idx: torch.Tensor) -> None:
         self._goals_ok[idx] = 0

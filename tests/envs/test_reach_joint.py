@@ -94,9 +94,15 @@ def test_goals_in_one_step_are_each_scored_and_asap_goals_get_a_time(tiny_model)
     _, _, terminated, _, _ = env.step(actions(2, 0))
     record, frames = env.goal_record()
     assert torch.isfinite(record[:, :2]).all() and torch.isnan(record[:, 2]).all() and not terminated.any()
+    # the asap footstep leaves the previous target (0, 0.2) at its frame 3: 1.0 m at 1.0 m/s is 30 frames later
+    assert frames[:, 2].tolist() == [33, 33]
+    # a first goal asap is timed from where its joint is at the start
+    first = JointGoalEntry("walk", (JointGoal("left_foot", (0.0, 1.2), None),))
+    env = make(tiny_model, goals=[first], max_episode_steps=12, max_speed=1.0, autoreset_mode="Disabled")
+    env.reset(seed=0)
     foot = env.history_world()[:, -1, JOINTS["left_foot"], :2]
     need = ((foot - torch.tensor([0.0, 1.2])).norm(dim=-1) / 1.0 * FPS).ceil().long()
-    assert frames[:, 2].tolist() == (8 + need.clamp(min=1)).tolist()
+    assert env.goal_record()[1][:, 0].tolist() == need.clamp(min=1).tolist()
 
 
 def test_random_goals_lie_in_their_time_distance_and_angle_ranges(tiny_model):

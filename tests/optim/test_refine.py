@@ -98,11 +98,10 @@ def test_upcoming_asap_goals_get_the_time_they_will_get(tiny_model):
     env.reset(seed=0)
     goals = env.upcoming_goals()
     assert goals["valid"].all() and goals["estimated"][0].tolist() == [False, True, True]
-    foot = env.history_world()[0, -1, JOINTS["left_foot"], :2]
-    first = 8 + math.ceil(float((torch.tensor([0.1, 0.9]) - foot).norm()) / env.max_speed * FPS)
-    # the second starts from the first's stone (the same foot), at the end of the step the first is due in
-    second = math.ceil(first / 8) * 8 + math.ceil(1.2 / env.max_speed * FPS)
-    assert goals["offset"][0].tolist() == [6, first, second]
+    # each leaves the previous goal's target at its time, at max_speed (at least a frame after it is current)
+    first = max(6 + math.ceil(math.hypot(0.1, 0.6) / env.max_speed * FPS), 8 + 1)
+    second = max(first + math.ceil(1.2 / env.max_speed * FPS - 1e-6), math.ceil(first / 8) * 8 + 1)
+    assert goals["offset"][0].tolist() == [6, first, second] == [6, 22, 52]
     env.step(torch.zeros(1, tiny_model.latent_dim))  # the pelvis goal is due; the first footstep gets its time
     goals = env.upcoming_goals()
     assert goals["estimated"][0].tolist()[:2] == [False, True] and env.goal_record()[1][0, 1] >= 0
