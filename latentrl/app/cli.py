@@ -486,10 +486,14 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--refine-skate", type=float, default=None, metavar="W",
                     help="with --refine: weight of the predicted frames' foot skate (m/s) in the refiner's loss: "
                          "planted feet for goal error (default: the policy's stored eval.refine_skate, else 0)")
-    ev.add_argument("--refine-start", choices=["policy", "zeros"], default=None,
-                    help="with --refine: start each step's refinement from the policy's action or from zero noise "
-                         "(for joints the policy was not trained on); default: the policy's stored "
-                         "eval.refine_start, else policy")
+    ev.add_argument("--refine-pace", type=float, default=None, metavar="W",
+                    help="with --refine: weight of the pace target of a goal beyond the horizon, the point that "
+                         "arrives on time at the horizon's end (default: the policy's stored eval.refine_pace, "
+                         "else 0.5)")
+    ev.add_argument("--refine-start", choices=["policy", "zeros", "auto"], default=None,
+                    help="with --refine: start each step's refinement from the policy's action, from zero noise "
+                         "(for joints the policy was not trained on), or auto: the policy's for its trained joints, "
+                         "zeros for the others; default: the policy's stored eval.refine_start, else policy")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

@@ -100,6 +100,9 @@ class EvalRequest:
     refine_start: str | None = None
     """With ``refine``: each step's refinement starts from the policy's action or from zero noise (``zeros``; None:
     the stored ``eval.refine_start``, else ``policy``)."""
+    refine_pace: float | None = None
+    """With ``refine``: the weight of the pace target of a goal beyond the horizon (None: the stored
+    ``eval.refine_pace``, else 0.5)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -112,7 +115,8 @@ class EvalRequest:
                    ("--scene", self.scene), ("--refine", self.refine),
                    ("--refine-horizon", self.refine_horizon),
                    ("--refine-skate", self.refine_skate),
-                   ("--refine-start", self.refine_start))
+                   ("--refine-start", self.refine_start),
+                   ("--refine-pace", self.refine_pace))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -246,12 +250,14 @@ def evaluate(req: EvalRequest) -> int:
                           "cleared around each goal, and a joystick's goal sweeps ahead of the body)")
     stored = stored_eval_choices(policy_file(req.policy))
     for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
-                             ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str)):
+                             ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
+                             ("refine_pace", "--refine-pace", float)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
         if getattr(req, name) is None and name in stored and not req.physics and (name == "refine" or req.refine):
             setattr(req, name, kind(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
-    refiner = _refiner(req, evaluator, spec.name)
+    trained = tuple(env.reach_joint.joints) if env is not None and env.reach_joint is not None else ("pelvis",)
+    refiner = _refiner(req, evaluator, spec.name, trained)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "
@@ -308,8 +314,12 @@ def evaluate(req: EvalRequest) -> int:
     return 0
 
 
-def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | None:
-    """``--refine``'s settings, checked; None when off. Only joint goals give the optimizer targets."""
+def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[str, ...] = ("pelvis",)
+             ) -> RefineSettings | None:
+    """``--refine``'s settings, checked; None when off. Only joint goals give the optimizer targets.
+
+    ``policy_joints``: the joints the policy was trained on (``--refine-start auto`` starts from its action there).
+    """
     if not req.refine:
         return None
     if getattr(evaluator, "suite_kind", None) != "joint_goals":
@@ -318,12 +328,15 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str) -> RefineSettings | No
     if req.physics:
         raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
     settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
-                              skate=req.refine_skate or 0.0, start=req.refine_start or "policy")
+                              skate=req.refine_skate or 0.0, start=req.refine_start or "policy",
+                              pace=0.5 if req.refine_pace is None else req.refine_pace,
+                              policy_joints=policy_joints)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'
         flag = str(exc).replace("refine steps:", "--refine:").replace("refine horizon:", "--refine-horizon:") \
-            .replace("refine skate:", "--refine-skate:").replace("refine start:", "--refine-start:")
+            .replace("refine skate:", "--refine-skate:").replace("refine start:", "--refine-start:") \
+            .replace("refine pace:", "--refine-pace:")
         raise ConfigError(flag) from None
     return settings
 

@@ -48,8 +48,11 @@ class EvalConfig:
     refine_skate: float | None = None
     """With ``refine``: its ``--refine-skate`` weight (None: 0)."""
     refine_start: str | None = None
-    """With ``refine``: its ``--refine-start``, ``policy`` or ``zeros`` (None: policy). A policy whose goals are
-    joints it was not trained on refines from zero noise better (docs/joint_goals.md)."""
+    """With ``refine``: its ``--refine-start``, ``policy``, ``zeros`` or ``auto`` (None: policy). A policy whose
+    goals are joints it was not trained on refines from zero noise better (docs/joint_goals.md); ``auto`` starts
+    from the policy's action for the joints it was trained on and from zero noise for the others."""
+    refine_pace: float | None = None
+    """With ``refine``: its ``--refine-pace`` weight (None: 0.5)."""
     video_every: int = 1
     """Every this many evaluations (the first of each training process included), the first episode of the first
     suite entry goes to TensorBoard as ``eval/episode``: an animated GIF at 10 frames/s with the scene and goals;
@@ -73,8 +76,10 @@ class EvalConfig:
                 f"must be 1-16 primitives (or null: 3), got {self.refine_horizon}")
         require(self.refine_skate is None or 0 <= self.refine_skate <= 1000, "refine_skate",
                 f"must be a weight in [0, 1000] (or null: 0), got {self.refine_skate}")
-        require(self.refine_start in (None, "policy", "zeros"), "refine_start",
-                f"must be policy or zeros (or null: policy), got {self.refine_start!r:.40}")
+        require(self.refine_pace is None or 0 <= self.refine_pace <= 1000, "refine_pace",
+                f"must be a weight in [0, 1000] (or null: 0.5), got {self.refine_pace}")
+        require(self.refine_start in (None, "policy", "zeros", "auto"), "refine_start",
+                f"must be policy, zeros or auto (or null: policy), got {self.refine_start!r:.40}")
 
 
 MAX_VIDEO_SIZE = 640

@@ -53,7 +53,7 @@ def stored_step_settings(config) -> StepSettings:
     return StepSettings.of(stored_env_config(config))
 
 
-EVAL_CHOICES = ("foot_lock_min_weight", "refine", "refine_horizon", "refine_skate", "refine_start")
+EVAL_CHOICES = ("foot_lock_min_weight", "refine", "refine_horizon", "refine_skate", "refine_start", "refine_pace")
 """The ``eval:`` settings a checkpoint stores that ``latentrl eval`` takes as its defaults (flags override)."""
 
 

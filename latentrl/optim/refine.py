@@ -23,6 +23,7 @@ from typing import NamedTuple
 import torch
 
 from latentrl.constants import CONTACT_HEIGHT_M
+from latentrl.envs.reach_joint import JOINTS
 from latentrl.errors import LatentRLError
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS
@@ -30,7 +31,7 @@ from latentrl.optim.losses import pseudo_huber, regularizers, target_squared
 from latentrl.optim.problems import Targets
 from latentrl.rewards.terms import noise_prior
 
-STARTS = ("policy", "zeros")
+STARTS = ("policy", "zeros", "auto")
 """Where a step's refinement starts (:attr:`RefineSettings.start`)."""
 FOOT_HOLD = 2
 """Frames after a footstep's frame in which the foot is also held on its stone (xy)."""
@@ -48,8 +49,11 @@ class RefineSettings:
     steps: int = 8
     """Adam steps per env step (0: the policy's action unchanged)."""
     start: str = "policy"
-    """Where each step's refinement starts: ``policy`` (its action) or ``zeros`` (zero noise; for joints the
-    policy was not trained on, whose actions start it off worse: docs/joint_goals.md)."""
+    """Where each step's refinement starts: ``policy`` (its action), ``zeros`` (zero noise; for joints the
+    policy was not trained on, whose actions start it off worse: docs/joint_goals.md) or ``auto`` (the policy's
+    action where the current goal's joint is one of :attr:`policy_joints`, zero noise elsewhere)."""
+    policy_joints: tuple[str, ...] = ("pelvis",)
+    """With ``start="auto"``: the joints the policy was trained on (its ``env.reach_joint.joints``)."""
     horizon: int = 3
     """Primitives predicted (8 frames each); the first is executed."""
     lr: float = 0.1
@@ -70,6 +74,9 @@ class RefineSettings:
             raise LatentRLError(f"refine horizon: expected 1-16 primitives, got {self.horizon}")
         if self.start not in STARTS:
             raise LatentRLError(f"refine start: expected one of {', '.join(STARTS)}, got {self.start!r}")
+        unknown = [j for j in self.policy_joints if j not in JOINTS]
+        if unknown:
+            raise LatentRLError(f"refine policy joints: expected some of {', '.join(JOINTS)}, got {unknown[0]!r:.40}")
         if not 0 < self.lr <= 10:
             raise LatentRLError(f"refine lr: expected a learning rate in (0, 10], got {self.lr}")
         for name in ("pace", "prior", "skate"):
@@ -182,6 +189,10 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
     given = torch.as_tensor(action, device=env.device).detach().to(torch.float32)
     given = given.reshape(n, *model.latent_shape).clamp(-bound, bound)
     start = torch.zeros_like(given) if settings.start == "zeros" else given
+    if settings.start == "auto":
+        trained = torch.tensor([JOINTS[j] for j in settings.policy_joints], device=given.device)
+        own = (env.current_goal()["joint"][:, None] == trained).any(dim=1)
+        start = torch.where(own[:, None, None], given, torch.zeros_like(given))
     z = torch.zeros(settings.horizon, *start.shape, device=start.device)
     z[0] = start
     z.requires_grad_(True)

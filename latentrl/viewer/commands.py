@@ -125,7 +125,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                                          refine_steps=int(stored.get("refine") or 0),
                                          refine_horizon=int(stored.get("refine_horizon") or 3),
                                          refine_start=str(stored.get("refine_start") or "policy"),
-                                         refine_skate=float(stored.get("refine_skate") or 0.0), **common)
+                                         refine_skate=float(stored.get("refine_skate") or 0.0),
+                                         refine_pace=float(0.5 if stored.get("refine_pace") is None
+                                                           else stored["refine_pace"]), **common)
     else:
         controller = LiveController(server, env, loaded.policy, title, env.texts[0], **common)
     controller.start()

@@ -244,13 +244,29 @@ def test_zero_steps_and_nothing_to_refine_keep_the_policy_action(tiny_model):
         env.step(refine(env, broken, zeros))
 
 
+def test_auto_start_takes_the_policy_action_only_for_the_joints_it_was_trained_on(tiny_model):
+    """Env 0's current goal is the pelvis, env 1's a foot: with ``auto`` the pelvis row refines as from the policy
+    and the foot row as from zero noise; with every joint trained, both as from the policy."""
+    foot = JointGoalEntry("walk", (JointGoal("left_foot", (0.1, 0.9), 12 / FPS),))
+    env = ReachJointEnv(2, motion=tiny_model, goals=[ENTRY, foot], max_episode_steps=8, autoreset_mode="Disabled")
+    env.reset(seed=0)
+    action = torch.randn(2, tiny_model.latent_dim)
+    auto = refine(env, action, RefineSettings(steps=2, start="auto", policy_joints=("pelvis",)))
+    policy = refine(env, action, RefineSettings(steps=2, start="policy"))
+    zeros = refine(env, action, RefineSettings(steps=2, start="zeros"))
+    assert torch.equal(auto[0], policy[0]) and torch.equal(auto[1], zeros[1]) and not torch.equal(auto[1], policy[1])
+    every = refine(env, action, RefineSettings(steps=2, start="auto", policy_joints=("pelvis", "left_foot")))
+    assert torch.equal(every, policy)
+
+
 @pytest.mark.parametrize("field, value, match", [
     ("steps", -1, "refine steps: expected 0-1000, got -1"),
     ("horizon", 0, "refine horizon: expected 1-16 primitives, got 0"),
     ("lr", 0.0, r"refine lr: expected a learning rate in \(0, 10\], got 0.0"),
     ("pace", -1.0, r"refine pace: expected a weight in \[0, 1000\], got -1.0"),
     ("skate", float("nan"), r"refine skate: expected a weight in \[0, 1000\], got nan"),
-    ("start", "random", r"refine start: expected one of policy, zeros, got 'random'"),
+    ("start", "random", r"refine start: expected one of policy, zeros, auto, got 'random'"),
+    ("policy_joints", ("pelvis", "tail"), r"refine policy joints: expected some of pelvis, .*, got 'tail'"),
 ])
 def test_bad_settings_are_one_line_errors(field, value, match):
     with pytest.raises(LatentRLError, match=match):
