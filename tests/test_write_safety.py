@@ -233,8 +233,8 @@ def test_a_second_optimize_into_the_same_out_folder_is_refused(eval_files, tmp_p
 
 def test_an_interrupt_during_the_temporary_files_creation_waits_until_cleanup_can_see_it():
     """SIGTERM arriving while ``mkstemp`` creates the file is held back, then raised where the file is removed."""
-    import os
     import signal
+    import threading
 
     from latentrl import safe_io
 
@@ -242,7 +242,9 @@ def test_an_interrupt_during_the_temporary_files_creation_waits_until_cleanup_ca
     previous = signal.signal(signal.SIGTERM, lambda *_: seen.append("term"))
     try:
         with safe_io._signals_held():
-            os.kill(os.getpid(), signal.SIGTERM)
+            # to this (the main) thread: a signal sent to the process may be taken by another thread an earlier
+            # test left running (a server's), which the main thread's mask does not cover
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
             assert seen == []  # held back inside
         assert seen == ["term"]  # delivered once the block ends
     finally:

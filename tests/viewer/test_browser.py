@@ -320,7 +320,7 @@ def test_play_lands_a_clicked_pelvis_goal_of_the_reach_joint_policy(browser):
 
     with serve("play", "reach_joint_default", "--deterministic") as (url, lines):
         open_page(browser, url, "a goal for the joint picked below")
-        assert "refinement: on (16 steps)" in page_text(browser)
+        assert "refinement: on (32 steps)" in page_text(browser)
         canvas = browser.find_element(By.TAG_NAME, "canvas")
         w, h = canvas.size["width"], canvas.size["height"]
         # near the middle: a spot about 1-2 m ahead of the start pose (the camera looks past it)

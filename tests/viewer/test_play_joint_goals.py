@@ -107,7 +107,7 @@ def test_a_full_queue_makes_room_by_dropping_done_goals(shipped):
 
 
 def test_the_shipped_pelvis_policy_lands_clicked_goals_with_refinement(shipped, guarded_server, capsys):
-    """Two clicked spots 2 s apart: with the stored 16 refinement steps both land within the radius (card: 1-2 cm)."""
+    """Two clicked spots 2 s apart: with 16 refinement steps both land within the radius (card: 1-2 cm)."""
     from latentrl.viewer.joint_play import JointGoalController
 
     loaded, _ = shipped
