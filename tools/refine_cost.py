@@ -1,6 +1,6 @@
 """Seconds per env step of one ReachJoint character with its noise refined: the cost side of ``--refine STEPS``.
 
-    python tools/refine_cost.py [--settings 0:3 3:3 4:2 8:3 16:3] [--steps-per-run 12]
+    python tools/refine_cost.py [--settings 0:3 3:3 4:2 8:3 16:3] [--steps-per-run 12] [--skate 0] [--pace 0.5]
 
 Runs the shipped ``reach_joint_default`` (mean action) on ``pelvis_far``'s first entry, one env, for each
 ``STEPS:HORIZON`` pair, and prints the mean wall time of policy + refinement + env step over the steps after the
@@ -32,6 +32,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--settings", nargs="+", default=["0:3", "3:3", "4:2", "8:3", "16:3"], metavar="STEPS:HORIZON")
     ap.add_argument("--steps-per-run", type=int, default=12)
+    ap.add_argument("--skate", type=float, default=0.0, help="the refiner's skate weight (the shipped policy: 3)")
+    ap.add_argument("--pace", type=float, default=0.5, help="the refiner's pace weight (the shipped policy: 2)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     policy = str(policy_file("reach_joint_default"))
@@ -44,7 +46,7 @@ def main() -> None:
         steps, horizon = (int(v) for v in pair.split(":"))
         env = joint_goals.make_env(model, entry, 1, settings, max_steps=64)
         obs, _ = env.reset(seed=0)
-        refined = RefineSettings(steps=steps, horizon=horizon)
+        refined = RefineSettings(steps=steps, horizon=horizon, skate=args.skate, pace=args.pace)
         times = []
         for _ in range(args.steps_per_run):
             t0 = time.perf_counter()
