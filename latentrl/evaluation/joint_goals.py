@@ -36,17 +36,21 @@ import numpy as np
 
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.envs.reach_joint import FEET, JOINTS, JointGoalEntry, ReachJointConfig, ReachJointEnv, load_joint_goals
-from latentrl.envs.scene import resolve_scene
-from latentrl.errors import ConfigError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import end_of, rollout
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each, scene_row
+from latentrl.evaluation.task_eval import (
+    TaskEpisode,
+    TaskResult,
+    episode_clip,
+    goal_scene,
+    run_each,
+    scene_row,
+    with_scene_metrics,
+)
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.render import GOAL_JOINT_COLOURS
-from latentrl.scenes.contact import scene_metrics
-from latentrl.scenes.courses import RandomMazes
 
 UNITS = {"success": "share", "err_near_cm": "cm", "err_far_cm": "cm", "footstep_err_cm": "cm",
          "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm"}
@@ -150,8 +154,7 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
     }
-    if terrain is not None:
-        metrics.update(scene_metrics(np.asarray(joints, dtype=np.float32), terrain))
+    with_scene_metrics(metrics, joints, terrain)
     detail = {"error_cm": [None if e is None else e * 100 for e in errors],
               "touchdown_err_cm": [None if s is None else s * 100 for s in steps], "frame": list(map(int, frames))}
     return metrics, detail
@@ -166,10 +169,7 @@ def make_env(motion, entry: JointGoalEntry, num_envs: int, settings: EvalSetting
     start and the first goal) puts objects around the goals; the policy observes them only when it was trained with
     a scene (``settings.observe_scene``).
     """
-    scene = resolve_scene(settings.scene) if settings.scene is not None else None
-    if isinstance(scene, RandomMazes):
-        raise ConfigError("scene: random mazes bring their own routes (path suites); joint goals take a scene file "
-                          "or random_obstacles")
+    scene = goal_scene(settings, "joint goals")
     return ReachJointEnv(num_envs, motion=motion, goals=[entry], texts=(entry.text,), device=settings.device,
                          max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
                          record_history=record_history, **settings.motion_kwargs(), **settings.scene_kwargs(scene))

@@ -33,16 +33,21 @@ import numpy as np
 import torch
 
 from latentrl.envs.joystick import STEP_SECONDS
-from latentrl.envs.scene import resolve_scene
 from latentrl.envs.timed import TimedPath, TimedPathEnv, load_timed_paths
-from latentrl.errors import ConfigError
 from latentrl.evaluation import metrics as M
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.episodes import end_of, rollout
 from latentrl.evaluation.results import prompts_label
-from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip, run_each, scene_row, with_scene_metrics
+from latentrl.evaluation.task_eval import (
+    TaskEpisode,
+    TaskResult,
+    episode_clip,
+    goal_scene,
+    run_each,
+    scene_row,
+    with_scene_metrics,
+)
 from latentrl.motion.skeleton import FPS
-from latentrl.scenes.courses import RandomMazes
 
 UNITS = {"success": "share", "arrival_err_s": "s", "late_s": "s", "reached": "share", "skate_cm_s": "cm/s",
          "floor_cm": "cm"}
@@ -90,10 +95,7 @@ def make_env(motion, path: TimedPath, num_envs: int, settings: EvalSettings, obs
     ``settings.scene`` (``latentrl eval --scene``: a scene file or name, or random obstacles, drawn clear of the
     start and the first waypoint, then of each waypoint as it becomes the goal) puts objects along the path.
     """
-    scene = resolve_scene(settings.scene) if settings.scene is not None else None
-    if isinstance(scene, RandomMazes):
-        raise ConfigError("scene: random mazes bring their own routes (path suites); timed paths take a scene file "
-                          "or random_obstacles")
+    scene = goal_scene(settings, "timed paths")
     return TimedPathEnv(num_envs, motion=motion, paths=[path], path_assignment="by_env", observe_next=observe_next,
                         next_at_last=settings.next_at_last, texts=(path.texts[0],), device=settings.device,
                         max_episode_steps=max_steps or settings.max_steps, autoreset_mode="Disabled",
