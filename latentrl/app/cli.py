@@ -494,6 +494,17 @@ def _eval_commands(sub) -> None:
                     help="with --refine: start each step's refinement from the policy's action, from zero noise "
                          "(for joints the policy was not trained on), or auto: the policy's for its trained joints, "
                          "zeros for the others; default: the policy's stored eval.refine_start, else policy")
+    ev.add_argument("--avoid", type=int, default=None, metavar="STEPS",
+                    help="evaluations among objects: before every step, predict --avoid-horizon primitives of the "
+                         "policy's noise and, where a joint comes within its skin plus --avoid-margin of an object, "
+                         "move the noise by STEPS optimizer steps, as little as it takes (default: the policy's "
+                         "stored eval.avoid, else 0: off; docs/scenes.md)")
+    ev.add_argument("--avoid-horizon", type=int, default=None, metavar="H",
+                    help="with --avoid: primitives predicted (8 frames each), the first executed (default: the "
+                         "policy's stored eval.avoid_horizon, else 2)")
+    ev.add_argument("--avoid-margin", type=float, default=None, metavar="M",
+                    help="with --avoid: metres beyond each joint's skin radius kept from every object (feet and "
+                         "ankles: the skin alone; default: the policy's stored eval.avoid_margin, else 0.1)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")

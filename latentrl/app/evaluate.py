@@ -24,6 +24,7 @@ has the format ``latentrl.eval.task/1`` and its motions are named ``<suite>_<i>_
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,7 @@ from latentrl.evaluation.tasks import RENDER_FORMATS  # (importing it attaches t
 from latentrl.evaluation.trained import motion_of, stored_env, stored_eval_choices
 from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_motion_model
 from latentrl.motion.rollout import lock_min_weight_problem
+from latentrl.optim.avoid import AvoidSettings, avoiding
 from latentrl.optim.refine import RefineSettings, refining
 from latentrl.ppo import load_policy
 from latentrl.preflight import check_device, check_output_file, check_writable, locked_output
@@ -103,6 +105,14 @@ class EvalRequest:
     refine_pace: float | None = None
     """With ``refine``: the weight of the pace target of a goal beyond the horizon (None: the stored
     ``eval.refine_pace``, else 0.5)."""
+    avoid: int | None = None
+    """Evaluations among objects: optimizer steps that move the policy's noise off a predicted collision
+    (``latentrl.optim.avoid``; 0: off; None: the policy's stored ``eval.avoid``, else off)."""
+    avoid_horizon: int | None = None
+    """With ``avoid``: primitives predicted (None: the stored ``eval.avoid_horizon``, else 2)."""
+    avoid_margin: float | None = None
+    """With ``avoid``: metres beyond each joint's skin kept from objects (None: the stored ``eval.avoid_margin``,
+    else 0.1)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -116,7 +126,8 @@ class EvalRequest:
                    ("--refine-horizon", self.refine_horizon),
                    ("--refine-skate", self.refine_skate),
                    ("--refine-start", self.refine_start),
-                   ("--refine-pace", self.refine_pace))
+                   ("--refine-pace", self.refine_pace), ("--avoid", self.avoid),
+                   ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -251,13 +262,16 @@ def evaluate(req: EvalRequest) -> int:
     stored = stored_eval_choices(policy_file(req.policy))
     for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
                              ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
-                             ("refine_pace", "--refine-pace", float)):
+                             ("refine_pace", "--refine-pace", float), ("avoid", "--avoid", int),
+                             ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
-        if getattr(req, name) is None and name in stored and not req.physics and (name == "refine" or req.refine):
+        head = name.split("_")[0]
+        if getattr(req, name) is None and name in stored and not req.physics and (name == head or getattr(req, head)):
             setattr(req, name, kind(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
     trained = tuple(env.reach_joint.joints) if env is not None and env.reach_joint is not None else ("pelvis",)
     refiner = _refiner(req, evaluator, spec.name, trained)
+    avoider = _avoider(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "
@@ -277,11 +291,17 @@ def evaluate(req: EvalRequest) -> int:
     observe_next = evaluator.fit(policy, model, files, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
-    if refiner is not None:
-        info["refine"] = asdict(refiner)
-        extra_run: dict[str, Any] = {"wrap": lambda env, policy_act: refining(env, policy_act, refiner)}
-    else:
-        extra_run = {}
+    extra_run: dict[str, Any] = {}
+    if refiner is not None or avoider is not None:
+        info.update({"refine": asdict(refiner)} if refiner is not None else {},
+                    **({"avoid": asdict(avoider)} if avoider is not None else {}))
+
+        def wrap(env: Any, policy_act: Callable) -> Callable:
+            """The policy, then the refiner, then the scene filter (the last word is the filter's)."""
+            out = refining(env, policy_act, refiner) if refiner is not None else policy_act
+            return avoiding(env, out, avoider) if avoider is not None else out
+
+        extra_run["wrap"] = wrap
     # an evaluator written before ``after_entry`` existed still runs, without the bar and the reports in between
     accepts = inspect.signature(evaluator.run).parameters
     stepwise = "after_entry" in accepts
@@ -338,6 +358,25 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[s
             .replace("refine skate:", "--refine-skate:").replace("refine start:", "--refine-start:") \
             .replace("refine pace:", "--refine-pace:")
         raise ConfigError(flag) from None
+    return settings
+
+
+def _avoider(req: EvalRequest, evaluator: Any, task: str) -> AvoidSettings | None:
+    """``--avoid``'s settings, checked; None when off. Only evaluations among objects have something to avoid."""
+    if not req.avoid:
+        return None
+    if getattr(evaluator, "suite_kind", None) not in SCENE_SUITES:
+        raise ConfigError(f"--avoid: the {task} task's evaluation is not filtered (the filter runs where --scene "
+                          "does: reach, path, timed, joystick and ReachJoint policies); leave out --avoid")
+    if req.physics:
+        raise ConfigError("--avoid: not with --physics (the filter predicts the kinematic step)")
+    settings = AvoidSettings(steps=req.avoid, horizon=2 if req.avoid_horizon is None else req.avoid_horizon,
+                             margin=0.1 if req.avoid_margin is None else req.avoid_margin)
+    try:
+        settings.check()
+    except LatentRLError as exc:  # the flags' names, not the settings'
+        raise ConfigError(str(exc).replace("avoid steps:", "--avoid:").replace("avoid horizon:", "--avoid-horizon:")
+                          .replace("avoid margin:", "--avoid-margin:")) from None
     return settings
 
 

@@ -53,6 +53,14 @@ class EvalConfig:
     from the policy's action for the joints it was trained on and from zero noise for the others."""
     refine_pace: float | None = None
     """With ``refine``: its ``--refine-pace`` weight (None: 0.5)."""
+    avoid: int | None = None
+    """Evaluations among objects: the optimizer steps of the scene filter ``latentrl eval`` of the checkpoints
+    applies by default (its ``--avoid``; the card's figures); None: off. The trainer's periodic evaluation does not
+    filter."""
+    avoid_horizon: int | None = None
+    """With ``avoid``: its ``--avoid-horizon`` (None: 2)."""
+    avoid_margin: float | None = None
+    """With ``avoid``: its ``--avoid-margin``, metres (None: 0.1)."""
     video_every: int = 1
     """Every this many evaluations (the first of each training process included), the first episode of the first
     suite entry goes to TensorBoard as ``eval/episode``: an animated GIF at 10 frames/s with the scene and goals;
@@ -80,6 +88,12 @@ class EvalConfig:
                 f"must be a weight in [0, 1000] (or null: 0.5), got {self.refine_pace}")
         require(self.refine_start in (None, "policy", "zeros", "auto"), "refine_start",
                 f"must be policy, zeros or auto (or null: policy), got {self.refine_start!r:.40}")
+        require(self.avoid is None or 0 <= self.avoid <= 1000, "avoid",
+                f"must be 0-1000 optimizer steps (or null: off), got {self.avoid}")
+        require(self.avoid_horizon is None or 1 <= self.avoid_horizon <= 16, "avoid_horizon",
+                f"must be 1-16 primitives (or null: 2), got {self.avoid_horizon}")
+        require(self.avoid_margin is None or 0 <= self.avoid_margin <= 1, "avoid_margin",
+                f"must be metres in [0, 1] (or null: 0.1), got {self.avoid_margin}")
 
 
 MAX_VIDEO_SIZE = 640

@@ -165,12 +165,13 @@ def timeline_label(timeline: CommandTimeline) -> str:
 
 def run_timeline(act: Callable, motion, timeline: CommandTimeline, settings: EvalSettings, *, suite: str = "joystick",
                  index: int = 0, criteria: TrackingCriteria | None = None, seed: int = 0,
-                 sink: Callable[[TaskEpisode, Any], str | None] | None = None) -> TaskResult:
-    """``settings.episodes`` episodes of one timeline in one batch."""
+                 sink: Callable[[TaskEpisode, Any], str | None] | None = None,
+                 wrap: Callable[[Any, Callable], Callable] | None = None) -> TaskResult:
+    """``settings.episodes`` episodes of one timeline in one batch (``wrap``: as ``runner.run_path``'s)."""
     criteria = criteria or TrackingCriteria()
     t0 = time.perf_counter()
     env = make_env(motion, timeline, settings.episodes, settings, record_history=True)
-    outcome = rollout(env, act, timeline_steps(timeline), seed)
+    outcome = rollout(env, act if wrap is None else wrap(env, act), timeline_steps(timeline), seed)
     episodes = []
     for i in range(settings.episodes):
         steps = int(outcome["steps"][i])
@@ -187,11 +188,12 @@ def run_timeline(act: Callable, motion, timeline: CommandTimeline, settings: Eva
 
 def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: EvalSettings, *,
                criteria: TrackingCriteria | None = None, sink=None,
-               progress: Callable[[TaskResult], None] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
+               progress: Callable[[TaskResult], None] | None = None,
+               wrap: Callable[[Any, Callable], Callable] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
     """Every timeline of every file (all files are parsed first); ``[(suite name, file, results)]``."""
     settings.validate()
     return run_each(files, load_timelines, lambda timeline, **where: run_timeline(
-        act, motion, timeline, settings, criteria=criteria, sink=sink, **where), settings.seed, progress)
+        act, motion, timeline, settings, criteria=criteria, sink=sink, wrap=wrap, **where), settings.seed, progress)
 
 
 def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_cfg: Any, device: str = "cpu"):

@@ -172,8 +172,12 @@ def build_report(
     speed: dict[str, Any] | None = None,
     hardware: dict[str, Any] | None = None,
     files: dict[str, Any] | None = None,
+    avoid: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The ``report.json`` dict (schema in docs/evaluation.md); NaN becomes ``null`` when written."""
+    """The ``report.json`` dict (schema in docs/evaluation.md); NaN becomes ``null`` when written.
+
+    ``avoid``: the scene filter's settings when ``eval --avoid`` ran (``latentrl.optim.avoid``).
+    """
     from dataclasses import asdict
 
     from latentrl import __version__
@@ -199,6 +203,7 @@ def build_report(
         "overall": {"metrics": pooled_metrics(all_paths), "paths": len(all_paths),
                     "episodes": sum(len(p.episodes) for p in all_paths), **skill_summary(all_paths)},
         "files": files or {},
+        **({"avoid": avoid} if avoid is not None else {}),
     }
 
 

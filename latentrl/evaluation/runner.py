@@ -192,11 +192,16 @@ def run_path(
     index: int = 0,
     observe_next: bool = False,
     sink: EpisodeSink | None = None,
+    wrap: Callable[[Any, PolicyFn], PolicyFn] | None = None,
 ) -> PathResult:
-    """Evaluate ``settings.episodes`` episodes of one path in one batch; see the module docstring."""
+    """Evaluate ``settings.episodes`` episodes of one path in one batch; see the module docstring.
+
+    ``wrap(env, act) -> act``: a policy function that also reads the env (``eval --avoid``'s scene filter).
+    """
     t0 = time.perf_counter()
     env = make_env(motion, [path], settings.episodes, settings, observe_next, record_history=True)
-    outcome = _rollout(env, act, settings.max_steps, path_seed(settings.seed, suite, index))
+    outcome = _rollout(env, act if wrap is None else wrap(env, act), settings.max_steps,
+                       path_seed(settings.seed, suite, index))
     final_goal = torch.tensor(path.waypoints[-1])
     episodes = []
     for i in range(settings.episodes):
@@ -253,6 +258,7 @@ def run_suites(
     text: str | None = None,
     sink: EpisodeSink | None = None,
     progress: Callable[[PathResult], None] | None = None,
+    wrap: Callable[[Any, PolicyFn], PolicyFn] | None = None,
 ) -> list[SuiteResult]:
     """Every path of every file, in order (all files are checked first, see :func:`load_suites`)."""
     settings.validate()
@@ -261,7 +267,7 @@ def run_suites(
         suite = SuiteResult(file.stem, str(file), [])
         for index, path in enumerate(paths):
             result = run_path(act, motion, path, settings, suite=file.stem, index=index,
-                              observe_next=observe_next, sink=sink)
+                              observe_next=observe_next, sink=sink, wrap=wrap)
             suite.paths.append(result)
             if progress is not None:
                 progress(result)

@@ -92,10 +92,12 @@ class PathEvaluator:
 
     def run(self, act: Callable, motion: Any, files: Sequence[Path], settings: Any, *, observe_next: bool,
             out_dir: Path | None = None, render: int = 0, motions: bool = False,
-            after_entry: Callable[[PathRun], None] | None = None, render_format: str = "gif") -> PathRun:
+            after_entry: Callable[[PathRun], None] | None = None, render_format: str = "gif",
+            wrap: Callable[[Any, Callable], Callable] | None = None) -> PathRun:
         """Every path of every file, then the controller's speed at batch 1 and at ``settings.episodes``.
 
-        ``after_entry`` gets the paths done so far (no speed yet) after each path.
+        ``after_entry`` gets the paths done so far (no speed yet) after each path; ``wrap(env, act) -> act``: a
+        policy function that also reads the env (``eval --avoid``; the speed is the policy's own).
         """
         def sink(ep: EpisodeResult, data: dict) -> str | None:
             clip = MotionClip.from_dict(data)
@@ -118,7 +120,7 @@ class PathEvaluator:
                 after_entry(PathRun(done, {}, motions, render, render_format))
 
         suites = run_suites(act, motion, files, settings, observe_next=observe_next,
-                            sink=sink if out_dir is not None else None, progress=progress)
+                            sink=sink if out_dir is not None else None, progress=progress, wrap=wrap)
         first = load_paths(files[0])[0]
         speed = measure_speed(act, motion, first, settings, [1, settings.episodes], observe_next)
         return PathRun(suites, speed, motions, render, render_format)
@@ -221,7 +223,7 @@ class SuiteEvaluator:
             wrap: Callable[[Any, Callable], Callable] | None = None) -> TaskRun:
         """Every entry of every suite file with the default criteria; ``after_entry`` gets those done so far.
 
-        ``wrap(env, act) -> act``: a policy function that also reads the env (joint goals only: ``eval --refine``).
+        ``wrap(env, act) -> act``: a policy function that also reads the env (``eval --refine``, ``--avoid``).
         """
         def sink(ep, clip: MotionClip) -> str | None:
             if motions:

@@ -110,8 +110,9 @@ def budget(path: TimedPath, settings: EvalSettings, criteria: TimingCriteria) ->
 
 def run_path(act: Callable, motion, path: TimedPath, settings: EvalSettings, *, suite: str = "timed",
              index: int = 0, observe_next: bool = False, criteria: TimingCriteria | None = None, seed: int = 0,
-             sink: Callable[[TaskEpisode, Any], str | None] | None = None) -> TaskResult:
-    """``settings.episodes`` episodes of one timed path in one batch."""
+             sink: Callable[[TaskEpisode, Any], str | None] | None = None,
+             wrap: Callable[[Any, Callable], Callable] | None = None) -> TaskResult:
+    """``settings.episodes`` episodes of one timed path in one batch (``wrap``: as ``runner.run_path``'s)."""
     criteria = criteria or TimingCriteria()
     t0 = time.perf_counter()
     steps_max = budget(path, settings, criteria)
@@ -125,7 +126,7 @@ def run_path(act: Callable, motion, path: TimedPath, settings: EvalSettings, *, 
         rows = torch.arange(n)[reached]
         errors[rows, wp[reached]] = infos["arrival_error_s"].cpu()[reached]
 
-    outcome = rollout(env, act, steps_max, seed, on_step)
+    outcome = rollout(env, act if wrap is None else wrap(env, act), steps_max, seed, on_step)
     episodes = []
     for i in range(n):
         steps = int(outcome["steps"][i])
@@ -144,11 +145,12 @@ def run_path(act: Callable, motion, path: TimedPath, settings: EvalSettings, *, 
 
 def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: EvalSettings, *,
                observe_next: bool = False, criteria: TimingCriteria | None = None, sink=None,
-               progress: Callable[[TaskResult], None] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
+               progress: Callable[[TaskResult], None] | None = None,
+               wrap: Callable[[Any, Callable], Callable] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
     """Every path of every file (all files are parsed first); ``[(suite name, file, results)]``."""
     settings.validate()
     return run_each(files, load_timed_paths, lambda path, **where: run_path(
-        act, motion, path, settings, observe_next=observe_next, criteria=criteria, sink=sink, **where),
+        act, motion, path, settings, observe_next=observe_next, criteria=criteria, sink=sink, wrap=wrap, **where),
         settings.seed, progress)
 
 

@@ -53,7 +53,8 @@ def stored_step_settings(config) -> StepSettings:
     return StepSettings.of(stored_env_config(config))
 
 
-EVAL_CHOICES = ("foot_lock_min_weight", "refine", "refine_horizon", "refine_skate", "refine_start", "refine_pace")
+EVAL_CHOICES = ("foot_lock_min_weight", "refine", "refine_horizon", "refine_skate", "refine_start", "refine_pace",
+                "avoid", "avoid_horizon", "avoid_margin")
 """The ``eval:`` settings a checkpoint stores that ``latentrl eval`` takes as its defaults (flags override)."""
 
 

@@ -102,3 +102,35 @@ def test_eval_command_with_a_scene_for_a_policy_trained_without_one(eval_files, 
     assert main([*base, "--out", str(tmp_path / "bad"), "--scene", "nowhere.json"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--scene: scene file not found: nowhere.json" in err[0]
+
+
+def test_eval_avoid_records_its_settings_leaves_a_clear_plan_alone_and_a_stored_choice_is_the_default(
+        eval_files, tmp_path, capsys):
+    """``--avoid`` among far objects changes no metric (the filter acts only on a plan near an object); its
+    settings go into report.json; a policy storing ``eval.avoid`` is filtered without the flag."""
+    from latentrl.app.cli import main
+    from latentrl.ppo.checkpoint import read_checkpoint, save_checkpoint
+    from tests.evaluation.conftest import NEAR, write_paths
+
+    paths = write_paths(tmp_path, [NEAR], "mini.json")
+    far = tmp_path / "far.json"
+    far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [30.0, 30.0], "size": [0.5, 0.5, 1.0]}]}))
+    base = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
+            "--episodes", "2", "--max-steps", "3", "--device", "cpu", "--no-render", "--no-progress",
+            "--scene", str(far)]
+    assert main([*base, "--out", str(tmp_path / "plain")]) == 0
+    assert main([*base, "--out", str(tmp_path / "filtered"), "--avoid", "3", "--avoid-horizon", "1"]) == 0
+    plain, filtered = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "filtered"))
+    assert "avoid" not in plain
+    assert filtered["avoid"] == {"steps": 3, "horizon": 1, "margin": 0.1, "anchor": 0.1, "weight": 100.0, "lr": 0.3,
+                                 "prior": 0.1}
+    assert filtered["overall"]["metrics"] == plain["overall"]["metrics"]
+    state = read_checkpoint(eval_files["policy"], map_location="cpu")
+    state["config"] = {**(state.get("config") or {}), "eval": {"avoid": 2, "avoid_margin": 0.2}}
+    stored = save_checkpoint(state, tmp_path / "stored.pt")
+    capsys.readouterr()
+    assert main([*base[:1], str(stored), *base[2:], "--out", str(tmp_path / "stored")]) == 0
+    assert "--avoid 2 (the policy's stored evaluation setting; --avoid overrides)" in capsys.readouterr().out
+    report = json.loads((tmp_path / "stored" / "report.json").read_text())
+    assert report["avoid"]["steps"] == 2 and report["avoid"]["margin"] == 0.2 and report["avoid"]["horizon"] == 2

@@ -1,0 +1,168 @@
+"""A scene safety filter: the policy's noise, moved only as far as it takes to keep the body off the objects.
+
+Why: a scene policy (``reach_obstacles_default``, ``path_maze_default``) learned to keep its distance by reward,
+and a fifth of its maze episodes still graze a wall (docs/scenes.md); a reward can make a collision rare, not
+impossible. Each env step, this predicts the next ``horizon`` primitives from the env's own state, placed exactly
+as the env places them (``MotionModel.differentiable_step(post_process=True)``): the policy's noise first, zero
+noise after it. Where no joint of that plan comes within its skin radius plus ``margin`` of an object, the
+policy's action goes through untouched (most steps, and every step on a flat floor). Elsewhere a few Adam steps
+move the first primitive's noise until the whole plan keeps out of that band, at a cost for leaving the policy's
+noise (so the goal the policy walks to stays its goal); that noise is executed and the next step plans again:
+a receding horizon, as model-predictive safety filters do. Only the envs at risk are optimized. The later
+primitives stay at zero noise, not optimized: a plan free to dodge in its later primitives leaves the executed
+one as it was, step after step, until no first primitive can dodge (a body walked at a pillar went through it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from latentrl.errors import LatentRLError
+from latentrl.motion.rollout import RolloutState
+from latentrl.motion.skeleton import JOINT_NAMES
+from latentrl.rewards.terms import noise_prior
+from latentrl.scenes.contact import skin_radii
+
+GROUND_JOINTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
+"""Joints that touch the terrain (a tread, a seat's top): their band is the skin alone, never ``margin`` more."""
+
+
+@dataclass
+class AvoidSettings:
+    """How the filter acts (``latentrl eval --avoid STEPS``; docs/scenes.md)."""
+
+    steps: int = 16
+    """Adam steps for an env whose predicted plan comes too close (0: off)."""
+    horizon: int = 2
+    """Primitives predicted (8 frames each); the first is executed."""
+    margin: float = 0.1
+    """Metres beyond each joint's skin radius that the plan must keep from every object (feet and ankles: 0)."""
+    anchor: float = 0.1
+    """Weight of the mean squared distance of the executed noise from the policy's."""
+    weight: float = 100.0
+    """Weight of the band violation (metres summed over joints, averaged over frames)."""
+    lr: float = 0.3
+    prior: float = 0.1
+    """Weight of the noise-shell penalty (the ``prior`` reward term) of the executed noise."""
+
+    def check(self) -> None:
+        """One-line :class:`LatentRLError` for a value out of range."""
+        if not 0 <= self.steps <= 1000:
+            raise LatentRLError(f"avoid steps: expected 0-1000, got {self.steps}")
+        if not 1 <= self.horizon <= 16:
+            raise LatentRLError(f"avoid horizon: expected 1-16 primitives, got {self.horizon}")
+        if not 0 <= self.margin <= 1:
+            raise LatentRLError(f"avoid margin: expected metres in [0, 1], got {self.margin}")
+        if not 0 < self.lr <= 10:
+            raise LatentRLError(f"avoid lr: expected a learning rate in (0, 10], got {self.lr}")
+        for name in ("anchor", "weight", "prior"):
+            value = getattr(self, name)
+            if not 0 <= value <= 1e6:
+                raise LatentRLError(f"avoid {name}: expected a weight in [0, 1e6], got {value}")
+
+
+def band(joints: torch.Tensor, margin: float) -> torch.Tensor:
+    """(22,) each joint's keep-out distance: its skin radius plus ``margin`` (the feet and ankles: the skin)."""
+    out = skin_radii(joints).clone()
+    ground = torch.tensor([name in GROUND_JOINTS for name in JOINT_NAMES], device=joints.device)
+    return torch.where(ground, out, out + margin)
+
+
+def intrusion(joints: torch.Tensor, scene, keep: torch.Tensor) -> torch.Tensor:
+    """(N,) how far joints come inside their ``keep`` (22,) distances of the scene's objects: summed, frame mean."""
+    return (keep - scene.sdf(joints)).clamp(min=0.0).sum(dim=-1).mean(dim=-1)
+
+
+def _rows(inputs: dict, idx: torch.Tensor) -> dict:
+    """The step inputs of envs ``idx`` (a one-scene terrain stays as it is: it answers any batch)."""
+    state = inputs["state"]
+    out = dict(inputs)
+    out["state"] = RolloutState(state.history[idx], state.world.index(idx),
+                                None if state.airborne is None else state.airborne[idx])
+    out["text_embedding"] = inputs["text_embedding"][idx]
+    guidance = inputs.get("guidance_scale")
+    if isinstance(guidance, torch.Tensor) and guidance.dim() > 0:  # one scale per env
+        out["guidance_scale"] = guidance[idx]
+    terrain = inputs.get("terrain")
+    if terrain is not None and terrain.num_scenes != 1:
+        out["terrain"] = terrain.index(idx)
+    return out
+
+
+def _plan(model, inputs: dict, noise: torch.Tensor) -> torch.Tensor:
+    """(M, S x 8, 22, 3) world joints of the S primitives of noises (S, M, 1, D), placed as the env will."""
+    state, frames = inputs["state"], []
+    kwargs = {k: v for k, v in inputs.items() if k != "state"}
+    for z in noise:
+        out = model.differentiable_step(state, noise=z, post_process=True, **kwargs)
+        frames.append(out.joints_world)
+        state = out.state
+    return torch.cat(frames, dim=1)
+
+
+def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
+    """The (N, D) noise to step ``env`` with: ``action``, or near it where its plan comes too close to an object."""
+    if settings.steps == 0 or getattr(env, "scene", None) is None:
+        return action
+    model = env.motion
+    if not hasattr(model, "differentiable_step"):
+        raise LatentRLError(f"avoid: the motion model {type(model).__name__} has no differentiable_step")
+    n, bound = env.num_envs, float(env.action_bound)
+    given = torch.as_tensor(action, device=env.device).detach().to(torch.float32)
+    given = given.reshape(n, *model.latent_shape)
+    finite = torch.isfinite(given).flatten(1).all(dim=1)  # a non-finite action goes through: the env's check sees it
+    scene = env.scene.batch
+    inputs = env.step_inputs()
+    z = torch.zeros(settings.horizon, *given.shape, device=given.device)
+    z[0] = given.clamp(-bound, bound)
+    with torch.no_grad():
+        plan = _plan(model, inputs, z)
+        keep = band(plan, settings.margin)
+        risk = (intrusion(plan, scene, keep) > 0) & finite
+    if not bool(risk.any()):
+        return action
+    idx = risk.nonzero().squeeze(1)
+    sub_inputs = _rows(inputs, idx)
+    sub_scene = scene if scene.num_scenes == 1 else scene.index(idx)
+    policy, tail = z[0, idx].clone(), z[1:, idx]
+    first = policy.clone().requires_grad_(True)
+    opt = torch.optim.Adam([first], lr=settings.lr)
+    best, best_loss = policy.clone(), torch.full((idx.numel(),), float("inf"), device=policy.device)
+    for step in range(settings.steps + 1):
+        with torch.enable_grad():
+            joints = _plan(model, sub_inputs, torch.cat((first[None], tail), dim=0))
+            loss = settings.weight * intrusion(joints, sub_scene, keep) \
+                + settings.anchor * (first - policy).flatten(1).square().mean(dim=1) \
+                - settings.prior * noise_prior(first.flatten(1))
+        with torch.no_grad():  # keep each env's best noise (Adam may overshoot)
+            better = loss.detach() < best_loss
+            best = torch.where(better[:, None, None], first.detach(), best)
+            best_loss = torch.where(better, loss.detach(), best_loss)
+        if step == settings.steps:
+            break
+        opt.zero_grad(set_to_none=True)
+        loss.sum().backward()
+        with torch.no_grad():  # DART's unit gradient per env
+            first.grad /= first.grad.flatten(1).norm(dim=1).clamp(min=1e-12)[:, None, None]
+            for group in opt.param_groups:
+                group["lr"] = settings.lr * (1.0 - step / settings.steps)
+        opt.step()
+        with torch.no_grad():
+            first.clamp_(-bound, bound)
+    out = given.clone()
+    out[idx] = best
+    return out.reshape(n, -1)
+
+
+def avoiding(env, act: Callable[[torch.Tensor], torch.Tensor], settings: AvoidSettings
+             ) -> Callable[[torch.Tensor], torch.Tensor]:
+    """``act`` (obs -> action) followed by :func:`avoid` on ``env``'s state: an evaluation's policy function."""
+    settings.check()
+
+    def filtered(obs: torch.Tensor) -> torch.Tensor:
+        return avoid(env, act(obs), settings)
+
+    return filtered
