@@ -227,6 +227,13 @@ def test_latentrl_eval_scene_puts_joint_goals_among_objects_and_reports_collisio
     assert away["overall"]["collision"]["mean"] == 0.0
     for key in ("err_far_cm", "skate_cm_s", "floor_cm"):
         assert away["overall"][key]["mean"] == pytest.approx(flat["overall"][key]["mean"], abs=1e-6)
+    # refined, then filtered: the filter leaves the refiner's clear plan alone, and the report records both
+    both = [*args, "--scene", str(far), "--refine", "2", "--refine-horizon", "1"]
+    assert main([*both, "--out", str(tmp_path / "refined")]) == 0
+    assert main([*both, "--out", str(tmp_path / "filtered"), "--avoid", "2", "--avoid-horizon", "1"]) == 0
+    refined, filtered = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("refined", "filtered"))
+    assert filtered["avoid"]["steps"] == 2 and filtered["refine"] == refined["refine"]
+    assert filtered["overall"] == refined["overall"]
 
 
 def test_training_runs_the_joint_goal_evaluator_periodically(tiny_model, tmp_path):

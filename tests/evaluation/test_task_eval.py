@@ -176,6 +176,12 @@ def test_latentrl_eval_scene_puts_joystick_and_timed_episodes_among_objects(task
     assert away["overall"]["collision"]["mean"] == 0.0
     for key, value in flat["overall"].items():
         assert away["overall"][key]["mean"] == pytest.approx(value["mean"], abs=1e-6, nan_ok=True), key
+    # the scene filter leaves a plan clear of every object alone, and the report says it ran
+    assert main([*args, "--out", str(tmp_path / "filtered"), "--scene", str(far), "--avoid", "2",
+                 "--avoid-horizon", "1"]) == 0
+    filtered = json.loads((tmp_path / "filtered" / "report.json").read_text())
+    assert filtered["avoid"]["steps"] == 2 and "avoid" not in away
+    assert filtered["overall"] == away["overall"]
 
 
 def test_random_obstacles_for_a_joystick_policy_is_a_one_line_error(task_policies, eval_files, tmp_path, capsys):
