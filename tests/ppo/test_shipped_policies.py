@@ -65,6 +65,7 @@ def test_shipped_policy_drives_its_first_path(name, tmp_path):
     assert episode["final_dist_m"] < 10.0, episode
     if name in ("reach_obstacles_default", "path_maze_default"):  # among objects: there without touching one
         assert episode["success"] and episode["collision"] == 0, episode
+        assert report["avoid"]["steps"] == 16  # with the scene filter its card's figures were taken with
 
 
 def _first_entry_metrics(name: str, task: str, suite: str, tmp_path) -> dict:
