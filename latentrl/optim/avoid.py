@@ -23,6 +23,7 @@ import torch
 from latentrl.errors import LatentRLError
 from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import JOINT_NAMES
+from latentrl.optim.refine import predict
 from latentrl.rewards.terms import noise_prior
 from latentrl.scenes.contact import skin_radii
 
@@ -92,17 +93,6 @@ def _rows(inputs: dict, idx: torch.Tensor) -> dict:
     return out
 
 
-def _plan(model, inputs: dict, noise: torch.Tensor) -> torch.Tensor:
-    """(M, S x 8, 22, 3) world joints of the S primitives of noises (S, M, 1, D), placed as the env will."""
-    state, frames = inputs["state"], []
-    kwargs = {k: v for k, v in inputs.items() if k != "state"}
-    for z in noise:
-        out = model.differentiable_step(state, noise=z, post_process=True, **kwargs)
-        frames.append(out.joints_world)
-        state = out.state
-    return torch.cat(frames, dim=1)
-
-
 def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     """The (N, D) noise to step ``env`` with: ``action``, or near it where its plan comes too close to an object."""
     if settings.steps == 0 or getattr(env, "scene", None) is None:
@@ -119,7 +109,7 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     z = torch.zeros(settings.horizon, *given.shape, device=given.device)
     z[0] = given.clamp(-bound, bound)
     with torch.no_grad():
-        plan = _plan(model, inputs, z)
+        plan = predict(model, inputs, z)
         keep = band(plan, settings.margin)
         risk = (intrusion(plan, scene, keep) > 0) & finite
     if not bool(risk.any()):
@@ -133,7 +123,7 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     best, best_loss = policy.clone(), torch.full((idx.numel(),), float("inf"), device=policy.device)
     for step in range(settings.steps + 1):
         with torch.enable_grad():
-            joints = _plan(model, sub_inputs, torch.cat((first[None], tail), dim=0))
+            joints = predict(model, sub_inputs, torch.cat((first[None], tail), dim=0))
             loss = settings.weight * intrusion(joints, sub_scene, keep) \
                 + settings.anchor * (first - policy).flatten(1).square().mean(dim=1) \
                 - settings.prior * noise_prior(first.flatten(1))

@@ -9,7 +9,8 @@ from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.motion.skeleton import JOINT_NAMES
-from latentrl.optim.avoid import AvoidSettings, _plan, _rows, avoid, avoiding, band, intrusion
+from latentrl.optim.avoid import AvoidSettings, _rows, avoid, avoiding, band, intrusion
+from latentrl.optim.refine import predict
 from latentrl.scenes.contact import penetration, skin_radii
 from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch
 
@@ -67,8 +68,8 @@ def test_step_inputs_of_some_envs_plan_those_envs_as_the_whole_batch_does(model)
     z = torch.randn(2, 3, *model.latent_shape, generator=torch.Generator().manual_seed(0))
     idx = torch.tensor([2, 0])
     with torch.no_grad():
-        whole = _plan(model, inputs, z)
-        some = _plan(model, _rows(inputs, idx), z[:, idx])
+        whole = predict(model, inputs, z)
+        some = predict(model, _rows(inputs, idx), z[:, idx])
     assert torch.allclose(some, whole[idx], atol=1e-5)
 
 
