@@ -71,19 +71,30 @@ def save_torch_atomic(obj: Any, path: str | Path) -> Path:
 
 @contextlib.contextmanager
 def _signals_held():
-    """Hold Ctrl-C and SIGTERM back (delivered when the block ends) in the main thread, where Python runs handlers.
+    """Hold Ctrl-C and SIGTERM back until the block ends, then deliver them to the handlers they would have met.
 
     Why: a KeyboardInterrupt raised between ``mkstemp`` creating the temporary file and the ``try`` that removes
-    it on failure would leave the file behind; the window is tiny, but an interrupted evaluation hit it.
+    it on failure would leave the file behind; the window is tiny, but an interrupted evaluation hit it. Python
+    runs signal handlers in the main thread whichever thread the OS delivered the signal to (torch and tqdm
+    start others), so the handlers themselves are swapped for a recorder here: masking the main thread alone let
+    a SIGTERM delivered to another thread through.
     """
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    caught: list[int] = []
+    held = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if handler is not None:  # None: installed outside Python, cannot be put back
+            held[signum] = signal.signal(signum, lambda number, frame: caught.append(number))
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for signum, handler in held.items():
+            signal.signal(signum, handler)
+        for signum in caught:
+            signal.raise_signal(signum)
 
 
 @contextlib.contextmanager

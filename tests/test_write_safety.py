@@ -232,20 +232,39 @@ def test_a_second_optimize_into_the_same_out_folder_is_refused(eval_files, tmp_p
 
 
 def test_an_interrupt_during_the_temporary_files_creation_waits_until_cleanup_can_see_it():
-    """SIGTERM arriving while ``mkstemp`` creates the file is held back, then raised where the file is removed."""
+    """SIGTERM arriving while ``mkstemp`` creates the file is held back, then raised where the file is removed:
+    sent to the main thread, to the process, and to another thread (Python runs the handler in the main thread
+    whichever thread the OS picked; a process-directed SIGTERM taken by a torch or tqdm thread left an
+    interrupted evaluation's temporary report behind)."""
+    import os
     import signal
     import threading
 
     from latentrl import safe_io
 
     seen = []
-    previous = signal.signal(signal.SIGTERM, lambda *_: seen.append("term"))
+
+    def record(*_) -> None:
+        seen.append("term")
+
+    previous = signal.signal(signal.SIGTERM, record)
+
+    def bytecodes() -> None:  # where a tripped handler would run
+        for _ in range(10_000):
+            pass
+
     try:
         with safe_io._signals_held():
-            # to this (the main) thread: a signal sent to the process may be taken by another thread an earlier
-            # test left running (a server's), which the main thread's mask does not cover
             signal.pthread_kill(threading.main_thread().ident, signal.SIGTERM)
+            bytecodes()
+            os.kill(os.getpid(), signal.SIGTERM)
+            bytecodes()
+            other = threading.Thread(target=lambda: signal.pthread_kill(threading.get_ident(), signal.SIGTERM))
+            other.start()
+            other.join()
+            bytecodes()
             assert seen == []  # held back inside
-        assert seen == ["term"]  # delivered once the block ends
+        assert seen == ["term"] * 3  # delivered once the block ends
+        assert signal.getsignal(signal.SIGTERM) is record  # the caller's handler is back in place
     finally:
         signal.signal(signal.SIGTERM, previous)
