@@ -222,6 +222,7 @@ EPISODE_METRICS: dict[str, str] = {
     "penetration_mm": "mm",
     "floating_mm": "mm",
     "skating_mm": "mm",
+    "pj_seam": "m/frame^3",
 }
 """Motion-quality metrics of one episode (name -> unit), as :func:`episode_metrics` returns them."""
 
@@ -245,7 +246,8 @@ def episode_metrics(joints, fps: float = 30.0, floor: float = 0.0, terrain=None)
     DART computes its metrics on the saved sequence, which starts with the 2 seed frames; so do we.
     ``terrain`` (a scene's ``SceneBatch`` row; None: the flat floor at ``floor``) puts each joint's ground
     under it (:func:`terrain_floor`): a foot on a tread is on the floor. Returns the :data:`EPISODE_METRICS`
-    names as floats.
+    names as floats (``pj_seam`` only for an episode of 4 primitives or more: its clips need 15 frames on either
+    side of a boundary).
     """
     j = _t(joints)
     ground = floor if terrain is None else terrain_floor(j, terrain, floor)
@@ -258,7 +260,18 @@ def episode_metrics(joints, fps: float = 30.0, floor: float = 0.0, terrain=None)
         "penetration_mm": float(closd_penetration_mm(j, ground)),
         "floating_mm": float(closd_floating_mm(j, ground)),
         "skating_mm": float(closd_skating_mm(j, feet)),
+        **({} if math.isnan(pj := seam_peak_jerk(j)) else {"pj_seam": pj}),
     }
+
+
+def seam_peak_jerk(joints, history: int = 2, future: int = 8) -> float:
+    """DART's PJ (Table 1) at the primitive boundaries of one rollout (T, 22, 3), m/frame^3; NaN when too short.
+
+    The transition jerk curve averaged over the 30-frame clips centred on every boundary
+    (:func:`primitive_seams`), its peak: a pop where one primitive hands over to the next shows as a spike.
+    """
+    clips = transition_clips(_t(joints)[None], primitive_seams(_t(joints).shape[-3], history, future))
+    return float("nan") if clips.shape[0] == 0 else peak_jerk(clips)
 
 
 def final_goal_distance_m(joints, goal, last: int = 8) -> torch.Tensor:

@@ -47,6 +47,12 @@ METRICS: dict[str, tuple[str, str]] = {
 }
 """Every aggregated metric: key -> (column title, unit). Each is stored as ``{"mean", "ci95"}``."""
 
+TRANSITION_METRICS: dict[str, tuple[str, str]] = {
+    "pj_seam": ("PJ at primitive boundaries", "m/frame³"),
+}
+"""DART's transition metric (:func:`latentrl.evaluation.metrics.seam_peak_jerk`), aggregated when the episodes carry
+it (every evaluation since it exists; reports and episodes made before lack it)."""
+
 SCENE_METRICS: dict[str, tuple[str, str]] = {
     "collision": ("collision rate", ""),
     "scene_penetration_cm": ("scene penetration", "cm"),
@@ -58,8 +64,8 @@ episode, and the episode's deepest point."""
 
 
 def _keys(values: dict) -> list[str]:
-    """:data:`METRICS`, then the scene metrics when the episodes carry them."""
-    return [*METRICS, *(k for k in SCENE_METRICS if k in values)]
+    """:data:`METRICS`, then the transition and scene metrics when the episodes carry them."""
+    return [*METRICS, *(k for k in (*TRANSITION_METRICS, *SCENE_METRICS) if k in values)]
 
 COMPARE_METRICS = ("success_rate", "reach_time_s", "reach_time_success_s", "skate_cm_s", "floor_cm", "jerk")
 
@@ -337,7 +343,7 @@ def _fmt(m: dict[str, float] | None, digits: int = 2) -> str:
 
 
 def _header(keys: Sequence[str], lead: Sequence[str]) -> list[str]:
-    named = {**METRICS, **SCENE_METRICS}
+    named = {**METRICS, **TRANSITION_METRICS, **SCENE_METRICS}
     titles = [f"{named[k][0]} ({named[k][1]})" if named[k][1] else named[k][0] for k in keys]
     cols = [*lead, *titles]
     return ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]

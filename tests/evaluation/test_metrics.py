@@ -51,7 +51,7 @@ def test_skate_xy_part_separates_sliding_from_lifting():
     expected = float(weights.mean()) * 0.1 * FPS / 2  # cm per frame times fps, averaged over both feet
     assert float(M.foot_skate_cm_s(lift)) == pytest.approx(expected, rel=1e-4)
     assert float(M.foot_skate_cm_s(lift, horizontal=True)) == 0.0
-    assert set(M.episode_metrics(lift)) == set(M.EPISODE_METRICS)
+    assert set(M.episode_metrics(lift)) == set(M.EPISODE_METRICS) - {"pj_seam"}  # 31 frames: no whole clip
 
 
 def test_skate_weight_is_dart_exponential_ramp():
@@ -95,7 +95,8 @@ def test_jerk_of_a_cubic_is_six_times_its_coefficient():
 
 def test_episode_metrics_bundle():
     out = M.episode_metrics(slide(body(), 0.5))
-    assert set(out) == set(M.EPISODE_METRICS)
+    assert set(out) == set(M.EPISODE_METRICS) - {"pj_seam"}  # too short for PJ's 30-frame clips (below)
+    assert set(M.episode_metrics(slide(body(66), 0.5))) == set(M.EPISODE_METRICS)
     assert out["skate_cm_s"] == pytest.approx(50.0, rel=1e-4) and out["floor_cm"] == 0.0
 
 
@@ -169,3 +170,19 @@ def test_seam_ratios_of_a_rollout_that_pops_at_each_primitive():
     smooth[:, 0, 0] = 0.0
     r = M.seam_ratios(smooth)
     assert r["step_ratio"] == pytest.approx(1.0) and r["pelvis_acc_ratio"] == pytest.approx(1.0, rel=1e-3)
+
+
+def test_seam_peak_jerk_is_twice_a_jump_made_at_every_primitive_boundary_and_zero_for_steady_motion():
+    """A body gliding at constant speed has no jerk; one that jumps d at the first frame of every primitive has
+    a third difference of d, -2d, d around each jump: PJ = 2d (every joint jumps, along x only)."""
+    frames = 2 + 8 * 8
+    steady = torch.zeros(frames, 22, 3)
+    steady[..., 0] = torch.arange(frames, dtype=torch.float32)[:, None] * 0.04
+    assert M.seam_peak_jerk(steady) == pytest.approx(0.0, abs=1e-6)
+    jumps = torch.zeros(frames, 22, 3)
+    for seam in M.primitive_seams(frames):
+        jumps[seam:, :, 0] += 0.01
+    assert M.seam_peak_jerk(jumps) == pytest.approx(0.02, abs=1e-6)
+    assert M.episode_metrics(jumps)["pj_seam"] == pytest.approx(0.02, abs=1e-6)
+    assert math.isnan(M.seam_peak_jerk(jumps[:26]))  # no boundary with 15 frames on either side
+    assert "pj_seam" not in M.episode_metrics(jumps[:26])
