@@ -53,7 +53,8 @@ from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.render import GOAL_JOINT_COLOURS
 
 UNITS = {"success": "share", "err_near_cm": "cm", "err_far_cm": "cm", "footstep_err_cm": "cm",
-         "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm"}
+         "steps_reached": "share", "reached": "share", "skate_cm_s": "cm/s", "floor_cm": "cm",
+         "pj_seam": "m/frame^3"}
 """Metric -> unit, in report order."""
 
 
@@ -74,7 +75,8 @@ DEFINITIONS = """\
   within one step (0.267 s) of the previous goal or the start / later.
 - footstep_err_cm: the foot's xy distance to its target at touchdown (the contact onset nearest the goal time);
   steps_reached: share of footsteps touched down within the radius; reached: share of all goals within it.
-- success: every goal reached. skate_cm_s, floor_cm: DART's foot skate and floor distance over the episode."""
+- success: every goal reached. skate_cm_s, floor_cm: DART's foot skate and floor distance over the episode.
+- pj_seam: DART's peak jerk at the primitive boundaries (m/frame^3; episodes of 4 primitives or more)."""
 
 
 @dataclass
@@ -153,6 +155,7 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
         "reached": float(np.mean(hit)),
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
+        "pj_seam": quality.get("pj_seam"),  # None for an episode under 4 primitives
     }
     with_scene_metrics(metrics, joints, terrain)
     detail = {"error_cm": [None if e is None else e * 100 for e in errors],

@@ -44,7 +44,8 @@ from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.scenes.scene import Scene
 
 UNITS = {"heading_err_deg": "deg", "speed_err_m_s": "m/s", "settle_s": "s", "unsettled": "share",
-         "skate_cm_s": "cm/s", "floor_cm": "cm"}
+         "skate_cm_s": "cm/s", "floor_cm": "cm",
+         "pj_seam": "m/frame^3"}
 """Metric -> unit, in report order."""
 
 
@@ -65,7 +66,8 @@ DEFINITIONS = """\
   step's 0.267 s), counted from `settle_window_s` after each command change.
 - settle_s: mean time from a command change to the end of the first step within both tolerances;
   unsettled: share of changes that never got there before the next change (they are left out of settle_s).
-- skate_cm_s, floor_cm: DART's foot skate and floor distance over the whole episode."""
+- skate_cm_s, floor_cm: DART's foot skate and floor distance over the whole episode.
+- pj_seam: DART's peak jerk at the primitive boundaries (m/frame^3; episodes of 4 primitives or more)."""
 
 
 # --------------------------------------------------------------------------- kernels
@@ -131,6 +133,7 @@ def joystick_metrics(joints, timeline: CommandTimeline, steps: int, criteria: Tr
         "unsettled": (len(changes) - len(reached)) / len(changes) if changes else None,
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
+        "pj_seam": quality.get("pj_seam"),  # None for an episode under 4 primitives
     }
     return with_scene_metrics(metrics, joints, terrain), {"settle_s": changes}
 

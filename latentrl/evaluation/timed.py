@@ -50,7 +50,7 @@ from latentrl.evaluation.task_eval import (
 from latentrl.motion.skeleton import FPS
 
 UNITS = {"success": "share", "arrival_err_s": "s", "late_s": "s", "reached": "share", "skate_cm_s": "cm/s",
-         "floor_cm": "cm"}
+         "floor_cm": "cm", "pj_seam": "m/frame^3"}
 """Metric -> unit, in report order."""
 
 
@@ -67,7 +67,8 @@ class TimingCriteria:
 DEFINITIONS = """\
 - success: every waypoint reached (pelvis within 0.3 m) and each arrival within `time_tolerance_s` of its time.
 - arrival_err_s: mean |arrival time - goal time| over the waypoints reached; late_s: the same, signed (late > 0).
-- reached: share of waypoints reached; skate_cm_s, floor_cm: DART's metrics over the whole episode."""
+- reached: share of waypoints reached; skate_cm_s, floor_cm: DART's metrics over the whole episode.
+- pj_seam: DART's peak jerk at the primitive boundaries (m/frame^3; episodes of 4 primitives or more)."""
 
 
 def timed_metrics(errors: Sequence[float | None], tolerance_s: float, joints,
@@ -85,6 +86,7 @@ def timed_metrics(errors: Sequence[float | None], tolerance_s: float, joints,
         "reached": len(hit) / len(errors),
         "skate_cm_s": quality["skate_cm_s"],
         "floor_cm": quality["floor_cm"],
+        "pj_seam": quality.get("pj_seam"),  # None for an episode under 4 primitives
     }, joints, terrain)
 
 
