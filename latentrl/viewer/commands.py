@@ -128,8 +128,14 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                                          refine_skate=float(stored.get("refine_skate") or 0.0),
                                          refine_pace=float(0.5 if stored.get("refine_pace") is None
                                                            else stored["refine_pace"]), **common)
-    else:
-        controller = LiveController(server, env, loaded.policy, title, env.texts[0], **common)
+    else:  # the scene filter as the policy's card used it (its stored eval.avoid), switchable on the page
+        from latentrl.evaluation.trained import stored_eval_choices
+        from latentrl.optim.avoid import AvoidSettings
+
+        stored = stored_eval_choices(policy)
+        avoid = AvoidSettings(steps=int(stored.get("avoid") or 0), horizon=int(stored.get("avoid_horizon") or 2),
+                              margin=float(0.1 if stored.get("avoid_margin") is None else stored["avoid_margin"]))
+        controller = LiveController(server, env, loaded.policy, title, env.texts[0], avoid=avoid, **common)
     controller.start()
     code = serve_until_interrupted(server, "play", host, controller.stop)
     controller.thread.join(2)

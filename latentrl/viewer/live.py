@@ -27,6 +27,7 @@ from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.optim.avoid import AvoidSettings, avoid
 from latentrl.scenes.scene import Box, Scene
 from latentrl.scenes.spec import MAX_OBJECTS
 from latentrl.viewer.guard import choice, complain, vector
@@ -209,11 +210,18 @@ class LiveController:
         seed: seed of the env (seed pose) and of action sampling.
         recorder: keeps the frames shown for ``--record`` (None: nothing kept).
         skeleton: draw the skeleton as well as the body from the start (``--skeleton``).
+        avoid: the scene filter's settings (:mod:`latentrl.optim.avoid`; the policy's stored ``eval.avoid*``);
+            its checkbox starts on when ``avoid.steps`` > 0. Near an object a filtered step takes up to a second on
+            a CPU, so the motion may pause there.
     """
 
     def __init__(self, server: Any, env: SteeredReachEnv | SteeredJoystickEnv, policy: Any, title: str, text: str,
-                 deterministic: bool = False, seed: int = 0, recorder: Any = None, skeleton: bool = False):
+                 deterministic: bool = False, seed: int = 0, recorder: Any = None, skeleton: bool = False,
+                 avoid: AvoidSettings | None = None):
         self.server, self.env, self.policy, self.seed = server, env, policy, seed
+        avoid = avoid or AvoidSettings(steps=0)
+        self.avoid = AvoidSettings(**{**vars(avoid), "steps": avoid.steps or AvoidSettings().steps})
+        """The scene filter's settings when its checkbox is on."""
         self.recorder = recorder
         """A :class:`~latentrl.viewer.record.Recorder` that keeps every frame shown (``--record``), or None."""
         self.lock = threading.Lock()
@@ -242,6 +250,7 @@ class LiveController:
         self.follow = gui.add_checkbox("follow camera", True)
         self.show_body = gui.add_checkbox("body", True)
         self.show_skeleton = gui.add_checkbox("skeleton", bool(skeleton))
+        self.filtering = gui.add_checkbox("scene filter (keeps the body off objects)", avoid.steps > 0)
         self.reset_button = gui.add_button("Reset")
         self.clear_button = gui.add_button("Remove dropped boxes")
         self.status = gui.add_markdown("")
@@ -469,9 +478,12 @@ class LiveController:
 
     # ------------------------------------------------------------------ the loop
     def _action(self) -> torch.Tensor:
-        """The noise of the next step: the policy's."""
+        """The noise of the next step: the policy's, through the scene filter when its checkbox is on."""
         with torch.no_grad():
-            return self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
+            action = self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
+        if self.filtering.value is True and getattr(self.env, "scene", None) is not None:
+            action = avoid(self.env, action, self.avoid)
+        return action
 
     def _generate(self) -> None:
         """One policy call and env step: 8 new frames (caller holds the lock)."""
@@ -528,7 +540,8 @@ class LiveController:
             "the policy does not see them: trained without a scene"
         n = len(world.objects)
         dropped = f", {self.dropped} dropped" if self.dropped else ""
-        return f"  \nscene: {n} object{'' if n == 1 else 's'}{dropped} ({seen})"
+        kept = f"; scene filter on ({self.avoid.steps} steps)" if self.filtering.value is True else ""
+        return f"  \nscene: {n} object{'' if n == 1 else 's'}{dropped} ({seen}{kept})"
 
     def status_text(self) -> str:
         """The status panel: message, pelvis, goal, distance, scene and generation speed (markdown)."""

@@ -360,3 +360,43 @@ def test_view_draws_joint_goal_targets_where_they_are(server, tmp_path):
     player = Player(server, open_source(path), None, skeleton=False)
     spheres = [h for h in player.scene.waypoints if "/waypoints/" in h.name]
     assert [tuple(np.round(h.position, 3)) for h in spheres] == [(0.0, 0.5, 0.08), (0.3, 1.0, 1.2)]
+
+
+def test_the_scene_filter_checkbox_moves_the_noise_off_a_pillar_ahead_and_only_then(server):
+    """``play``'s scene filter (the policy's stored ``eval.avoid``; a checkbox): off, the walk policy's mean action
+    heads into a pillar on the way to the goal; on, that action is moved; a pillar far away leaves it alone."""
+    from latentrl.motion.checkpoint import load_motion_model
+    from latentrl.optim.avoid import AvoidSettings, band, intrusion
+    from latentrl.optim.refine import predict
+    from latentrl.ppo import load_policy
+    from latentrl.resources import policy_file
+    from latentrl.scenes.scene import Cylinder
+    from latentrl.viewer.live import LiveController, play_env
+
+    model, loaded = load_motion_model("default"), load_policy(policy_file("reach_walk_default"))
+
+    def controller(pillar_y: float) -> LiveController:
+        world = Scene([Cylinder(center=(0.05, pillar_y), radius=0.25, height=1.8)])
+        env = play_env(loaded.checkpoint, model, None, "cpu", "reach", world)
+        live = LiveController(server, env, loaded.policy, "test", "walk", deterministic=True, seed=0,
+                              avoid=AvoidSettings(steps=8))
+        live.set_goal((0.0, 6.0))  # straight through the pillar
+        return live
+
+    def plan_intrusion(live: LiveController, action: torch.Tensor) -> float:
+        z = torch.zeros(2, 1, *model.latent_shape)
+        z[0] = action.reshape(1, *model.latent_shape)
+        with torch.no_grad():
+            plan = predict(model, live.env.step_inputs(), z)
+        return float(intrusion(plan, live.env.scene.batch, band(plan, 0.1)))
+
+    near = controller(0.8)
+    assert near.filtering.value is True and "scene filter on (8 steps)" in near.status_text()
+    filtered = near._action()
+    near.filtering.value = False
+    plain_action = near._action()
+    assert plan_intrusion(near, plain_action) > 0  # the policy alone plans into the pillar
+    assert not torch.equal(filtered, plain_action)
+    assert plan_intrusion(near, filtered) < plan_intrusion(near, plain_action)
+    far = controller(20.0)
+    assert torch.equal(far._action(), plain_action)  # nothing near: the policy's own action
