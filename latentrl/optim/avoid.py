@@ -105,6 +105,8 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     given = given.reshape(n, *model.latent_shape)
     finite = torch.isfinite(given).flatten(1).all(dim=1)  # a non-finite action goes through: the env's check sees it
     scene = env.scene.batch
+    if not bool((scene.object_counts() > 0).any()):  # an empty scene (play before a box is dropped): nothing to avoid
+        return action
     inputs = env.step_inputs()
     z = torch.zeros(settings.horizon, *given.shape, device=given.device)
     z[0] = given.clamp(-bound, bound)

@@ -222,6 +222,7 @@ class LiveController:
         avoid = avoid or AvoidSettings(steps=0)
         self.avoid = AvoidSettings(**{**vars(avoid), "steps": avoid.steps or AvoidSettings().steps})
         """The scene filter's settings when its checkbox is on."""
+        self.avoid.check()  # a tampered stored value: one line before the page starts
         self.recorder = recorder
         """A :class:`~latentrl.viewer.record.Recorder` that keeps every frame shown (``--record``), or None."""
         self.lock = threading.Lock()

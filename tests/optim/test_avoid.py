@@ -106,3 +106,12 @@ def test_the_settings_refuse_values_out_of_range_in_one_line():
         with pytest.raises(LatentRLError) as err:
             AvoidSettings(**bad).check()
         assert str(err.value) == message
+
+
+def test_an_empty_scene_gets_the_policys_own_action_without_a_prediction(model, monkeypatch):
+    import latentrl.optim.avoid as A
+
+    env = walker(model, Scene())
+    monkeypatch.setattr(A, "predict", lambda *a, **k: pytest.fail("an empty scene needs no prediction"))
+    action = torch.zeros(1, model.latent_dim)
+    assert avoid(env, action, AvoidSettings()) is action
