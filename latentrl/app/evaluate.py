@@ -370,8 +370,7 @@ def _avoider(req: EvalRequest, evaluator: Any, task: str) -> AvoidSettings | Non
                           "does: reach, path, timed, joystick and ReachJoint policies); leave out --avoid")
     if req.physics:
         raise ConfigError("--avoid: not with --physics (the filter predicts the kinematic step)")
-    settings = AvoidSettings(steps=req.avoid, horizon=2 if req.avoid_horizon is None else req.avoid_horizon,
-                             margin=0.1 if req.avoid_margin is None else req.avoid_margin)
+    settings = AvoidSettings.of(req.avoid, req.avoid_horizon, req.avoid_margin)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'

@@ -270,7 +270,8 @@ def seam_peak_jerk(joints, history: int = 2, future: int = 8) -> float:
     The transition jerk curve averaged over the 30-frame clips centred on every boundary
     (:func:`primitive_seams`), its peak: a pop where one primitive hands over to the next shows as a spike.
     """
-    clips = transition_clips(_t(joints)[None], primitive_seams(_t(joints).shape[-3], history, future))
+    j = _t(joints)
+    clips = transition_clips(j[None], primitive_seams(j.shape[-3], history, future))
     return float("nan") if clips.shape[0] == 0 else peak_jerk(clips)
 
 

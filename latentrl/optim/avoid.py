@@ -25,7 +25,7 @@ from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import JOINT_NAMES
 from latentrl.optim.refine import predict
 from latentrl.rewards.terms import noise_prior
-from latentrl.scenes.contact import skin_radii
+from latentrl.scenes.contact import collision_cost, skin_radii
 
 GROUND_JOINTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
 """Joints that touch the terrain (a tread, a seat's top): their band is the skin alone, never ``margin`` more."""
@@ -49,6 +49,12 @@ class AvoidSettings:
     prior: float = 0.1
     """Weight of the noise-shell penalty (the ``prior`` reward term) of the executed noise."""
 
+    @classmethod
+    def of(cls, steps: int, horizon: int | None = None, margin: float | None = None) -> AvoidSettings:
+        """The settings of ``steps``, ``horizon`` and ``margin``, each None taking the default (flags, stored ones)."""
+        chosen = {"horizon": horizon, "margin": margin}
+        return cls(steps=steps, **{k: v for k, v in chosen.items() if v is not None})
+
     def check(self) -> None:
         """One-line :class:`LatentRLError` for a value out of range."""
         if not 0 <= self.steps <= 1000:
@@ -70,11 +76,6 @@ def band(joints: torch.Tensor, margin: float) -> torch.Tensor:
     out = skin_radii(joints).clone()
     ground = torch.tensor([name in GROUND_JOINTS for name in JOINT_NAMES], device=joints.device)
     return torch.where(ground, out, out + margin)
-
-
-def intrusion(joints: torch.Tensor, scene, keep: torch.Tensor) -> torch.Tensor:
-    """(N,) how far joints come inside their ``keep`` (22,) distances of the scene's objects: summed, frame mean."""
-    return (keep - scene.sdf(joints)).clamp(min=0.0).sum(dim=-1).mean(dim=-1)
 
 
 def _rows(inputs: dict, idx: torch.Tensor) -> dict:
@@ -113,7 +114,7 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     with torch.no_grad():
         plan = predict(model, inputs, z)
         keep = band(plan, settings.margin)
-        risk = (intrusion(plan, scene, keep) > 0) & finite
+        risk = (collision_cost(plan, scene, keep) > 0) & finite
     if not bool(risk.any()):
         return action
     idx = risk.nonzero().squeeze(1)
@@ -126,7 +127,7 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     for step in range(settings.steps + 1):
         with torch.enable_grad():
             joints = predict(model, sub_inputs, torch.cat((first[None], tail), dim=0))
-            loss = settings.weight * intrusion(joints, sub_scene, keep) \
+            loss = settings.weight * collision_cost(joints, sub_scene, keep) \
                 + settings.anchor * (first - policy).flatten(1).square().mean(dim=1) \
                 - settings.prior * noise_prior(first.flatten(1))
         with torch.no_grad():  # keep each env's best noise (Adam may overshoot)

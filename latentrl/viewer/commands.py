@@ -133,8 +133,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
         from latentrl.optim.avoid import AvoidSettings
 
         stored = stored_eval_choices(policy)
-        avoid = AvoidSettings(steps=int(stored.get("avoid") or 0), horizon=int(stored.get("avoid_horizon") or 2),
-                              margin=float(0.1 if stored.get("avoid_margin") is None else stored["avoid_margin"]))
+        avoid = AvoidSettings.of(int(stored.get("avoid") or 0), stored.get("avoid_horizon"), stored.get("avoid_margin"))
         controller = LiveController(server, env, loaded.policy, title, env.texts[0], avoid=avoid, **common)
     controller.start()
     code = serve_until_interrupted(server, "play", host, controller.stop)

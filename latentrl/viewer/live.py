@@ -13,6 +13,7 @@ whenever fewer than one primitive of frames is waiting, and shows the frames at 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 import threading
 import time
@@ -220,7 +221,7 @@ class LiveController:
                  avoid: AvoidSettings | None = None):
         self.server, self.env, self.policy, self.seed = server, env, policy, seed
         avoid = avoid or AvoidSettings(steps=0)
-        self.avoid = AvoidSettings(**{**vars(avoid), "steps": avoid.steps or AvoidSettings().steps})
+        self.avoid = dataclasses.replace(avoid, steps=avoid.steps or AvoidSettings.steps)
         """The scene filter's settings when its checkbox is on."""
         self.avoid.check()  # a tampered stored value: one line before the page starts
         self.recorder = recorder

@@ -9,9 +9,9 @@ from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.motion.skeleton import JOINT_NAMES
-from latentrl.optim.avoid import AvoidSettings, _rows, avoid, avoiding, band, intrusion
+from latentrl.optim.avoid import AvoidSettings, _rows, avoid, avoiding, band
 from latentrl.optim.refine import predict
-from latentrl.scenes.contact import penetration, skin_radii
+from latentrl.scenes.contact import collision_cost, penetration, skin_radii
 from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch
 
 WALL = Scene([Box(center=(0.0, 0.8), size=(4.0, 0.2, 1.5))])
@@ -53,13 +53,13 @@ def test_the_band_adds_the_margin_to_every_joint_but_the_feet_and_ankles():
         assert float(keep[j]) == pytest.approx(float(skin[j]) + (0.0 if grounded else 0.1))
 
 
-def test_intrusion_is_the_summed_depth_inside_the_band_averaged_over_frames():
+def test_the_filters_cost_is_the_summed_depth_inside_the_band_averaged_over_frames():
     scene = SceneBatch.from_scenes([Scene([Box(center=(0.0, 1.0), size=(2.0, 0.2, 2.0))])])
     joints = torch.zeros(1, 2, 22, 3)
     joints[..., 2] = 1.0
     joints[0, 0, 0, 1] = 0.85  # the pelvis 5 cm from the box's face (y = 0.9) in frame 0; every other joint far
     keep = torch.full((22,), 0.1)
-    assert float(intrusion(joints, scene, keep)[0]) == pytest.approx((0.1 - 0.05) / 2, abs=1e-6)
+    assert float(collision_cost(joints, scene, keep)[0]) == pytest.approx((0.1 - 0.05) / 2, abs=1e-6)
 
 
 def test_step_inputs_of_some_envs_plan_those_envs_as_the_whole_batch_does(model):

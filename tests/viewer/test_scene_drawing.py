@@ -366,10 +366,11 @@ def test_the_scene_filter_checkbox_moves_the_noise_off_a_pillar_ahead_and_only_t
     """``play``'s scene filter (the policy's stored ``eval.avoid``; a checkbox): off, the walk policy's mean action
     heads into a pillar on the way to the goal; on, that action is moved; a pillar far away leaves it alone."""
     from latentrl.motion.checkpoint import load_motion_model
-    from latentrl.optim.avoid import AvoidSettings, band, intrusion
+    from latentrl.optim.avoid import AvoidSettings, band
     from latentrl.optim.refine import predict
     from latentrl.ppo import load_policy
     from latentrl.resources import policy_file
+    from latentrl.scenes.contact import collision_cost
     from latentrl.scenes.scene import Cylinder
     from latentrl.viewer.live import LiveController, play_env
 
@@ -388,7 +389,7 @@ def test_the_scene_filter_checkbox_moves_the_noise_off_a_pillar_ahead_and_only_t
         z[0] = action.reshape(1, *model.latent_shape)
         with torch.no_grad():
             plan = predict(model, live.env.step_inputs(), z)
-        return float(intrusion(plan, live.env.scene.batch, band(plan, 0.1)))
+        return float(collision_cost(plan, live.env.scene.batch, band(plan, 0.1)))
 
     near = controller(0.8)
     assert near.filtering.value is True and "scene filter on (8 steps)" in near.status_text()
