@@ -193,6 +193,14 @@ class ReachJointConfig:
     turns toward a wanted speed and heading, each due at most 8 frames after the previous (feet: runs of 1)."""
     turn_deg_s: float = 30.0
     """A run's heading turns at a rate uniform in +/- this, degrees per second."""
+    step_run: list[int] = field(default_factory=lambda: [1, 1])
+    """Footsteps per run when a foot goal starts a run of near goals, uniform in [min, max]: stepping stones
+    alternating feet along a path, ``step_length`` apart and ``step_width`` wide, each due when a walk at the
+    run's speed gets there ([1, 1]: a foot takes single near goals)."""
+    step_length: list[float] = field(default_factory=lambda: [0.5, 0.7])
+    """Metres along the path from one stone to the next, uniform per run of footsteps."""
+    step_width: float = 0.18
+    """Metres between the lines of the left and the right stones."""
     far_time: list[float] = field(default_factory=lambda: [1.0, 4.0])
     """Lead time of the other goals, uniform in [min, max] seconds."""
     distance: list[float] = field(default_factory=lambda: [0.0, 5.0])
@@ -232,6 +240,16 @@ class ReachJointConfig:
                 and all(isinstance(v, int) and not isinstance(v, bool) for v in self.near_run)
                 and 1 <= self.near_run[0] <= self.near_run[1] <= MAX_RUN, "near_run",
                 f"must be [min, max] goals with 1 <= min <= max <= {MAX_RUN}, got {self.near_run!r}")
+        require(isinstance(self.step_run, list) and len(self.step_run) == 2
+                and all(isinstance(v, int) and not isinstance(v, bool) for v in self.step_run)
+                and 1 <= self.step_run[0] <= self.step_run[1] <= MAX_RUN, "step_run",
+                f"must be [min, max] footsteps with 1 <= min <= max <= {MAX_RUN}, got {self.step_run!r}")
+        require(isinstance(self.step_length, list) and len(self.step_length) == 2
+                and all(map(is_finite_number, self.step_length))
+                and 0.05 <= self.step_length[0] <= self.step_length[1] <= 2.0, "step_length",
+                f"must be [min, max] metres with 0.05 <= min <= max <= 2, got {self.step_length!r}")
+        require(is_finite_number(self.step_width) and 0 <= self.step_width <= 1, "step_width",
+                f"must be metres in [0, 1], got {self.step_width!r}")
         require(is_finite_number(self.turn_deg_s) and 0 <= self.turn_deg_s <= 360, "turn_deg_s",
                 f"must be degrees per second in [0, 360], got {self.turn_deg_s!r}")
         require(self.far_time[1] <= MAX_TIME_S, "far_time", f"must end by {MAX_TIME_S:g} s, got {self.far_time!r}")
@@ -250,7 +268,8 @@ class ReachJointConfig:
             require(found is not None, "goals", f"joint-goal file not found: {self.goals}")
             goals = str(found)
         return {"joints": tuple(self.joints), "radius": self.radius, "near_share": self.near_share,
-                "near_run": tuple(self.near_run), "turn_deg_s": self.turn_deg_s,
+                "near_run": tuple(self.near_run), "turn_deg_s": self.turn_deg_s, "step_run": tuple(self.step_run),
+                "step_length": tuple(self.step_length), "step_width": self.step_width,
                 "far_time": tuple(self.far_time), "distance": tuple(self.distance), "max_speed": self.max_speed,
                 "angle_deg": self.angle_deg, "height_offset": tuple(self.height_offset), "planar": tuple(self.planar),
                 "goals": goals}
@@ -267,7 +286,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
     and the next goal becomes current. Random goals (training) follow one another until truncation: a fresh
     goal is drawn from the body when the previous one is due, a share ``near_share`` of them starting a run
     of ``near_run`` near goals along a path (each due within one step of the previous, as the targets of a
-    file lie on a path: the body must keep up with them); the others lie ``far_time`` ahead;
+    file lie on a path: the body must keep up with them), or, for a foot, a run of ``step_run`` footsteps
+    alternating feet; the others lie ``far_time`` ahead;
     goals from a file (``goals=``) are an entry's goals in order, and the episode ends after its last.
 
     ## Observation Space
@@ -292,7 +312,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
 
     ## Arguments
 
-    ``joints``, ``radius``, ``near_share``, ``near_run``, ``turn_deg_s``, ``far_time``, ``distance``,
+    ``joints``, ``radius``, ``near_share``, ``near_run``, ``turn_deg_s``, ``step_run``, ``step_length``,
+    ``step_width``, ``far_time``, ``distance``,
     ``max_speed``, ``angle_deg``, ``height_offset``, ``planar`` (:class:`ReachJointConfig`), ``goals`` (a
     joint-goal file or a list of :class:`JointGoalEntry`; env ``i`` runs entry ``i % E``), ``time_left_clip``
     (10 s); every other argument is :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
@@ -310,6 +331,9 @@ class ReachJointEnv(LatentMotionVectorEnv):
         near_share: float = 0.25,
         near_run: Sequence[int] = (1, 1),
         turn_deg_s: float = 30.0,
+        step_run: Sequence[int] = (1, 1),
+        step_length: Sequence[float] = (0.5, 0.7),
+        step_width: float = 0.18,
         far_time: Sequence[float] = (1.0, 4.0),
         distance: Sequence[float] = (0.0, 5.0),
         max_speed: float = 1.2,
@@ -320,8 +344,9 @@ class ReachJointEnv(LatentMotionVectorEnv):
         time_left_clip: float = TIME_LEFT_CLIP_S,
         **kwargs,
     ):
-        section = ReachJointConfig(list(joints), radius, near_share, list(near_run), turn_deg_s,
-                                   [float(v) for v in far_time], [float(v) for v in distance], max_speed, angle_deg,
+        section = ReachJointConfig(list(joints), radius, near_share, list(near_run), turn_deg_s, list(step_run),
+                                   [float(v) for v in step_length], step_width, [float(v) for v in far_time],
+                                   [float(v) for v in distance], max_speed, angle_deg,
                                    [float(v) for v in height_offset], list(planar))
         section.validate()
         require(time_left_clip > 0, "time_left_clip", f"must be > 0 seconds, got {time_left_clip}")
@@ -331,6 +356,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
         require(self.entries is None or len(self.entries) > 0, "goals", "give at least one entry")
         self.joints, self.radius, self.near_share = tuple(section.joints), float(radius), float(near_share)
         self.near_run, self.turn = tuple(section.near_run), math.radians(float(turn_deg_s))
+        self.step_run, self.step_length = tuple(section.step_run), tuple(section.step_length)
+        self.step_width = float(step_width)
         self.far_time, self.distance = tuple(section.far_time), tuple(section.distance)
         self.max_speed, self.angle_deg = float(max_speed), float(angle_deg)
         self.height_offset, self.time_left_clip = tuple(section.height_offset), float(time_left_clip)
@@ -361,6 +388,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self._run_speed = torch.zeros(n, device=dev)
         self._run_heading = torch.zeros(n, device=dev)
         self._run_turn = torch.zeros(n, device=dev)
+        self._run_stride = torch.zeros(n, device=dev)  # a run of footsteps: metres from stone to stone
         if self.entries is not None:
             self._entry_tables()
 
@@ -457,7 +485,11 @@ class ReachJointEnv(LatentMotionVectorEnv):
         """The next random goal of envs ``idx`` (slot 0): the next of a run of near goals, else a fresh one."""
         going = self._run_left[idx] > 0
         if bool(going.any()):
-            self._next_in_run(idx[going])
+            on, foot = idx[going], self._is_foot(self._joint[idx[going], 0])
+            if bool(foot.any()):
+                self._next_step(on[foot])
+            if not bool(foot.all()):
+                self._next_in_run(on[~foot])
         if not bool(going.all()):
             self._fresh_goals(idx[~going])
 
@@ -498,6 +530,63 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self._planar[idx, 0] = planar
         self._frame[idx, 0] = self._now_frame(idx) + lead
         self._gi[idx] = 0
+        if self.step_run[1] > 1 and bool((near & feet).any()):
+            self._first_step(idx[near & feet], history[near & feet], forward[near & feet])
+
+    @staticmethod
+    def _is_foot(slot: torch.Tensor) -> torch.Tensor:
+        """Whether one-hot slots (indices into :data:`JOINTS`) are feet."""
+        return (slot == list(JOINTS).index("left_foot")) | (slot == list(JOINTS).index("right_foot"))
+
+    def _stone(self, centre: torch.Tensor, heading: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
+        """(M, 2) a stone of foot ``slot`` beside the path point ``centre`` at ``heading`` (half the width aside)."""
+        right = torch.stack((torch.sin(heading), -torch.cos(heading)), dim=-1)
+        side = torch.where(slot == list(JOINTS).index("right_foot"), 0.5, -0.5) * self.step_width
+        return centre + right * side[:, None]
+
+    def _first_step(self, idx: torch.Tensor, history: torch.Tensor, forward: torch.Tensor) -> None:
+        """Start a run of footsteps in envs ``idx`` (their near foot goal just drawn): the first stone.
+
+        The path starts at the pelvis, heading forward; the first stone lies half to one stride along it, due
+        when the foot gets there at the run's speed (uniform in [max_speed / 2, max_speed]).
+        """
+        m = len(idx)
+        slot = self._joint[idx, 0]
+        self._run_stride[idx] = self._uniform(m, *self.step_length)
+        self._run_speed[idx] = self._uniform(m, 0.5 * self.max_speed, self.max_speed)
+        heading = torch.atan2(forward[:, 1], forward[:, 0])
+        self._run_heading[idx] = heading
+        self._run_turn[idx] = self._uniform(m, -self.turn, self.turn)
+        along = self._run_stride[idx] * self._uniform(m, 0.5, 1.0)
+        centre = history[:, -1, PELVIS, :2] + torch.stack((torch.cos(heading), torch.sin(heading)), -1) * along[:, None]
+        stone = self._stone(centre, heading, slot)
+        foot = self._joint_now(idx, self._joint_ids[slot])[:, :2]
+        lead = torch.ceil((stone - foot).norm(dim=-1) / self._run_speed[idx] * FPS).long().clamp(min=1)
+        self._target[idx, 0, :2] = stone
+        self._frame[idx, 0] = self._now_frame(idx) + lead
+        count = self._randint(torch.full_like(lead, self.step_run[0]), torch.full_like(lead, self.step_run[1]))
+        self._run_left[idx] = count - 1
+
+    def _next_step(self, idx: torch.Tensor) -> None:
+        """The next footstep of a run: the other foot, one stride on along the turning path.
+
+        Due a stride's time at the run's speed after the previous goal (and after now).
+        """
+        slot = self._joint[idx, 0]
+        other = torch.where(slot == list(JOINTS).index("left_foot"), list(JOINTS).index("right_foot"),
+                            list(JOINTS).index("left_foot"))
+        stride, before, now = self._run_stride[idx], self._frame[idx, 0], self._now_frame(idx)
+        gap = torch.maximum(torch.ceil(stride / self._run_speed[idx] * FPS).long().clamp(min=1), now - before + 1)
+        heading = self._run_heading[idx]
+        centre = self._target[idx, 0, :2] - (self._stone(torch.zeros_like(stride[:, None]).expand(-1, 2), heading,
+                                                          slot))
+        heading = heading + self._run_turn[idx] * gap.float() / FPS
+        centre = centre + torch.stack((torch.cos(heading), torch.sin(heading)), -1) * stride[:, None]
+        self._run_heading[idx] = heading
+        self._target[idx, 0, :2] = self._stone(centre, heading, other)
+        self._joint[idx, 0] = other
+        self._frame[idx, 0] = before + gap
+        self._run_left[idx] -= 1
 
     def _next_in_run(self, idx: torch.Tensor) -> None:
         """The next goal of a run: on the path from the previous target, due 1 to 8 frames after it and after now."""

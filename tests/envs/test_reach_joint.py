@@ -195,6 +195,43 @@ def test_a_run_of_near_goals_moves_as_its_velocity_model_says(tiny_model):
     assert env._run_left.tolist() == [0, 1, 0]
 
 
+def test_a_run_of_footsteps_alternates_feet_one_stride_apart_at_the_runs_cadence(tiny_model):
+    env = make(tiny_model, 6, joints=("left_foot", "right_foot"), near_share=1.0, step_run=[8, 8],
+               step_length=[0.5, 0.7], step_width=0.2, turn_deg_s=0.0, max_episode_steps=64)
+    env.reset(seed=3)
+    assert env._run_left.tolist() == [7] * 6
+    first = env.current_goal()
+    pelvis = env.history_world()[:, -1, 0, :2]
+    forward = (first["target"][:, :2] - pelvis)
+    assert (forward[:, 1] > 0).all()  # the first stone lies ahead (the episode starts facing +y)
+    checked = 0
+    for k in range(12):
+        before, slot = env.current_goal(), env._joint[:, 0].clone()
+        left, stride, speed = env._run_left.clone(), env._run_stride.clone(), env._run_speed.clone()
+        _, _, _, _, infos = env.step(actions(6, k))
+        after = env.current_goal()
+        went_on = infos["goal_due"] & (left > 0) & (infos["joint_error_m"] <= 0.5)
+        if not bool(went_on.any()):
+            continue
+        # the other foot, one stride on along a straight path, half the width to the other side
+        assert (env._joint[went_on, 0] + slot[went_on] == 3).all()  # left_foot 1 <-> right_foot 2
+        step = (after["target"] - before["target"])[went_on, :2]
+        assert step.norm(dim=-1) == pytest.approx(torch.hypot(stride[went_on], torch.tensor(0.2)), abs=1e-4)
+        gap = (after["frame"] - before["frame"])[went_on]
+        stride_frames = torch.ceil(stride[went_on] / speed[went_on] * FPS).long()
+        due = torch.maximum(stride_frames, 8 * (k + 1) - before["frame"][went_on] + 1)
+        assert gap.tolist() == due.tolist()
+        assert ((speed >= 0.6 - 1e-6) & (speed <= 1.2 + 1e-6)).all() and after["planar"].all()
+        checked += int(went_on.sum())
+    assert checked >= 6
+
+
+def test_footsteps_take_single_goals_unless_step_run_asks_for_runs(tiny_model):
+    env = make(tiny_model, 8, joints=("left_foot", "right_foot"), near_share=1.0, max_episode_steps=16)
+    env.reset(seed=0)
+    assert env._run_left.tolist() == [0] * 8 and (env._run_stride == 0).all()
+
+
 def test_reward_terms_of_the_joint_error():
     from latentrl.rewards import terms
 
@@ -249,6 +286,9 @@ def test_joint_goal_file_loads_targets_times_and_asap(tmp_path):
     ({"near_share": 1.5}, r"near_share: must be a share in \[0, 1\]"),
     ({"near_run": [4, 2]}, r"near_run: must be \[min, max\] goals with 1 <= min <= max <= 1000, got \[4, 2\]"),
     ({"near_run": [1.5, 2]}, r"near_run: must be \[min, max\] goals"),
+    ({"step_run": [0, 4]}, r"step_run: must be \[min, max\] footsteps with 1 <= min <= max <= 1000, got \[0, 4\]"),
+    ({"step_length": [0.7, 0.5]}, r"step_length: must be \[min, max\] metres with 0.05 <= min <= max <= 2"),
+    ({"step_width": 1.5}, r"step_width: must be metres in \[0, 1\], got 1.5"),
     ({"turn_deg_s": -1.0}, r"turn_deg_s: must be degrees per second in \[0, 360\], got -1.0"),
     ({"far_time": [4.0, 1.0]}, r"far_time: must be \[min, max\]"),
     ({"distance": [-1.0, 2.0]}, r"distance: must be \[min, max\] with 0 <= min <= max"),
@@ -267,11 +307,13 @@ def test_env_config_section_builds_the_env(tiny_model):
 
     cfg = from_dict(EnvConfig, {"task": "reach_joint", "num_envs": 2,
                                 "reach_joint": {"joints": ["left_hand", "head"], "radius": 0.05,
-                                                "near_run": [2, 8], "turn_deg_s": 20.0}}, "env")
+                                                "near_run": [2, 8], "turn_deg_s": 20.0, "step_run": [2, 6],
+                                                "step_length": [0.4, 0.6], "step_width": 0.2}}, "env")
     cfg.validate()
     env = build(cfg, "cpu", motion=tiny_model)
     assert isinstance(env, ReachJointEnv) and env.joints == ("left_hand", "head") and env.radius == 0.05
     assert env.near_run == (2, 8) and env.turn == pytest.approx(math.radians(20.0))
+    assert env.step_run == (2, 6) and env.step_length == (0.4, 0.6) and env.step_width == 0.2
     with pytest.raises(ConfigError, match=r"^env: reach_joint.far_time: must be \[min, max\]"):
         from_dict(EnvConfig, {"task": "reach_joint", "reach_joint": {"far_time": [2.0]}}, "env")
 
