@@ -1,6 +1,7 @@
 """Ship a trained policy: export it to policies/<name>.pt and write its card policies/<name>.md.
 
     python tools/ship_policy.py RUN_DIR EVAL_DIR NAME --config CONFIG --text TEXT [--task LINE] [--notes FILE]
+                                [--half]
 
 RUN_DIR is a `latentrl train` run (its final.pt is exported without optimizer state); EVAL_DIR holds
 the `latentrl eval` report of that final.pt on the skill's suite. The eval's ``paths.png`` is copied to
@@ -53,10 +54,11 @@ def main() -> None:
     ap.add_argument("--task", default="Reach goals", help="what the policy does, e.g. 'Follow joystick commands'")
     ap.add_argument("--notes", help="markdown file appended to the card")
     ap.add_argument("--motion-name", default="default", help="the embedded motion model it was trained on")
+    ap.add_argument("--half", action="store_true", help="store the weight matrices in float16 (evaluate the copy)")
     args = ap.parse_args()
     run, ev = Path(args.run_dir), Path(args.eval_dir)
     state = torch.load(run / "final.pt", weights_only=True)
-    out = export_policy(run / "final.pt", ROOT / "policies" / f"{args.name}.pt")
+    out = export_policy(run / "final.pt", ROOT / "policies" / f"{args.name}.pt", half=args.half)
     name_motion(out, args.motion_name)
     report = json.loads((ev / "report.json").read_text())
     s = report["settings"]
@@ -77,7 +79,8 @@ def main() -> None:
         "",
         "| | |",
         "|---|---|",
-        f"| file | `policies/{out.name}` ({out.stat().st_size / 1e6:.1f} MB, optimizer state stripped) |",
+        f"| file | `policies/{out.name}` ({out.stat().st_size / 1e6:.1f} MB, optimizer state stripped"
+        + (", weight matrices in float16" if args.half else "") + ") |",
         f"| config | [`{args.config}`](../{args.config}) |",
         f"| reproduce | `latentrl train {args.config}` |",
         f"| trainer | {state['trainer']} PPO |",

@@ -374,13 +374,21 @@ def load_policy(path: str | Path, device: str | torch.device = "cpu", motion: Ma
     return LoadedPolicy(policy.eval(), meta)
 
 
-def export_policy(src: str | Path, dst: str | Path) -> Path:
-    """A release copy of a checkpoint, about a third of its size.
+def export_policy(src: str | Path, dst: str | Path, half: bool = False) -> Path:
+    """A release copy of a checkpoint, about a third of its size (a sixth with ``half``).
 
     Keeps policy, spec, config, counters and motion-model hash; drops the optimizer and RNG states.
-    ``load_policy`` reads it; ``--resume`` cannot continue from it.
+    ``half`` stores the weight matrices in float16 (biases, the action std and the normalizer statistics stay
+    float32; ``load_policy`` loads them into the float32 policy): the file halves, and the actions it gives
+    are those of the rounded weights, so a half copy must be evaluated as itself. ``load_policy`` reads it;
+    ``--resume`` cannot continue from it.
     """
     state = read_checkpoint(src)
     slim = {k: v for k, v in state.items() if k not in ("optimizer", "rng")}
     slim["extra"] = {**(state.get("extra") or {}), "exported_from": Path(src).name}
+    if half:
+        slim["policy"] = {k: v.half() if v.is_floating_point() and v.dim() == 2 else v
+                          for k, v in state["policy"].items()}
+        slim["policy_sha256"] = weights_sha256(slim["policy"])
+        slim["extra"]["half_weights"] = True
     return save_torch_atomic(slim, dst)

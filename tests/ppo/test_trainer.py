@@ -150,3 +150,29 @@ def test_exported_policy_loads_without_optimizer(tmp_path):
     action = loaded.policy.act(obs, deterministic=True).action
     assert action.shape == (2, loaded.policy.action_dim) and torch.isfinite(action).all()
     assert "optimizer" not in torch.load(out, weights_only=True)
+
+
+def test_a_half_export_stores_weight_matrices_in_float16_and_acts_as_its_rounded_weights(tmp_path):
+    import torch
+
+    from latentrl.ppo.checkpoint import export_policy, load_policy
+    from latentrl.ppo.config import PolicyConfig, PPOConfig
+    from latentrl.ppo.run import train
+    from tests.ppo.envs import ReachVecEnv
+
+    env = ReachVecEnv(num_envs=4)
+    res = train(env, tmp_path / "run", PPOConfig(total_steps=64, num_steps=8, num_minibatches=2, update_epochs=1),
+                PolicyConfig(latent_dim=64), progress=False)
+    full = export_policy(res.final_checkpoint, tmp_path / "full.pt")
+    half = export_policy(res.final_checkpoint, tmp_path / "half.pt", half=True)
+    assert half.stat().st_size < 0.7 * full.stat().st_size
+    stored = torch.load(half, weights_only=True)["policy"]
+    kinds = {(v.dtype, v.dim() == 2) for v in stored.values() if v.is_floating_point()}
+    assert (torch.float16, True) in kinds and (torch.float32, False) in kinds and (torch.float32, True) not in kinds
+    a, b = load_policy(full).policy, load_policy(half).policy  # the half copy's sha256 is its own: it loads
+    assert all(p.dtype == torch.float32 for p in b.parameters())
+    for name, p in b.state_dict().items():  # exactly the float32 weights rounded to float16
+        assert torch.equal(p, a.state_dict()[name].half().float() if p.dim() == 2 else a.state_dict()[name])
+    obs = torch.randn(8, a.obs_dim)
+    ours, theirs = b.act(obs, deterministic=True).action, a.act(obs, deterministic=True).action
+    assert 0 < (ours - theirs).abs().max() < 1e-2 * theirs.abs().max()
