@@ -44,6 +44,8 @@ JOINTS: dict[str, int] = {"pelvis": PELVIS, "left_foot": joint_index("left_foot"
 """Goal joint name -> SMPL joint index (hands are the wrists, feet DART's contact joints); the one-hot order."""
 FEET = ("left_foot", "right_foot")
 """Joints whose targets lie on the floor (2-D)."""
+LEFT_SLOT, RIGHT_SLOT = list(JOINTS).index("left_foot"), list(JOINTS).index("right_foot")
+"""The feet's one-hot slots (indices into :data:`JOINTS`)."""
 ASAP = "asap"
 """A goal time meaning as soon as possible."""
 WINDOW_S = FUTURE_LENGTH / FPS
@@ -485,7 +487,8 @@ class ReachJointEnv(LatentMotionVectorEnv):
         """The next random goal of envs ``idx`` (slot 0): the next of a run of near goals, else a fresh one."""
         going = self._run_left[idx] > 0
         if bool(going.any()):
-            on, foot = idx[going], self._is_foot(self._joint[idx[going], 0])
+            on = idx[going]
+            foot = (self._joint[on, 0] == LEFT_SLOT) | (self._joint[on, 0] == RIGHT_SLOT)
             if bool(foot.any()):
                 self._next_step(on[foot])
             if not bool(foot.all()):
@@ -533,16 +536,10 @@ class ReachJointEnv(LatentMotionVectorEnv):
         if self.step_run[1] > 1 and bool((near & feet).any()):
             self._first_step(idx[near & feet], history[near & feet], forward[near & feet])
 
-    @staticmethod
-    def _is_foot(slot: torch.Tensor) -> torch.Tensor:
-        """Whether one-hot slots (indices into :data:`JOINTS`) are feet."""
-        return (slot == list(JOINTS).index("left_foot")) | (slot == list(JOINTS).index("right_foot"))
-
-    def _stone(self, centre: torch.Tensor, heading: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
-        """(M, 2) a stone of foot ``slot`` beside the path point ``centre`` at ``heading`` (half the width aside)."""
+    def _aside(self, heading: torch.Tensor, slot: torch.Tensor) -> torch.Tensor:
+        """(M, 2) where foot ``slot``'s stone lies from its path point at ``heading``: half the width to its side."""
         right = torch.stack((torch.sin(heading), -torch.cos(heading)), dim=-1)
-        side = torch.where(slot == list(JOINTS).index("right_foot"), 0.5, -0.5) * self.step_width
-        return centre + right * side[:, None]
+        return right * (torch.where(slot == RIGHT_SLOT, 0.5, -0.5) * self.step_width)[:, None]
 
     def _first_step(self, idx: torch.Tensor, history: torch.Tensor, forward: torch.Tensor) -> None:
         """Start a run of footsteps in envs ``idx`` (their near foot goal just drawn): the first stone.
@@ -559,7 +556,7 @@ class ReachJointEnv(LatentMotionVectorEnv):
         self._run_turn[idx] = self._uniform(m, -self.turn, self.turn)
         along = self._run_stride[idx] * self._uniform(m, 0.5, 1.0)
         centre = history[:, -1, PELVIS, :2] + torch.stack((torch.cos(heading), torch.sin(heading)), -1) * along[:, None]
-        stone = self._stone(centre, heading, slot)
+        stone = centre + self._aside(heading, slot)
         foot = self._joint_now(idx, self._joint_ids[slot])[:, :2]
         lead = torch.ceil((stone - foot).norm(dim=-1) / self._run_speed[idx] * FPS).long().clamp(min=1)
         self._target[idx, 0, :2] = stone
@@ -573,17 +570,15 @@ class ReachJointEnv(LatentMotionVectorEnv):
         Due a stride's time at the run's speed after the previous goal (and after now).
         """
         slot = self._joint[idx, 0]
-        other = torch.where(slot == list(JOINTS).index("left_foot"), list(JOINTS).index("right_foot"),
-                            list(JOINTS).index("left_foot"))
+        other = LEFT_SLOT + RIGHT_SLOT - slot
         stride, before, now = self._run_stride[idx], self._frame[idx, 0], self._now_frame(idx)
         gap = torch.maximum(torch.ceil(stride / self._run_speed[idx] * FPS).long().clamp(min=1), now - before + 1)
         heading = self._run_heading[idx]
-        centre = self._target[idx, 0, :2] - (self._stone(torch.zeros_like(stride[:, None]).expand(-1, 2), heading,
-                                                          slot))
+        centre = self._target[idx, 0, :2] - self._aside(heading, slot)
         heading = heading + self._run_turn[idx] * gap.float() / FPS
         centre = centre + torch.stack((torch.cos(heading), torch.sin(heading)), -1) * stride[:, None]
         self._run_heading[idx] = heading
-        self._target[idx, 0, :2] = self._stone(centre, heading, other)
+        self._target[idx, 0, :2] = centre + self._aside(heading, other)
         self._joint[idx, 0] = other
         self._frame[idx, 0] = before + gap
         self._run_left[idx] -= 1
