@@ -37,7 +37,7 @@ setup() {
         fi
     fi
     echo "[latentrl] installing latentrl (editable) with numpy, gymnasium, stable-baselines3, tensorboard,"
-    echo "[latentrl] pyyaml, omegaconf, tqdm, matplotlib and the test tools (.[dev]); torch is left as it is"
+    echo "[latentrl] pyyaml, omegaconf, tqdm, matplotlib, scipy and the test tools (.[dev]); torch is left as it is"
     if ! "$VENV/bin/python" -m pip install -q -e ".[dev]" >"$VENV/pip-install.log" 2>&1; then
         grep -v "^WARNING: Location" "$VENV/pip-install.log" >&2
         exit 1

@@ -6,7 +6,8 @@
 OBSTACLE_EVAL and FLAT_EVAL are `latentrl eval` output folders of reach suites (their ``motions/*.npz`` carry
 each episode's scene, goals and joints). For every successful episode of OBSTACLE_EVAL this computes the
 shortest route of the pelvis (xy) from its start to within the success radius (0.3 m) of the goal that stays
-``--clearance`` metres clear of every object (Dijkstra on a ``--cell`` grid, 8-connected), the straight line's
+``--clearance`` metres clear of every object (:class:`latentrl.scenes.route.RouteMap`: Dijkstra on a ``--cell``
+grid, 16-connected), the straight line's
 length, and the policy's own pelvis route until it reached the goal, then prints per-path and overall means:
 the detour (shortest clear route / straight line), the policy's route / straight line, and its speed along its
 route. With ``--flat`` (the obstacle-free policy on the same goals without a scene) it prints that policy's
@@ -19,85 +20,30 @@ policy: `latentrl eval path_maze_default --paths ROUTES.json --episodes 1`.
 from __future__ import annotations
 
 import argparse
-import heapq
 import json
 import math
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from latentrl.constants import SUCCESS_RADIUS_M
+from latentrl.scenes.route import RouteMap, RouteSettings
 from latentrl.scenes.scene import SceneBatch
 from latentrl.scenes.spec import scene_from_json
-
-PROBE_Z = (0.1, 0.4, 0.8, 1.2)
-"""Heights (m) at which the scene is probed: the random obstacles stand 0.5-1.5 m tall on the floor."""
 
 
 def clear_route(scene_json: str, start: np.ndarray, goal: np.ndarray, clearance: float, cell: float
                 ) -> tuple[float, list[np.ndarray]]:
-    """Length (m) and corners of the shortest clear grid route from ``start`` to near ``goal``.
+    """Length (m) and corners of the shortest route from ``start`` to near ``goal`` keeping ``clearance`` from objects.
 
-    Near: within the success radius; clear: ``clearance`` from every object (the start cell is allowed); (inf,
-    []) when there is none. The corners: the route pulled taut (each kept point the farthest route point in
-    clear sight of the last), then the goal itself.
+    Near: within the success radius; the clearance is hard (``band_cost`` inf: no leg enters it; a start inside
+    it may keep its own distance). (inf, []) when there is none. The corners: the route pulled taut, the goal last.
     """
     scene = SceneBatch.from_scenes([scene_from_json(scene_json)])
-    lo = np.minimum(start, goal) - 3.0
-    hi = np.maximum(start, goal) + 3.0
-    nx, ny = (np.ceil((hi - lo) / cell).astype(int) + 1).tolist()
-    xs, ys = lo[0] + cell * np.arange(nx), lo[1] + cell * np.arange(ny)
-    gx, gy = np.meshgrid(xs, ys, indexing="ij")
-    sdf = np.full(gx.shape, np.inf)
-    for z in PROBE_Z:
-        pts = torch.tensor(np.stack((gx, gy, np.full_like(gx, z)), -1).reshape(1, -1, 3), dtype=torch.float32)
-        sdf = np.minimum(sdf, scene.sdf(pts).reshape(gx.shape).numpy())
-    free = sdf > clearance
-    si, sj = (np.round((start - lo) / cell).astype(int)).tolist()
-    free[si, sj] = True
-    done = np.hypot(gx - goal[0], gy - goal[1]) <= SUCCESS_RADIUS_M
-    dist = np.full(gx.shape, np.inf)
-    dist[si, sj] = 0.0
-    came: dict[tuple[int, int], tuple[int, int]] = {}
-    heap = [(0.0, si, sj)]
-    steps = [(di, dj, cell * math.hypot(di, dj)) for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj]
-    while heap:
-        d, i, j = heapq.heappop(heap)
-        if d > dist[i, j]:
-            continue
-        if done[i, j]:
-            cells = [(i, j)]
-            while cells[-1] != (si, sj):
-                cells.append(came[cells[-1]])
-            points = [np.array([xs[a], ys[b]]) for a, b in reversed(cells)]
-            return d, taut(points, free, lo, cell) + [goal]
-        for di, dj, w in steps:
-            a, b = i + di, j + dj
-            if 0 <= a < nx and 0 <= b < ny and free[a, b] and d + w < dist[a, b]:
-                dist[a, b] = d + w
-                came[(a, b)] = (i, j)
-                heapq.heappush(heap, (d + w, a, b))
-    return math.inf, []
-
-
-def taut(points: list[np.ndarray], free: np.ndarray, lo: np.ndarray, cell: float) -> list[np.ndarray]:
-    """The corners of a grid route: from each kept point, the farthest later point in clear sight of it."""
-    def sight(p: np.ndarray, q: np.ndarray) -> bool:
-        n = max(2, int(np.ceil(np.hypot(*(q - p)) / (cell / 2))))
-        for t in np.linspace(0.0, 1.0, n):
-            a, b = np.round((p + (q - p) * t - lo) / cell).astype(int)
-            if not free[a, b]:
-                return False
-        return True
-
-    kept, k = [], 0
-    while k < len(points) - 1:
-        far = next(m for m in range(len(points) - 1, k, -1) if m == k + 1 or sight(points[k], points[m]))
-        kept.append(points[far])
-        k = far
-    return kept[:-1]
+    route = RouteMap(scene, start, goal, RouteSettings(clearance=clearance, cell=cell, band_cost=math.inf,
+                                                      reach=SUCCESS_RADIUS_M))
+    return route.length(start), route.corners(start)
 
 
 def episodes(folder: Path, every: bool = False):

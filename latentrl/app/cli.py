@@ -505,6 +505,11 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--avoid-margin", type=float, default=None, metavar="M",
                     help="with --avoid: metres beyond each joint's skin radius kept from every object (feet and "
                          "ankles: the skin alone; default: the policy's stored eval.avoid_margin, else 0.1)")
+    ev.add_argument("--route", type=float, default=None, metavar="M",
+                    help="reach and path policies among objects: plan the shortest route to each goal keeping M "
+                         "metres from every object, and show the policy the farthest route point in clear sight as "
+                         "its goal (success stays the task's goal; default: the policy's stored eval.route, else "
+                         "0: off; docs/scenes.md)")
     ev.set_defaults(func=_evaluate)
 
     cmp = sub.add_parser("compare", help="several evaluation reports side by side (markdown table)")
@@ -550,13 +555,17 @@ def _viewer_commands(sub) -> None:
     play.add_argument("--scene", metavar="SCENE", help="play among objects: a latentrl.scene/1 file or a name in "
                                                         "tasks/scenes (default: the policy's training scene, else the "
                                                         "bare floor); ctrl-click drops boxes into it")
+    play.add_argument("--route", type=float, default=None, metavar="M",
+                      help="reach and path policies: head along the shortest route keeping M metres from every "
+                           "object, so dropped boxes are walked around (default: the policy's env.route, else "
+                           "0: straight for the goal; docs/scenes.md)")
     server_flags(play)
     play.add_argument("--record", metavar="FILE", help="also draw every frame shown into this .gif or .mp4 when the "
                                                        "viewer stops (MP4 needs latentrl[video])")
     play.set_defaults(func=lambda a: _viewer(
         "play_command", a.policy, host=a.host, port=a.port, motion=a.motion, device=a.device, text=a.text,
         deterministic=a.deterministic, seed=a.seed, allow_motion_mismatch=a.allow_motion_mismatch, record=a.record,
-        scene=a.scene, skeleton=a.skeleton))
+        scene=a.scene, skeleton=a.skeleton, route=a.route))
 
 
 def _viewer(name: str, *args, **kwargs) -> int:

@@ -113,6 +113,10 @@ class EvalRequest:
     avoid_margin: float | None = None
     """With ``avoid``: metres beyond each joint's skin kept from objects (None: the stored ``eval.avoid_margin``,
     else 0.1)."""
+    route: float | None = None
+    """Evaluations among objects: the policy sees the next point of the shortest route keeping this many metres
+    from every object in place of its goal (``latentrl.envs.guide``; 0: off; None: the policy's stored
+    ``eval.route``, else off)."""
 
     def argv(self) -> list[str]:
         """The ``latentrl eval`` arguments that make this request (what quickstart prints)."""
@@ -127,7 +131,8 @@ class EvalRequest:
                    ("--refine-skate", self.refine_skate),
                    ("--refine-start", self.refine_start),
                    ("--refine-pace", self.refine_pace), ("--avoid", self.avoid),
-                   ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin))
+                   ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin),
+                   ("--route", self.route))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -263,7 +268,8 @@ def evaluate(req: EvalRequest) -> int:
     for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
                              ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
                              ("refine_pace", "--refine-pace", float), ("avoid", "--avoid", int),
-                             ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float)):
+                             ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
+                             ("route", "--route", float)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
         head = name.split("_")[0]
         if getattr(req, name) is None and name in stored and not req.physics and (name == head or getattr(req, head)):
@@ -272,6 +278,7 @@ def evaluate(req: EvalRequest) -> int:
     trained = tuple(env.reach_joint.joints) if env is not None and env.reach_joint is not None else ("pelvis",)
     refiner = _refiner(req, evaluator, spec.name, trained)
     avoider = _avoider(req, evaluator, spec.name)
+    _check_route(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
         print(f"foot lock pins from contact weight {req.foot_lock_min_weight:g} (the policy's stored evaluation "
@@ -288,6 +295,8 @@ def evaluate(req: EvalRequest) -> int:
     out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"
     check_writable(out_dir, "--out")
     model, policy, motion, policy_info, observe_next = _load(req, settings)
+    if req.route is not None:  # over the training env's own (--route 0: off)
+        settings.route = float(req.route) or None
     observe_next = evaluator.fit(policy, model, files, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
@@ -359,6 +368,19 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[s
             .replace("refine pace:", "--refine-pace:")
         raise ConfigError(flag) from None
     return settings
+
+
+def _check_route(req: EvalRequest, evaluator: Any, task: str) -> None:
+    """``--route``'s clearance in range, for an evaluation that has a goal on the floor (reach and path policies)."""
+    if not req.route:
+        return
+    if getattr(evaluator, "suite_kind", None) not in ("paths",):
+        raise ConfigError(f"--route: the {task} task's goal is not a place on the floor to plan a route to (reach and "
+                          "path policies take one); leave out --route")
+    if req.physics:
+        raise ConfigError("--route: not with --physics")
+    if not 0 < req.route <= 2:
+        raise ConfigError(f"--route: expected the route's clearance in metres, in (0, 2], got {req.route}")
 
 
 def _avoider(req: EvalRequest, evaluator: Any, task: str) -> AvoidSettings | None:

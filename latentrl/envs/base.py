@@ -49,6 +49,7 @@ from latentrl.envs.episode_state import (
     step_infos,
 )
 from latentrl.envs.goal import goal_features
+from latentrl.envs.guide import RouteGuide
 from latentrl.envs.history import HistoryRecorder, RecordedEpisodes
 from latentrl.envs.observation import ObservationLayout, observe
 from latentrl.envs.scene import HEIGHT_GRID_SPACING_M, env_scene, grid_offsets, height_grid_problem
@@ -62,6 +63,7 @@ from latentrl.motion.representation import joints_of
 from latentrl.motion.rollout import LOCK_MIN_WEIGHT, RolloutState
 from latentrl.motion.skeleton import PELVIS
 from latentrl.rewards.compose import COMMON_TERMS, DART_TERMS, SCENE_TERMS, RewardComposer, RewardConfig, RewardInputs
+from latentrl.scenes.route import RouteSettings
 
 
 class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
@@ -106,6 +108,9 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         height_grid, height_grid_spacing: with a scene, also observe the terrain on a ``height_grid`` x
             ``height_grid`` grid of samples ``height_grid_spacing`` metres apart around the pelvis, in the body
             frame (the ``scene_height_grid`` group; 0: none, the default).
+        route: with a scene, the clearance (metres) of the routes a :class:`~latentrl.envs.guide.RouteGuide`
+            plans to each goal; where an object stands in the way, ``goal_dir`` / ``goal_dist`` show the farthest
+            route point in clear sight instead of the goal (reach and path tasks; None: off, the default).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
@@ -150,6 +155,7 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         observe_scene: bool = True,
         height_grid: int = 0,
         height_grid_spacing: float = HEIGHT_GRID_SPACING_M,
+        route: float | None = None,
     ):
         require(int(num_envs) >= 1, "num_envs", f"must be >= 1, got {num_envs}")
         require(int(max_episode_steps) >= 1, "max_episode_steps", f"must be >= 1, got {max_episode_steps}")
@@ -213,6 +219,10 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         self.texts: tuple[str, ...] = self.text_table.texts
         self._feature_range = feature_range(self.motion)  # None: the prior declares no mean/std
         self._setup_spaces()
+        require(route is None or self.scene is not None, "route", "needs a scene")
+        self.route = None if route is None else RouteSettings(clearance=float(route))
+        self.guide = RouteGuide(self, self.route) if self.route is not None else None
+        """The :class:`~latentrl.envs.guide.RouteGuide` that rewrites the goal observation (None without ``route``)."""
         self._generator = torch.Generator(device=self.device)
         self._history = HistoryRecorder(self.num_envs, self.motion.latent_dim, record_features) if record_history \
             else None
@@ -428,15 +438,26 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         """(N, obs_dim) float32: [goal | text | motion | scene] (see :attr:`observation_layout`)."""
         state = self._require_state()
         history_world = state.world.apply(joints_of(state.history))
-        return observe(state.history, history_world, self._goal_observation(history_world),
-                       self.text_table.embeddings[self._text_idx], self.floor_height,
-                       self.scene.rays(history_world) if self.observe_scene else None,
-                       self.scene.height_grid(history_world, self._grid_offsets) if self.height_grid else None)
+        obs = observe(state.history, history_world, self._goal_observation(history_world),
+                      self.text_table.embeddings[self._text_idx], self.floor_height,
+                      self.scene.rays(history_world) if self.observe_scene else None,
+                      self.scene.height_grid(history_world, self._grid_offsets) if self.height_grid else None)
+        return obs if self.guide is None else self.guide.observe(obs)
 
     def _goal_features(self, history_world: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """(N, 4) :func:`goal_features` of ``goal`` with this env's clips."""
         return goal_features(history_world[:, -1], self._state.world.rotation, goal, self.obs_goal_angle_clip_deg,
                              self.obs_goal_dist_clip)
+
+    def goal_features_of(self, goal: torch.Tensor) -> torch.Tensor:
+        """(N, 4) the ``goal_dir`` and ``goal_dist`` fields this env would observe for (N, 3) world ``goal``s.
+
+        Why: a route guide (:mod:`latentrl.envs.guide`) shows a policy a waypoint of its route in place of the
+        task's goal, in exactly the form the policy was trained on.
+        """
+        state = self._require_state()
+        with torch.no_grad():
+            return self._goal_features(state.world.apply(joints_of(state.history)), goal)
 
     def step_inputs(self) -> dict[str, Any]:
         """What the next :meth:`step` feeds the motion model besides the noise.

@@ -242,6 +242,10 @@ class EnvConfig:
     path task: each episode walks a maze of the pool along its route); None: the flat floor alone."""
     terminate_on_collision: bool = False
     """With a scene: end an episode when a joint comes inside its skin radius of an object."""
+    route: float | None = None
+    """With a scene (reach and path tasks): plan each goal's shortest route keeping this many metres (pelvis, xy)
+    from every object and observe the farthest route point in clear sight as the goal where an object is in the
+    way (:mod:`latentrl.envs.guide`; docs/scenes.md, "Routes"); None: the task's goal."""
     height_grid: int = 0
     """With a scene (``scene``, or a task's own such as sit's seat): also observe the terrain on a k x k grid around
     the pelvis (``scene_height_grid``, odd k in [3, 15]); 0: no grid."""
@@ -276,6 +280,10 @@ class EnvConfig:
                     f"{closest(name, tuple(REWARD_TERMS))}; known: {', '.join(REWARD_TERMS)}")
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
                 "needs a scene (env.scene)")
+        require(self.route is None or self.scene is not None, "route", "needs a scene (env.scene)")
+        require(self.route is None or (not isinstance(self.route, bool) and isinstance(self.route, (int, float))
+                                       and 0 < self.route <= 2), "route",
+                f"expected the route's clearance in metres, in (0, 2], or null, got {self.route!r:.30}")
         problem = height_grid_problem(self.height_grid, self.height_grid_spacing)
         if problem is not None:
             raise ConfigError(problem)
@@ -341,6 +349,8 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
         common["max_episode_steps"] = cfg.max_episode_steps
     if cfg.scene is not None:  # flat-floor envs get exactly the arguments they always had
         common.update(scene=cfg.scene_spec(), terminate_on_collision=cfg.terminate_on_collision)
+        if cfg.route is not None:
+            common.update(route=cfg.route)
     if cfg.height_grid:  # the env refuses it without a scene (env.scene, or a task's own such as sit's seat)
         common.update(height_grid=cfg.height_grid, height_grid_spacing=cfg.height_grid_spacing)
     common.update(extra)

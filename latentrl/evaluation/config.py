@@ -61,6 +61,9 @@ class EvalConfig:
     """With ``avoid``: its ``--avoid-horizon`` (None: 2)."""
     avoid_margin: float | None = None
     """With ``avoid``: its ``--avoid-margin``, metres (None: 0.1)."""
+    route: float | None = None
+    """Reach and path policies among objects: the route guide's clearance, metres, that ``latentrl eval`` applies by
+    default (its ``--route``; the card's figures); None: off. The trainer's periodic evaluation does not guide."""
     video_every: int = 1
     """Every this many evaluations (the first of each training process included), the first episode of the first
     suite entry goes to TensorBoard as ``eval/episode``: an animated GIF at 10 frames/s with the scene and goals;
@@ -94,6 +97,8 @@ class EvalConfig:
                 f"must be 1-16 primitives (or null: 2), got {self.avoid_horizon}")
         require(self.avoid_margin is None or 0 <= self.avoid_margin <= 1, "avoid_margin",
                 f"must be metres in [0, 1] (or null: 0.1), got {self.avoid_margin}")
+        require(self.route is None or 0 <= self.route <= 2, "route",
+                f"must be metres in [0, 2] (or null: off), got {self.route}")
 
 
 MAX_VIDEO_SIZE = 640
@@ -137,6 +142,8 @@ class EvalSettings(StepSettings):
     """The policy's local height grid (``env.height_grid``; 0: none), observed with the scene."""
     height_grid_spacing: float = 0.25
     """Its sample spacing, metres (``env.height_grid_spacing``)."""
+    route: float | None = None
+    """Among objects: the route guide's clearance, metres (``env.route``, ``eval --route``; None: off)."""
 
     def take_training_env(self, env_cfg: Any) -> None:
         """Step the motion as the policy's training env did (its :class:`StepSettings`; None: the defaults).
@@ -150,6 +157,7 @@ class EvalSettings(StepSettings):
         self.observe_scene = True
         self.height_grid = int(getattr(env_cfg, "height_grid", 0) or 0)
         self.height_grid_spacing = float(getattr(env_cfg, "height_grid_spacing", 0.25))
+        self.route = getattr(env_cfg, "route", None)
 
     def scene_kwargs(self, scene: Any) -> dict[str, Any]:
         """The eval env's scene arguments for ``scene`` (resolved; None: the flat floor, no arguments).
@@ -163,6 +171,8 @@ class EvalSettings(StepSettings):
         out: dict[str, Any] = {"scene": scene, "observe_scene": observe}
         if observe and self.height_grid:
             out.update(height_grid=self.height_grid, height_grid_spacing=self.height_grid_spacing)
+        if self.route:
+            out["route"] = self.route
         return out
 
     def take_eval_config(self, eval_cfg: Any) -> None:

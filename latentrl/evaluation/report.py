@@ -196,7 +196,7 @@ def build_report(
         "policy": policy,
         "motion": motion,
         "settings": {**{k: v for k, v in asdict(settings).items()
-                        if k not in ("scene", "observe_scene", "height_grid", "height_grid_spacing")
+                        if k not in ("scene", "observe_scene", "height_grid", "height_grid_spacing", "route")
                         or settings.scene is not None}, "fps": FPS,
                      "budget_s": settings.budget_s, "files": [s.file for s in suites]},
         "hardware": hardware or {},

@@ -48,7 +48,7 @@ def view_command(path: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT
 def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, motion: str | None = None,
                  device: str | None = None, text: str | None = None, deterministic: bool = False, seed: int = 0,
                  allow_motion_mismatch: bool = False, record: str | Path | None = None, scene: str | None = None,
-                 skeleton: bool = False) -> int:
+                 skeleton: bool = False, route: float | None = None) -> int:
     """Steer a trained policy live in the browser, and pick its text from a list.
 
     Clicks set a reach/path policy's goal and waypoints and a ReachJoint policy's timed joint goals
@@ -61,6 +61,8 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     ``record``: a .gif or .mp4 that gets every frame shown, drawn when the server stops.
     ``scene``: a ``latentrl.scene/1`` file or a name in ``tasks/scenes`` to play in (default: the policy's
     training scene when it has a fixed one, else the bare floor). ``skeleton``: draw the skeleton too.
+    ``route``: a reach or path policy heads along routes keeping this many metres from the objects (None: the
+    policy's ``env.route``; 0: off).
     """
     import torch
 
@@ -84,6 +86,11 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     if text is not None and prompt_problem(text):  # an empty --text would fall back to the default silently
         raise ConfigError(f"--text: {prompt_problem(text)}")
     check_record(record)
+    if route is not None and not 0 <= route <= 2:
+        raise ConfigError(f"--route: expected the route's clearance in metres, in [0, 2] (0: off), got {route}")
+    if route and task not in ("reach", "path"):
+        raise ConfigError(f"--route: only reach and path policies walk to a place on the floor; this policy's task "
+                          f"is '{task}'")
     world = play_scene(scene)
     require_viser()
     check_port(host, port)  # before the models load
@@ -101,7 +108,7 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     model = load_motion_model(motion, device=device)
     loaded = load_policy(policy, device, motion={"path": model.info.get("source"), "sha256": model.info.get("sha256")},
                          allow_motion_mismatch=allow_motion_mismatch)
-    env = play_env(loaded.checkpoint, model, text, device, task, world)
+    env = play_env(loaded.checkpoint, model, text, device, task, world, route)
     if task != "joystick" and loaded.policy.action_dim == env.single_action_space.shape[0] and \
             loaded.policy.obs_dim == env.single_observation_space.shape[0] + 4:
         raise CheckpointError(f"{policy}: this {task} policy also observes the next waypoint; play steers one "

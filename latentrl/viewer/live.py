@@ -162,7 +162,7 @@ def training_scene(env_cfg: Mapping[str, Any]) -> Scene | None:
 
 
 def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str,
-             task: str = "reach", scene: Scene | None = None) -> Any:
+             task: str = "reach", scene: Scene | None = None, route: float | None = None) -> Any:
     """The env of ``latentrl play``: one steered env that steps the motion as the policy's training env.
 
     ``task`` 'joystick' gives a :class:`SteeredJoystickEnv` (the policy's trained speed range bounds the
@@ -173,7 +173,9 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     :class:`~latentrl.envs.settings.StepSettings` are the checkpoint's (:func:`stored_step_settings`).
     Its scene is ``scene`` (``--scene``), else the policy's fixed training scene, else an empty one (boxes can
     be dropped into any); the policy observes it (``scene_rays``) only when it was trained with a scene, as
-    ``latentrl eval --scene`` does. An empty scene steps exactly as the flat floor.
+    ``latentrl eval --scene`` does. An empty scene steps exactly as the flat floor. ``route`` (``--route``; None:
+    the policy's ``env.route``; 0: off): a reach or path policy heads along planned routes around the objects
+    (:mod:`latentrl.envs.guide`), so boxes dropped in its way are walked around even by a policy that cannot see.
     """
     env_cfg = (checkpoint.get("config") or {}).get("env") or {}
     prompts = list(getattr(model.text_encoder, "prompts", None) or [])
@@ -190,7 +192,8 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     if task == "joystick":
         speeds = tuple((env_cfg.get("joystick") or {}).get("speed_range") or (0.7, 1.4))
         return SteeredJoystickEnv(1, speed_range=speeds, **common)
-    return SteeredReachEnv(1, **common)
+    route = env_cfg.get("route") if route is None else (route or None)
+    return SteeredReachEnv(1, route=route, **common)
 
 
 class LiveController:

@@ -140,3 +140,25 @@ def test_amp_samples_the_motion_in_bf16_keeps_float32_outputs_and_reaches_eval()
         bad.validate()
     with pytest.raises(ConfigError, match="amp.*int8"):
         build(bad, "cpu", motion=plain_model)
+
+
+def test_env_route_reaches_the_env_and_the_eval_settings_and_bad_values_name_the_key(tmp_path, tiny_model):
+    from latentrl.errors import ConfigError
+    from latentrl.evaluation.config import EvalSettings
+
+    cfg = EnvConfig(task="reach", num_envs=2, scene={"random_obstacles": {}}, route=0.4)
+    cfg.validate()
+    env = build(cfg, "cpu", motion=tiny_model)
+    assert env.route.clearance == 0.4 and env.guide is not None
+    assert build(EnvConfig(task="reach", num_envs=2, scene={"random_obstacles": {}}), "cpu",
+                 motion=tiny_model).guide is None
+    settings = EvalSettings()
+    settings.take_training_env(cfg)
+    assert settings.route == 0.4 and settings.scene_kwargs(cfg.scene_spec())["route"] == 0.4
+    f = tmp_path / "bad.yaml"
+    for body, message in (("route: 0.5", r"env\.route: needs a scene \(env\.scene\)"),
+                          ("scene: {random_obstacles: {}}, route: 3", r"env\.route: expected the route's clearance"),
+                          ("scene: {random_obstacles: {}}, route: true", r"env\.route: Value 'True' of type 'bool'")):
+        f.write_text(f"env: {{task: reach, {body}}}\n")
+        with pytest.raises(ConfigError, match=message):
+            load_config(TrainConfig, f)

@@ -134,3 +134,32 @@ def test_eval_avoid_records_its_settings_leaves_a_clear_plan_alone_and_a_stored_
     assert "--avoid 2 (the policy's stored evaluation setting; --avoid overrides)" in capsys.readouterr().out
     report = json.loads((tmp_path / "stored" / "report.json").read_text())
     assert report["avoid"]["steps"] == 2 and report["avoid"]["margin"] == 0.2 and report["avoid"]["horizon"] == 2
+
+
+def test_eval_route_records_its_settings_leaves_a_clear_way_alone_and_a_stored_choice_is_the_default(
+        eval_files, tmp_path, capsys):
+    """``--route`` where no object stands between the body and the goal changes no metric (the policy sees its own
+    goal); its clearance goes into report.json's settings; a policy storing ``eval.route`` is guided without it."""
+    from latentrl.app.cli import main
+    from latentrl.ppo.checkpoint import read_checkpoint, save_checkpoint
+    from tests.evaluation.conftest import NEAR, write_paths
+
+    paths = write_paths(tmp_path, [NEAR], "mini.json")
+    far = tmp_path / "far.json"
+    far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [30.0, 30.0], "size": [0.5, 0.5, 1.0]}]}))
+    base = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
+            "--episodes", "2", "--max-steps", "3", "--device", "cpu", "--no-render", "--no-progress",
+            "--scene", str(far)]
+    assert main([*base, "--out", str(tmp_path / "plain")]) == 0
+    assert main([*base, "--out", str(tmp_path / "guided"), "--route", "0.5"]) == 0
+    plain, guided = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "guided"))
+    assert plain["settings"]["route"] is None and guided["settings"]["route"] == 0.5
+    assert guided["overall"]["metrics"] == plain["overall"]["metrics"]
+    state = read_checkpoint(eval_files["policy"], map_location="cpu")
+    state["config"] = {**(state.get("config") or {}), "eval": {"route": 0.7}}
+    stored = save_checkpoint(state, tmp_path / "stored.pt")
+    capsys.readouterr()
+    assert main([*base[:1], str(stored), *base[2:], "--out", str(tmp_path / "stored")]) == 0
+    assert "--route 0.7 (the policy's stored evaluation setting; --route overrides)" in capsys.readouterr().out
+    assert json.loads((tmp_path / "stored" / "report.json").read_text())["settings"]["route"] == 0.7

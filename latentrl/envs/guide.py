@@ -1,0 +1,90 @@
+"""A route guide: the policy sees the next point of a planned route among the objects in place of its goal.
+
+Why: a scene policy finds its way by its rays alone and walks twice the straight line where a route clear of every
+object is a few per cent longer (docs/scenes.md, "Routes"). An env made with ``route`` (``env.route``,
+``latentrl eval --route``) holds a :class:`RouteGuide`: it plans each goal's route once
+(:class:`~latentrl.scenes.route.RouteMap`) and, every observation, rewrites the ``goal_dir`` / ``goal_dist`` fields
+so that the goal the policy sees lies in the direction of the farthest route point in clear sight, as far away as
+the route's length left: the policy walks as it was trained to, toward a goal that happens to lie along the route.
+Where the straight line to the goal is clear the observation is left as it is, bit for bit. Success, rewards and
+metrics keep the task's own goal; the rays still see the objects; ``--avoid``'s scene filter acts after the policy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from latentrl.errors import ConfigError
+from latentrl.motion.skeleton import PELVIS
+from latentrl.scenes.route import RouteMap, RouteSettings
+
+
+class RouteGuide:
+    """The route maps of a vector env's envs, one per (goal, scene) pair, planned when either changes.
+
+    ``env``: a vector env with a scene, ``goal_world`` and the ``goal_dir`` / ``goal_dist`` observation fields.
+    """
+
+    def __init__(self, env, settings: RouteSettings | None = None):
+        settings = settings or RouteSettings()
+        settings.check()
+        fields = getattr(env, "observation_fields", {})
+        if "goal_dir" not in fields or "goal_dist" not in fields or not hasattr(type(env), "goal_world"):
+            raise ConfigError(f"route: the {type(env).__name__} task has no goal_dir/goal_dist goal to guide "
+                              "(reach and path tasks have)")
+        self.env, self.settings = env, settings
+        self._maps: dict[int, tuple[tuple, RouteMap]] = {}
+        self.plans = 0
+        """Routes planned so far (a new goal or a changed scene plans anew)."""
+
+    def _scene_key(self, i: int) -> tuple:
+        s = self.env.scene.row(i)
+        parts = [s.box_center[0][s.box_mask[0]], s.box_half[0][s.box_mask[0]], s.box_yaw[0][s.box_mask[0]],
+                 s.cyl_center[0][s.cyl_mask[0]], s.cyl_radius[0][s.cyl_mask[0]], s.cyl_half_height[0][s.cyl_mask[0]]]
+        return tuple(round(float(v), 5) for p in parts for v in p.reshape(-1).tolist())
+
+    def goals(self) -> torch.Tensor:
+        """(N, 3) the goal each env's policy should see now (the task's goal where no object is in the way)."""
+        env = self.env
+        goal = env.goal_world.detach().to("cpu", torch.float64)
+        out = goal.clone()
+        scene = getattr(env, "scene", None)
+        if scene is None:
+            return out
+        counts = scene.batch.object_counts().cpu()
+        pelvis = env.history_world()[:, -1, PELVIS, :2].detach().to("cpu", torch.float64).numpy()
+        for i in range(env.num_envs):
+            if int(counts[i if counts.numel() > 1 else 0]) == 0:
+                continue
+            key = (tuple(round(v, 5) for v in goal[i, :2].tolist()), self._scene_key(i))
+            held = self._maps.get(i)
+            if held is None or held[0] != key:
+                held = (key, RouteMap(scene.row(i), pelvis[i], goal[i, :2].numpy(), self.settings))
+                self._maps[i] = held
+                self.plans += 1
+            point, left = held[1].carrot(pelvis[i])
+            if np.allclose(point, goal[i, :2].numpy()):
+                continue
+            away = point - pelvis[i]
+            norm = float(np.hypot(*away))
+            if norm < 1e-6:
+                continue
+            out[i, :2] = torch.from_numpy(pelvis[i] + away / norm * left)
+        return out
+
+    def observe(self, obs: torch.Tensor) -> torch.Tensor:
+        """``obs`` with the goal fields of every guided env showing :meth:`goals` (others untouched)."""
+        goal = self.env.goal_world.detach().to("cpu", torch.float64)
+        seen = self.goals()
+        moved = (seen != goal).any(dim=1)
+        if not bool(moved.any()):
+            return obs
+        fields = self.env.observation_fields
+        a, b = fields["goal_dir"][0], fields["goal_dist"][1]
+        out = torch.as_tensor(obs).clone()
+        feats = self.env.goal_features_of(seen.to(self.env.goal_world.device, self.env.goal_world.dtype))
+        rows = moved.nonzero().squeeze(1).to(out.device)
+        out[rows, a:b] = feats[rows].to(out.device, out.dtype)
+        return out
+

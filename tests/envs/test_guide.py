@@ -1,0 +1,103 @@
+"""The route guide (latentrl.envs.guide): the policy's goal moved onto the route, only where an object is in the way."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from latentrl.envs.path import FollowPathEnv, WaypointPath
+from latentrl.envs.reach import ReachLocationEnv
+from latentrl.envs.reach_joint import ReachJointEnv
+from latentrl.errors import ConfigError
+from latentrl.motion.skeleton import PELVIS
+from latentrl.scenes.route import RouteMap, RouteSettings
+from latentrl.scenes.scene import Box, Scene
+
+GOAL = WaypointPath(((0.0, 4.0, 0.0),), ("walk",))
+WALL = Scene([Box(center=(0.0, 2.0), size=(2.0, 0.2, 1.5))])
+FAR = Scene([Box(center=(6.0, 0.0), size=(0.5, 0.5, 1.0))])
+
+
+def env_with(model, scene, route=None, n: int = 2) -> FollowPathEnv:
+    env = FollowPathEnv(n, motion=model, paths=[GOAL], path_assignment="by_env", scene=scene, route=route,
+                        autoreset_mode="Disabled")
+    env.reset(seed=0)
+    return env
+
+
+def test_where_nothing_is_in_the_way_the_observation_is_the_unguided_one_bit_for_bit(tiny_model):
+    plain, guided = env_with(tiny_model, FAR), env_with(tiny_model, FAR, route=0.5)
+    actions = torch.randn(4, 2, tiny_model.latent_dim, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(plain.observation(), guided.observation())
+    for a in actions:
+        assert torch.equal(plain.step(a)[0], guided.step(a)[0])
+
+
+def test_a_wall_in_the_way_turns_the_seen_goal_toward_its_end_at_the_routes_length(tiny_model):
+    plain, guided = env_with(tiny_model, WALL), env_with(tiny_model, WALL, route=0.3)
+    obs, seen = plain.observation(), guided.observation()
+    fields = guided.observation_fields
+    a, b, dist = fields["goal_dir"][0], fields["goal_dist"][1], fields["goal_dist"][0]
+    assert torch.equal(seen[:, b:], obs[:, b:])  # text, motion and rays untouched
+    assert not torch.allclose(seen[:, a:b], obs[:, a:b])
+    pelvis = guided.history_world()[:, -1, PELVIS, :2].double()
+    route = RouteMap(guided.scene.row(0), pelvis[0].numpy(), (0.0, 4.0), RouteSettings(clearance=0.3))
+    point, left = route.carrot(pelvis[0].numpy())
+    assert abs(point[0]) > 0.3 and route.in_sight(pelvis[0].numpy(), point)  # beside the wall, in clear sight
+    away = torch.from_numpy(point) - pelvis[0]
+    goal = torch.zeros(2, 3)
+    goal[:, :2] = (pelvis[0] + away / away.norm() * left).float()
+    assert torch.allclose(seen[:, a:b], guided.goal_features_of(goal), atol=1e-5)
+    assert float(seen[0, dist]) == pytest.approx(min(left, guided.obs_goal_dist_clip), abs=1e-4)
+    assert float(obs[0, dist]) < float(seen[0, dist])  # the route is longer than the line
+
+
+def test_routes_are_planned_once_per_goal_and_scene(tiny_model):
+    env = env_with(tiny_model, WALL, route=0.5)
+    for _ in range(3):
+        env.step(torch.zeros(env.num_envs, env.motion.latent_dim))
+    assert env.guide.plans == env.num_envs  # one per env, not one per step
+    env.scene.replace(Scene([Box(center=(0.0, 2.5), size=(2.0, 0.2, 1.5))]))
+    env.observation()
+    assert env.guide.plans == 2 * env.num_envs
+
+
+def test_a_reach_env_with_random_obstacles_is_guided_and_steps(tiny_model):
+    env = ReachLocationEnv(4, motion=tiny_model, scene={"random_obstacles": {}}, route=0.5)
+    obs, _ = env.reset(seed=0)
+    for _ in range(3):
+        obs = env.step(torch.zeros(4, tiny_model.latent_dim))[0]
+    assert torch.isfinite(obs).all() and env.guide.plans >= 4
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda m: ReachJointEnv(1, motion=m, scene=WALL, route=0.5),
+     "^route: the ReachJointEnv task has no goal_dir/goal_dist goal to guide"),
+    (lambda m: ReachLocationEnv(1, motion=m, route=0.5), "^route: needs a scene"),
+    (lambda m: ReachLocationEnv(1, motion=m, scene=WALL, route=3.0),
+     r"^route clearance: expected metres in \[0.0, 2.0\]"),
+])
+def test_bad_routes_are_refused_in_one_line(tiny_model, make, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        make(tiny_model)
+    assert "\n" not in str(err.value)
+
+
+def test_play_heads_a_reach_policy_along_routes_when_asked_or_trained_so(tiny_model):
+    pytest.importorskip("viser")
+    from latentrl.viewer.live import play_env
+
+    plain = {"config": {"env": {"texts": ["walk"]}}}
+    stored = {"config": {"env": {"texts": ["walk"], "scene": {"random_obstacles": {}}, "route": 0.4}}}
+    assert play_env(plain, tiny_model, None, "cpu", "reach", WALL).guide is None
+    assert play_env(stored, tiny_model, None, "cpu", "reach", WALL).route.clearance == 0.4
+    assert play_env(stored, tiny_model, None, "cpu", "reach", WALL, route=0.0).guide is None  # --route 0: off
+    envs = [play_env(plain, tiny_model, None, "cpu", "reach", WALL, route=r) for r in (None, 0.5)]
+    for env in envs:
+        env.reset(seed=0)
+        env.set_goal((0.0, 4.0))  # a click behind the wall
+    fields = envs[1].observation_fields
+    a, b = fields["goal_dir"][0], fields["goal_dist"][1]
+    straight, routed = (env.observation() for env in envs)
+    assert not torch.allclose(straight[:, a:b], routed[:, a:b])
+    assert torch.equal(straight[:, b:], routed[:, b:])
