@@ -104,21 +104,27 @@ def test_eval_command_with_a_scene_for_a_policy_trained_without_one(eval_files, 
     assert len(err) == 1 and "--scene: scene file not found: nowhere.json" in err[0]
 
 
-def test_eval_avoid_records_its_settings_leaves_a_clear_plan_alone_and_a_stored_choice_is_the_default(
-        eval_files, tmp_path, capsys):
-    """``--avoid`` among far objects changes no metric (the filter acts only on a plan near an object); its
-    settings go into report.json; a policy storing ``eval.avoid`` is filtered without the flag."""
-    from latentrl.app.cli import main
-    from latentrl.ppo.checkpoint import read_checkpoint, save_checkpoint
+def far_scene_eval(eval_files, tmp_path) -> list[str]:
+    """``latentrl eval`` arguments of the tiny policy on one near goal, in a scene whose one box stands 40 m away."""
     from tests.evaluation.conftest import NEAR, write_paths
 
     paths = write_paths(tmp_path, [NEAR], "mini.json")
     far = tmp_path / "far.json"
     far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
         {"type": "box", "center": [30.0, 30.0], "size": [0.5, 0.5, 1.0]}]}))
-    base = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
+    return ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
             "--episodes", "2", "--max-steps", "3", "--device", "cpu", "--no-render", "--no-progress",
             "--scene", str(far)]
+
+
+def test_eval_avoid_records_its_settings_leaves_a_clear_plan_alone_and_a_stored_choice_is_the_default(
+        eval_files, tmp_path, capsys):
+    """``--avoid`` among far objects changes no metric (the filter acts only on a plan near an object); its
+    settings go into report.json; a policy storing ``eval.avoid`` is filtered without the flag."""
+    from latentrl.app.cli import main
+    from latentrl.ppo.checkpoint import read_checkpoint, save_checkpoint
+
+    base = far_scene_eval(eval_files, tmp_path)
     assert main([*base, "--out", str(tmp_path / "plain")]) == 0
     assert main([*base, "--out", str(tmp_path / "filtered"), "--avoid", "3", "--avoid-horizon", "1"]) == 0
     plain, filtered = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "filtered"))
@@ -142,15 +148,8 @@ def test_eval_route_records_its_settings_leaves_a_clear_way_alone_and_a_stored_c
     goal); its clearance goes into report.json's settings; a policy storing ``eval.route`` is guided without it."""
     from latentrl.app.cli import main
     from latentrl.ppo.checkpoint import read_checkpoint, save_checkpoint
-    from tests.evaluation.conftest import NEAR, write_paths
 
-    paths = write_paths(tmp_path, [NEAR], "mini.json")
-    far = tmp_path / "far.json"
-    far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
-        {"type": "box", "center": [30.0, 30.0], "size": [0.5, 0.5, 1.0]}]}))
-    base = ["eval", str(eval_files["policy"]), "--motion", str(eval_files["motion"]), "--paths", str(paths),
-            "--episodes", "2", "--max-steps", "3", "--device", "cpu", "--no-render", "--no-progress",
-            "--scene", str(far)]
+    base = far_scene_eval(eval_files, tmp_path)
     assert main([*base, "--out", str(tmp_path / "plain")]) == 0
     assert main([*base, "--out", str(tmp_path / "guided"), "--route", "0.5"]) == 0
     plain, guided = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "guided"))
