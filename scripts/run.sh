@@ -58,7 +58,8 @@ case "${1:-}" in
         setup
         shift
         "$VENV/bin/python" -m ruff check latentrl tests
-        "$VENV/bin/python" -m pytest -q "$@"
+        # two worker processes by default (the CI machine's 2 cores); LATENTRL_TEST_WORKERS=0 runs in this process
+        "$VENV/bin/python" -m pytest -q -n "${LATENTRL_TEST_WORKERS:-2}" "$@"
         ;;
     *)
         echo "usage: bash scripts/run.sh {quickstart|test|setup} [extra args]" >&2
