@@ -442,22 +442,22 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
                       self.text_table.embeddings[self._text_idx], self.floor_height,
                       self.scene.rays(history_world) if self.observe_scene else None,
                       self.scene.height_grid(history_world, self._grid_offsets) if self.height_grid else None)
-        return obs if self.guide is None else self.guide.observe(obs)
+        return obs if self.guide is None else self.guide.observe(obs, history_world)
 
     def _goal_features(self, history_world: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """(N, 4) :func:`goal_features` of ``goal`` with this env's clips."""
         return goal_features(history_world[:, -1], self._state.world.rotation, goal, self.obs_goal_angle_clip_deg,
                              self.obs_goal_dist_clip)
 
-    def goal_features_of(self, goal: torch.Tensor) -> torch.Tensor:
+    def goal_features_of(self, goal: torch.Tensor, history_world: torch.Tensor | None = None) -> torch.Tensor:
         """(N, 4) the ``goal_dir`` and ``goal_dist`` fields this env would observe for (N, 3) world ``goal``s.
 
         Why: a route guide (:mod:`latentrl.envs.guide`) shows a policy a waypoint of its route in place of the
-        task's goal, in exactly the form the policy was trained on.
+        task's goal, in exactly the form the policy was trained on. ``history_world``: :meth:`history_world`, when
+        the caller holds it already.
         """
-        state = self._require_state()
         with torch.no_grad():
-            return self._goal_features(state.world.apply(joints_of(state.history)), goal)
+            return self._goal_features(self.history_world() if history_world is None else history_world, goal)
 
     def step_inputs(self) -> dict[str, Any]:
         """What the next :meth:`step` feeds the motion model besides the noise.

@@ -38,14 +38,20 @@ class RouteGuide:
         self.plans = 0
         """Routes planned so far (a new goal or a changed scene plans anew)."""
 
-    def _scene_key(self, i: int) -> tuple:
-        s = self.env.scene.row(i)
-        parts = [s.box_center[0][s.box_mask[0]], s.box_half[0][s.box_mask[0]], s.box_yaw[0][s.box_mask[0]],
-                 s.cyl_center[0][s.cyl_mask[0]], s.cyl_radius[0][s.cyl_mask[0]], s.cyl_half_height[0][s.cyl_mask[0]]]
-        return tuple(round(float(v), 5) for p in parts for v in p.reshape(-1).tolist())
+    def _scene_keys(self) -> list[tuple]:
+        """One hashable key per env's scene row (a fixed scene: one row for all), read in one pass per call."""
+        s = self.env.scene.batch
+        rows = torch.cat((s.box_center.flatten(1), s.box_half.flatten(1), s.box_yaw, s.box_mask.to(s.box_yaw.dtype),
+                          s.cyl_center.flatten(1), s.cyl_radius, s.cyl_half_height,
+                          s.cyl_mask.to(s.cyl_radius.dtype)), dim=1)
+        keys = [tuple(r) for r in rows.tolist()]
+        return keys * self.env.num_envs if len(keys) == 1 else keys
 
-    def goals(self) -> torch.Tensor:
-        """(N, 3) the goal each env's policy should see now (the task's goal where no object is in the way)."""
+    def goals(self, history_world: torch.Tensor | None = None) -> torch.Tensor:
+        """(N, 3) the goal each env's policy should see now (the task's goal where no object is in the way).
+
+        ``history_world``: the env's :meth:`history_world`, when the caller holds it already.
+        """
         env = self.env
         goal = env.goal_world.detach().to("cpu", torch.float64)
         out = goal.clone()
@@ -53,11 +59,13 @@ class RouteGuide:
         if scene is None:
             return out
         counts = scene.batch.object_counts().cpu()
-        pelvis = env.history_world()[:, -1, PELVIS, :2].detach().to("cpu", torch.float64).numpy()
+        history_world = env.history_world() if history_world is None else history_world
+        pelvis = history_world[:, -1, PELVIS, :2].detach().to("cpu", torch.float64).numpy()
+        scene_keys = self._scene_keys()
         for i in range(env.num_envs):
             if int(counts[i if counts.numel() > 1 else 0]) == 0:
                 continue
-            key = (tuple(round(v, 5) for v in goal[i, :2].tolist()), self._scene_key(i))
+            key = (tuple(round(v, 5) for v in goal[i, :2].tolist()), scene_keys[i])
             held = self._maps.get(i)
             if held is None or held[0] != key:
                 held = (key, RouteMap(scene.row(i), pelvis[i], goal[i, :2].numpy(), self.settings))
@@ -73,18 +81,22 @@ class RouteGuide:
             out[i, :2] = torch.from_numpy(pelvis[i] + away / norm * left)
         return out
 
-    def observe(self, obs: torch.Tensor) -> torch.Tensor:
-        """``obs`` with the goal fields of every guided env showing :meth:`goals` (others untouched)."""
+    def observe(self, obs: torch.Tensor, history_world: torch.Tensor | None = None) -> torch.Tensor:
+        """``obs`` with the goal fields of every guided env showing :meth:`goals` (others untouched).
+
+        ``history_world``: the env's :meth:`history_world` (the env's own observation passes what it computed).
+        """
+        history_world = self.env.history_world() if history_world is None else history_world
         goal = self.env.goal_world.detach().to("cpu", torch.float64)
-        seen = self.goals()
+        seen = self.goals(history_world)
         moved = (seen != goal).any(dim=1)
         if not bool(moved.any()):
             return obs
         fields = self.env.observation_fields
         a, b = fields["goal_dir"][0], fields["goal_dist"][1]
         out = torch.as_tensor(obs).clone()
-        feats = self.env.goal_features_of(seen.to(self.env.goal_world.device, self.env.goal_world.dtype))
+        feats = self.env.goal_features_of(seen.to(self.env.goal_world.device, self.env.goal_world.dtype),
+                                          history_world)
         rows = moved.nonzero().squeeze(1).to(out.device)
         out[rows, a:b] = feats[rows].to(out.device, out.dtype)
         return out
-

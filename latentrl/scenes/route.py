@@ -1,7 +1,7 @@
 """Routes among objects: the shortest walk to a goal that keeps clear of every object, and where to head next.
 
 Why: a policy that sees the scene through its rays steers around each object as it meets it; the obstacle reach
-policy walks twice the straight line where a route 0.25 m clear of every object is 8 % longer (docs/scenes.md,
+policy walks twice the straight line where a route 0.25 m clear of every object is 4.5 % longer (docs/scenes.md,
 "Where the reach time goes"). A grid planner sees the whole scene at once. :class:`RouteMap` holds, for one
 goal in one scene, the length of the shortest route from every grid cell to within ``reach`` of the goal
 (Dijkstra from the goal, 16-connected); :meth:`RouteMap.carrot` turns it into a heading for a walker anywhere on
@@ -97,8 +97,6 @@ class RouteMap:
             walkable &= self.sdf >= min(settings.clearance, float(self.sdf[si, sj])) - 1e-9
         walkable[si, sj] = True
         self.walkable = walkable
-        self.clear = self.sdf > settings.clearance
-        self.clear[si, sj] = True
         depth = np.clip((settings.clearance - self.sdf) / max(settings.clearance, 1e-9), 0.0, 1.0)
         band = 0.0 if not math.isfinite(settings.band_cost) else settings.band_cost
         self.weight = 1.0 + band * depth
