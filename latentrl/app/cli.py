@@ -505,6 +505,10 @@ def _eval_commands(sub) -> None:
     ev.add_argument("--avoid-margin", type=float, default=None, metavar="M",
                     help="with --avoid: metres beyond each joint's skin radius kept from every object (feet and "
                          "ankles: the skin alone; default: the policy's stored eval.avoid_margin, else 0.1)")
+    ev.add_argument("--avoid-samples", type=int, default=None, metavar="K",
+                    help="with --avoid: first try K more draws of the stochastic policy in one batched prediction and "
+                         "take the safe one ending nearest the policy's own plan; the optimizer only where none is "
+                         "safe (default: the policy's stored eval.avoid_samples, else 0; not with --refine)")
     ev.add_argument("--route", type=float, default=None, metavar="M",
                     help="reach and path policies among objects: plan the shortest route to each goal keeping M "
                          "metres from every object, and show the policy the farthest route point in clear sight as "

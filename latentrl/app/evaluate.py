@@ -113,6 +113,9 @@ class EvalRequest:
     avoid_margin: float | None = None
     """With ``avoid``: metres beyond each joint's skin kept from objects (None: the stored ``eval.avoid_margin``,
     else 0.1)."""
+    avoid_samples: int | None = None
+    """With ``avoid``: draws of the policy tried before the optimizer (None: the stored ``eval.avoid_samples``,
+    else 0)."""
     route: float | None = None
     """Evaluations among objects: the policy sees the next point of the shortest route keeping this many metres
     from every object in place of its goal (``latentrl.envs.guide``; 0: off; None: the policy's stored
@@ -132,7 +135,7 @@ class EvalRequest:
                    ("--refine-start", self.refine_start),
                    ("--refine-pace", self.refine_pace), ("--avoid", self.avoid),
                    ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin),
-                   ("--route", self.route))
+                   ("--avoid-samples", self.avoid_samples), ("--route", self.route))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -269,7 +272,7 @@ def evaluate(req: EvalRequest) -> int:
                              ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
                              ("refine_pace", "--refine-pace", float), ("avoid", "--avoid", int),
                              ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
-                             ("route", "--route", float)):
+                             ("avoid_samples", "--avoid-samples", int), ("route", "--route", float)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
         head = name.split("_")[0]
         if getattr(req, name) is None and name in stored and not req.physics and (name == head or getattr(req, head)):
@@ -299,6 +302,7 @@ def evaluate(req: EvalRequest) -> int:
         settings.route = float(req.route) or None
     observe_next = evaluator.fit(policy, model, files, settings, observe_next)
     act = policy_fn(policy, settings.deterministic)
+    sample = policy_fn(policy, False)  # the scene filter's draws (--avoid-samples) are the policy's own
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
     extra_run: dict[str, Any] = {}
     if refiner is not None or avoider is not None:
@@ -308,7 +312,7 @@ def evaluate(req: EvalRequest) -> int:
         def wrap(env: Any, policy_act: Callable) -> Callable:
             """The policy, then the refiner, then the scene filter (the last word is the filter's)."""
             out = refining(env, policy_act, refiner) if refiner is not None else policy_act
-            return avoiding(env, out, avoider) if avoider is not None else out
+            return avoiding(env, out, avoider, sample) if avoider is not None else out
 
         extra_run["wrap"] = wrap
     # an evaluator written before ``after_entry`` existed still runs, without the bar and the reports in between
@@ -392,12 +396,16 @@ def _avoider(req: EvalRequest, evaluator: Any, task: str) -> AvoidSettings | Non
                           "does: reach, path, timed, joystick and ReachJoint policies); leave out --avoid")
     if req.physics:
         raise ConfigError("--avoid: not with --physics (the filter predicts the kinematic step)")
-    settings = AvoidSettings.of(req.avoid, req.avoid_horizon, req.avoid_margin)
+    settings = AvoidSettings.of(req.avoid, req.avoid_horizon, req.avoid_margin, req.avoid_samples)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'
         raise ConfigError(str(exc).replace("avoid steps:", "--avoid:").replace("avoid horizon:", "--avoid-horizon:")
-                          .replace("avoid margin:", "--avoid-margin:")) from None
+                          .replace("avoid margin:", "--avoid-margin:")
+                          .replace("avoid samples:", "--avoid-samples:")) from None
+    if settings.samples and req.refine:
+        raise ConfigError("--avoid-samples: not with --refine (the draws would drop the refinement); "
+                          "leave out one of them")
     return settings
 
 

@@ -61,6 +61,8 @@ class EvalConfig:
     """With ``avoid``: its ``--avoid-horizon`` (None: 2)."""
     avoid_margin: float | None = None
     """With ``avoid``: its ``--avoid-margin``, metres (None: 0.1)."""
+    avoid_samples: int | None = None
+    """With ``avoid``: its ``--avoid-samples``, draws of the policy tried before the optimizer (None: 0)."""
     route: float | None = None
     """Reach and path policies among objects: the route guide's clearance, metres, that ``latentrl eval`` applies by
     default (its ``--route``; the card's figures); None: off. The trainer's periodic evaluation does not guide."""
@@ -97,6 +99,8 @@ class EvalConfig:
                 f"must be 1-16 primitives (or null: 2), got {self.avoid_horizon}")
         require(self.avoid_margin is None or 0 <= self.avoid_margin <= 1, "avoid_margin",
                 f"must be metres in [0, 1] (or null: 0.1), got {self.avoid_margin}")
+        require(self.avoid_samples is None or 0 <= self.avoid_samples <= 256, "avoid_samples",
+                f"must be 0-256 draws (or null: 0), got {self.avoid_samples}")
         require(self.route is None or 0 <= self.route <= 2, "route",
                 f"must be metres in [0, 2] (or null: off), got {self.route}")
 

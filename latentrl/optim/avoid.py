@@ -48,17 +48,24 @@ class AvoidSettings:
     lr: float = 0.3
     prior: float = 0.1
     """Weight of the noise-shell penalty (the ``prior`` reward term) of the executed noise."""
+    samples: int = 0
+    """Other draws of a stochastic policy tried first, in one batched prediction (0: none): of those whose plan
+    keeps out of the band, the one whose pelvis ends nearest the policy's own plan's is executed; only envs where
+    none does are optimized."""
 
     @classmethod
-    def of(cls, steps: int, horizon: int | None = None, margin: float | None = None) -> AvoidSettings:
-        """The settings of ``steps``, ``horizon`` and ``margin``, each None taking the default (flags, stored ones)."""
-        chosen = {"horizon": horizon, "margin": margin}
+    def of(cls, steps: int, horizon: int | None = None, margin: float | None = None,
+           samples: int | None = None) -> AvoidSettings:
+        """The settings of these four, each None taking its default (flags, stored ones)."""
+        chosen = {"horizon": horizon, "margin": margin, "samples": samples}
         return cls(steps=steps, **{k: v for k, v in chosen.items() if v is not None})
 
     def check(self) -> None:
         """One-line :class:`LatentRLError` for a value out of range."""
         if not 0 <= self.steps <= 1000:
             raise LatentRLError(f"avoid steps: expected 0-1000, got {self.steps}")
+        if not 0 <= self.samples <= 256:
+            raise LatentRLError(f"avoid samples: expected 0-256, got {self.samples}")
         if not 1 <= self.horizon <= 16:
             raise LatentRLError(f"avoid horizon: expected 1-16 primitives, got {self.horizon}")
         if not 0 <= self.margin <= 1:
@@ -94,8 +101,34 @@ def _rows(inputs: dict, idx: torch.Tensor) -> dict:
     return out
 
 
-def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
-    """The (N, D) noise to step ``env`` with: ``action``, or near it where its plan comes too close to an object."""
+def _safe_sample(model, inputs: dict, scene, keep: torch.Tensor, plan: torch.Tensor, tail: torch.Tensor,
+                 draws: torch.Tensor, bound: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Of ``draws`` (K, R, 1, D) for R envs at risk, each env's safe draw ending nearest ``plan`` (R, T, 22, 3).
+
+    Returns the (R, 1, D) chosen noises and an (R,) mask of envs with a safe draw. Why: another draw of the
+    policy is an action it was trained to take (its pace and gait), where an optimized noise may leave its habits.
+    """
+    k, r = draws.shape[:2]
+    rows = torch.arange(r, device=draws.device).repeat(k)
+    inputs_k = _rows(inputs, rows)
+    scene_k = scene if scene.num_scenes == 1 else scene.index(rows)
+    z = torch.cat((draws.clamp(-bound, bound).reshape(1, k * r, *draws.shape[2:]), tail[:, rows]), dim=0)
+    with torch.no_grad():
+        joints = predict(model, inputs_k, z)
+        unsafe = (collision_cost(joints, scene_k, keep) > 0).reshape(k, r)
+        miss = (joints[:, -1, 0, :2] - plan[rows, -1, 0, :2]).norm(dim=-1).reshape(k, r)
+    miss = miss.masked_fill(unsafe, float("inf"))
+    pick = miss.argmin(dim=0)
+    chosen = draws[pick, torch.arange(r, device=draws.device)].clamp(-bound, bound)
+    return chosen, ~unsafe.all(dim=0)
+
+
+def avoid(env, action: torch.Tensor, settings: AvoidSettings,
+          sampler: Callable[[int], torch.Tensor] | None = None) -> torch.Tensor:
+    """The (N, D) noise to step ``env`` with: ``action``, or near it where its plan comes too close to an object.
+
+    ``sampler(k)``: k more (k, N, D) draws of the policy for the same observation (``settings.samples``).
+    """
     if settings.steps == 0 or getattr(env, "scene", None) is None:
         return action
     model = env.motion
@@ -118,6 +151,16 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
     if not bool(risk.any()):
         return action
     idx = risk.nonzero().squeeze(1)
+    out = given.clone()
+    if settings.samples and sampler is not None:
+        draws = torch.as_tensor(sampler(settings.samples), device=given.device).detach().to(torch.float32)
+        draws = draws.reshape(settings.samples, n, *model.latent_shape)[:, idx]
+        sub_scene = scene if scene.num_scenes == 1 else scene.index(idx)
+        chosen, found = _safe_sample(model, _rows(inputs, idx), sub_scene, keep, plan[idx], z[1:, idx], draws, bound)
+        out[idx[found]] = chosen[found]
+        idx = idx[~found]
+        if idx.numel() == 0:
+            return out.reshape(n, -1)
     sub_inputs = _rows(inputs, idx)
     sub_scene = scene if scene.num_scenes == 1 else scene.index(idx)
     policy, tail = z[0, idx].clone(), z[1:, idx]
@@ -145,17 +188,26 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings) -> torch.Tensor:
         opt.step()
         with torch.no_grad():
             first.clamp_(-bound, bound)
-    out = given.clone()
     out[idx] = best
     return out.reshape(n, -1)
 
 
-def avoiding(env, act: Callable[[torch.Tensor], torch.Tensor], settings: AvoidSettings
-             ) -> Callable[[torch.Tensor], torch.Tensor]:
-    """``act`` (obs -> action) followed by :func:`avoid` on ``env``'s state: an evaluation's policy function."""
+def draws(sample: Callable[[torch.Tensor], torch.Tensor], obs: torch.Tensor) -> Callable[[int], torch.Tensor]:
+    """:func:`avoid`'s ``sampler``: ``k`` calls of a stochastic policy ``sample`` (obs -> action) on ``obs``."""
+    return lambda k: torch.stack([sample(obs) for _ in range(k)])
+
+
+def avoiding(env, act: Callable[[torch.Tensor], torch.Tensor], settings: AvoidSettings,
+             sample: Callable[[torch.Tensor], torch.Tensor] | None = None) -> Callable[[torch.Tensor], torch.Tensor]:
+    """``act`` (obs -> action) followed by :func:`avoid` on ``env``'s state: an evaluation's policy function.
+
+    ``sample``: the policy drawing its actions (``settings.samples`` of them are tried first where a plan comes
+    near an object); None: ``act``'s own calls.
+    """
     settings.check()
+    sample = act if sample is None else sample
 
     def filtered(obs: torch.Tensor) -> torch.Tensor:
-        return avoid(env, act(obs), settings)
+        return avoid(env, act(obs), settings, draws(sample, obs))
 
     return filtered

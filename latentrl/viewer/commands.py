@@ -140,7 +140,11 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
         from latentrl.optim.avoid import AvoidSettings
 
         stored = stored_eval_choices(policy)
-        avoid = AvoidSettings.of(int(stored.get("avoid") or 0), stored.get("avoid_horizon"), stored.get("avoid_margin"))
+        from latentrl.viewer.live import PLAY_SAMPLES
+
+        samples = stored.get("avoid_samples")
+        avoid = AvoidSettings.of(int(stored.get("avoid") or 0), stored.get("avoid_horizon"), stored.get("avoid_margin"),
+                                 PLAY_SAMPLES if samples is None else int(samples))
         controller = LiveController(server, env, loaded.policy, title, env.texts[0], avoid=avoid, **common)
     controller.start()
     code = serve_until_interrupted(server, "play", host, controller.stop)

@@ -28,7 +28,7 @@ from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
-from latentrl.optim.avoid import AvoidSettings, avoid
+from latentrl.optim.avoid import AvoidSettings, avoid, draws
 from latentrl.scenes.scene import Box, Scene
 from latentrl.scenes.spec import MAX_OBJECTS
 from latentrl.viewer.guard import choice, complain, vector
@@ -196,6 +196,12 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     return SteeredReachEnv(1, route=route, **common)
 
 
+PLAY_SAMPLES = 16
+"""Draws of the policy the play page's scene filter tries before its optimizer, unless the policy stores
+``eval.avoid_samples``: a live character waits for every filtered step (docs/scenes.md, "Draws before the
+optimizer")."""
+
+
 class LiveController:
     """Runs a policy on a steered env and draws the result in a Viser server.
 
@@ -216,7 +222,8 @@ class LiveController:
         skeleton: draw the skeleton as well as the body from the start (``--skeleton``).
         avoid: the scene filter's settings (:mod:`latentrl.optim.avoid`; the policy's stored ``eval.avoid*``);
             its checkbox starts on when ``avoid.steps`` > 0. Near an object a filtered step takes up to a second on
-            a CPU, so the motion may pause there.
+            a CPU, so the motion may pause there; ``avoid.samples`` draws of the policy tried first shorten most of
+            those steps (``latentrl play`` tries :data:`PLAY_SAMPLES` unless the policy stores its own).
     """
 
     def __init__(self, server: Any, env: SteeredReachEnv | SteeredJoystickEnv, policy: Any, title: str, text: str,
@@ -487,7 +494,8 @@ class LiveController:
         with torch.no_grad():
             action = self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
         if self.filtering.value is True and getattr(self.env, "scene", None) is not None:
-            action = avoid(self.env, action, self.avoid)
+            sample = lambda obs: self.policy.act(obs, deterministic=False).action  # noqa: E731
+            action = avoid(self.env, action, self.avoid, draws(sample, self.obs))
         return action
 
     def _generate(self) -> None:
@@ -545,7 +553,8 @@ class LiveController:
             "the policy does not see them: trained without a scene"
         n = len(world.objects)
         dropped = f", {self.dropped} dropped" if self.dropped else ""
-        kept = f"; scene filter on ({self.avoid.steps} steps)" if self.filtering.value is True else ""
+        draws = f", {self.avoid.samples} draws first" if self.avoid.samples else ""
+        kept = f"; scene filter on ({self.avoid.steps} steps{draws})" if self.filtering.value is True else ""
         return f"  \nscene: {n} object{'' if n == 1 else 's'}{dropped} ({seen}{kept})"
 
     def status_text(self) -> str:

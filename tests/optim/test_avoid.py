@@ -102,7 +102,8 @@ def test_the_settings_refuse_values_out_of_range_in_one_line():
                          (dict(horizon=0), "avoid horizon: expected 1-16 primitives, got 0"),
                          (dict(margin=2.0), "avoid margin: expected metres in [0, 1], got 2.0"),
                          (dict(lr=0.0), "avoid lr: expected a learning rate in (0, 10], got 0.0"),
-                         (dict(anchor=-1.0), "avoid anchor: expected a weight in [0, 1e6], got -1.0")):
+                         (dict(anchor=-1.0), "avoid anchor: expected a weight in [0, 1e6], got -1.0"),
+                         (dict(samples=-1), "avoid samples: expected 0-256, got -1")):
         with pytest.raises(LatentRLError) as err:
             AvoidSettings(**bad).check()
         assert str(err.value) == message
@@ -115,3 +116,69 @@ def test_an_empty_scene_gets_the_policys_own_action_without_a_prediction(model, 
     monkeypatch.setattr(A, "predict", lambda *a, **k: pytest.fail("an empty scene needs no prediction"))
     action = torch.zeros(1, model.latent_dim)
     assert avoid(env, action, AvoidSettings()) is action
+
+
+def _at_the_wall(model):
+    """A walker facing WALL, the zero noise whose plan comes too close, and an optimized noise whose plan keeps out."""
+    env = walker(model, WALL)
+    zeros = torch.zeros(1, model.latent_dim)
+    safe = avoid(env, zeros, AvoidSettings())
+    assert not torch.equal(safe, zeros)  # the zero-noise plan is at risk here
+    return env, zeros, safe
+
+
+def _plan(env, model, noise: torch.Tensor) -> torch.Tensor:
+    z = torch.zeros(2, 1, *model.latent_shape)
+    z[0] = noise.reshape(1, *model.latent_shape)
+    with torch.no_grad():
+        return predict(model, env.step_inputs(), z)
+
+
+def test_a_safe_draw_of_the_policy_is_taken_without_the_optimizer(model, monkeypatch):
+    import latentrl.optim.avoid as A
+
+    env, zeros, safe = _at_the_wall(model)
+    keep = band(_plan(env, model, zeros), 0.1)
+    assert float(collision_cost(_plan(env, model, safe), env.scene.batch, keep)[0]) == 0.0
+    monkeypatch.setattr(A.torch.optim, "Adam", lambda *a, **k: pytest.fail("a safe draw needs no optimizer"))
+    chosen = avoid(env, zeros, AvoidSettings(samples=2), lambda k: torch.stack([zeros, safe]))
+    assert torch.equal(chosen, safe)
+
+
+def test_of_the_safe_draws_the_one_ending_nearest_the_policys_own_plan_is_taken(model):
+    env, zeros, safe = _at_the_wall(model)
+    other = safe + 0.05 * torch.randn(safe.shape, generator=torch.Generator().manual_seed(1))
+    keep, scene = band(_plan(env, model, zeros), 0.1), env.scene.batch
+    plans = {name: _plan(env, model, z) for name, z in (("safe", safe), ("other", other))}
+    assert all(float(collision_cost(p, scene, keep)[0]) == 0.0 for p in plans.values())
+    own_end = _plan(env, model, zeros)[0, -1, 0, :2]
+    miss = {name: float((p[0, -1, 0, :2] - own_end).norm()) for name, p in plans.items()}
+    assert miss["safe"] != miss["other"]
+    nearest = safe if miss["safe"] < miss["other"] else other
+    for order in ((safe, other), (other, safe)):
+        chosen = avoid(env, zeros, AvoidSettings(samples=2), lambda k, o=order: torch.stack(o))
+        assert torch.allclose(chosen, nearest, atol=1e-6)
+
+
+def test_where_no_draw_is_safe_the_optimizer_moves_the_policys_own_noise(model):
+    env, zeros, safe = _at_the_wall(model)
+    chosen = avoid(env, zeros, AvoidSettings(samples=3), lambda k: torch.zeros(k, 1, model.latent_dim))
+    assert torch.equal(chosen, safe)  # the same optimization as without draws, bit for bit
+
+
+def test_avoiding_draws_its_samples_from_the_sampling_policy_only_where_a_plan_is_at_risk(model):
+    calls = []
+
+    def policy(obs):
+        calls.append(1)
+        return torch.zeros(obs.shape[0], model.latent_dim)
+
+    far = Scene([Box(center=(0.0, 20.0), size=(1.0, 1.0, 1.0))])
+    env = walker(model, far)
+    avoiding(env, lambda obs: torch.zeros(obs.shape[0], model.latent_dim), AvoidSettings(samples=5),
+             policy)(env.observation())
+    assert calls == []  # a clear plan costs no draw (and no random number)
+    env = walker(model, WALL)
+    avoiding(env, lambda obs: torch.zeros(obs.shape[0], model.latent_dim), AvoidSettings(samples=5),
+             policy)(env.observation())
+    assert len(calls) == 5

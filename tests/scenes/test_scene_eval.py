@@ -130,16 +130,17 @@ def test_eval_avoid_records_its_settings_leaves_a_clear_plan_alone_and_a_stored_
     plain, filtered = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "filtered"))
     assert "avoid" not in plain
     assert filtered["avoid"] == {"steps": 3, "horizon": 1, "margin": 0.1, "anchor": 0.1, "weight": 100.0, "lr": 0.3,
-                                 "prior": 0.1}
+                                 "prior": 0.1, "samples": 0}
     assert filtered["overall"]["metrics"] == plain["overall"]["metrics"]
     state = read_checkpoint(eval_files["policy"], map_location="cpu")
-    state["config"] = {**(state.get("config") or {}), "eval": {"avoid": 2, "avoid_margin": 0.2}}
+    state["config"] = {**(state.get("config") or {}), "eval": {"avoid": 2, "avoid_margin": 0.2, "avoid_samples": 4}}
     stored = save_checkpoint(state, tmp_path / "stored.pt")
     capsys.readouterr()
     assert main([*base[:1], str(stored), *base[2:], "--out", str(tmp_path / "stored")]) == 0
     assert "--avoid 2 (the policy's stored evaluation setting; --avoid overrides)" in capsys.readouterr().out
     report = json.loads((tmp_path / "stored" / "report.json").read_text())
     assert report["avoid"]["steps"] == 2 and report["avoid"]["margin"] == 0.2 and report["avoid"]["horizon"] == 2
+    assert report["avoid"]["samples"] == 4
 
 
 def test_eval_route_records_its_settings_leaves_a_clear_way_alone_and_a_stored_choice_is_the_default(

@@ -401,3 +401,7 @@ def test_the_scene_filter_checkbox_moves_the_noise_off_a_pillar_ahead_and_only_t
     assert plan_intrusion(near, filtered) < plan_intrusion(near, plain_action)
     far = controller(20.0)
     assert torch.equal(far._action(), plain_action)  # nothing near: the policy's own action
+    drawn = controller(0.8)
+    drawn.avoid.samples = 16
+    assert "scene filter on (8 steps, 16 draws first)" in drawn.status_text()
+    assert plan_intrusion(drawn, drawn._action()) < plan_intrusion(drawn, plain_action)
