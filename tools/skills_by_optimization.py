@@ -30,21 +30,25 @@ import time
 
 import torch
 
-from latentrl.app.bench.motion import SEAT_HEIGHTS_M, SKILL_SECONDS
+from latentrl.app.bench.motion import SEAT_HEIGHTS_M, SKILL_SECONDS, _standing_rollout
+from latentrl.constants import GUIDANCE_SCALE
 from latentrl.evaluation import skill_checks as S
-from latentrl.motion.canonical import features_to_world
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.optim.problems import parse_problem
 from latentrl.optim.solver import OptimizeSettings, optimize
+from latentrl.safe_io import atomic_write_text
 
 
-def standing_frame(model) -> torch.Tensor:
-    """(22, 3) the standing seed's second frame (what the bench places seats from)."""
-    seed = model.initial_state(1, seed_index=torch.zeros(1, dtype=torch.long))
-    world = features_to_world(seed.history, seed.world, model.pelvis_delta)[0]
-    return world[1, 144:210].reshape(22, 3)
+def primitives_of(seconds: float) -> int:
+    """Primitives of a ``seconds``-long check, as the bench's rollout counts them."""
+    return max(1, round(seconds * FPS / FUTURE_LENGTH))
+
+
+def drawn(model, text: str, seconds: float, batch: int) -> torch.Tensor:
+    """(B, T, 22, 3) the bench's own rollouts of ``text`` from the standing seed (seed 0, N(0, I) noise)."""
+    return _standing_rollout(model, text, seconds, batch, 0, GUIDANCE_SCALE)
 
 
 def problem(seat: torch.Tensor, primitives: int, hold: int, collision: float, name: str) -> dict:
@@ -75,16 +79,11 @@ def reach(model, args) -> dict:
     from latentrl.app.bench.motion import REACH_FRACTIONS, REACH_SAMPLES
     from latentrl.datasets.locomotion.skills import REACH_DIRECTIONS
 
-    primitives = max(1, round(SKILL_SECONDS["reach"] * FPS / FUTURE_LENGTH))
-    frame = standing_frame(model)
+    primitives = primitives_of(SKILL_SECONDS["reach"])
+    samples = {hand: drawn(model, f"reach with the {('left', 'right')[hand]} hand", SKILL_SECONDS["reach"],
+                           REACH_SAMPLES) for hand in (0, 1)}
     jobs = [(hand, d, f) for hand in (0, 1) for d in REACH_DIRECTIONS for f in REACH_FRACTIONS]
-    targets = [S.reach_target(frame, hand, d, f) for hand, d, f in jobs]
-    drawn = {}
-    for hand in (0, 1):
-        g = torch.Generator(device=model.device).manual_seed(0)
-        state = model.initial_state(REACH_SAMPLES, g, seed_index=torch.zeros(REACH_SAMPLES, dtype=torch.long))
-        drawn[hand] = model.rollout(f"reach with the {('left', 'right')[hand]} hand", primitives,
-                                    batch=REACH_SAMPLES, generator=g, state=state).joints_world
+    targets = [S.reach_target(samples[hand][0, 1], hand, d, f) for hand, d, f in jobs]  # as the bench places them
     problems = [parse_problem(reach_problem(t, hand, primitives, f"{('left', 'right')[hand]}_{d}_{f}"), "reach", i)
                 for i, ((hand, d, f), t) in enumerate(zip(jobs, targets))]
     settings = OptimizeSettings(steps=args.steps, samples=args.samples, batch=len(problems))
@@ -93,7 +92,7 @@ def reach(model, args) -> dict:
     seconds = time.perf_counter() - t0
     rows = []
     for (hand, d, f), t, r in zip(jobs, targets, results):
-        best = float(S.reach_check(drawn[hand], t.expand(REACH_SAMPLES, 3), hand)["distance_m"].min())
+        best = float(S.reach_check(samples[hand], t.expand(REACH_SAMPLES, 3), hand)["distance_m"].min())
         got = float(S.reach_check(torch.as_tensor(r.joints), t, hand)["distance_m"])
         rows.append({"hand": ("left", "right")[hand], "direction": d, "fraction": f,
                      "drawn_best_cm": round(100 * best, 2), "optimized_cm": round(100 * got, 2)})
@@ -107,36 +106,12 @@ def reach(model, args) -> dict:
             "optimized_mean_cm": round(sum(r["optimized_cm"] for r in rows) / len(rows), 2), "rows": rows}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("model")
-    ap.add_argument("--skill", choices=("sit", "reach"), default="sit")
-    ap.add_argument("--seats", type=int, default=8)
-    ap.add_argument("--steps", type=int, default=100)
-    ap.add_argument("--samples", type=int, default=1)
-    ap.add_argument("--seconds", type=float, default=SKILL_SECONDS["sit"])
-    ap.add_argument("--hold", type=int, default=15)
-    ap.add_argument("--collision", type=float, default=0.1)
-    ap.add_argument("--floor", type=float, default=1.0)
-    ap.add_argument("--out", default=None)
-    args = ap.parse_args()
-    torch.set_num_threads(1)
-    model = load_motion_model(args.model)
-    if args.skill == "reach":
-        summary = reach(model, args)
-        print(json.dumps({k: v for k, v in summary.items() if k != "rows"}), flush=True)
-        if args.out:
-            with open(args.out, "w") as f:
-                json.dump(summary, f, indent=1)
-        return
-    primitives = max(1, round(args.seconds * FPS / FUTURE_LENGTH))
-    frame = standing_frame(model)
+def sit(model, args) -> dict:
+    """The sit check on ``args.seats`` seats, drawn (the bench's rollouts) and optimized, per seat."""
+    primitives = primitives_of(args.seconds)
+    raw = drawn(model, "sit down", args.seconds, args.seats)
     heights = torch.linspace(*SEAT_HEIGHTS_M, args.seats)
-    seats = torch.stack([S.seat_behind(frame, float(h)) for h in heights])
-    # the bench's protocol on the same seats: N(0, I) noise, the model's own sit
-    g = torch.Generator(device=model.device).manual_seed(0)
-    state = model.initial_state(args.seats, g, seed_index=torch.zeros(args.seats, dtype=torch.long))
-    raw = model.rollout("sit down", primitives, batch=args.seats, generator=g, state=state).joints_world
+    seats = torch.stack([S.seat_behind(raw[i, 1], float(h)) for i, h in enumerate(heights)])  # as the bench does
     raw_check = S.sit_check(raw, seats, args.hold)
     problems = [parse_problem(problem(seats[i], primitives, args.hold, args.collision, f"seat_{i}"), "sit", i)
                 for i in range(args.seats)]
@@ -162,17 +137,34 @@ def main() -> None:
               f"(height err {rows[-1]['raw']['height_err_cm']:5.1f} cm) | optimized seated "
               f"{rows[-1]['optimized']['seated']!s:5} (height err {rows[-1]['optimized']['height_err_cm']:5.1f} cm, "
               f"xy {rows[-1]['optimized']['xy_err_cm']:4.1f} cm)", flush=True)
-    summary = {"skill": "sit", "model": args.model, "seats": args.seats, "primitives": primitives, "steps": args.steps,
-               "samples": args.samples, "collision": args.collision, "floor": args.floor, "seconds": round(seconds, 1),
-               "raw_seated": float(raw_check["seated"].float().mean()),
-               "raw_height_err_cm": round(100 * float(raw_check["height_err_m"].mean()), 2),
-               "optimized_seated": float(check["seated"].float().mean()),
-               "optimized_height_err_cm": round(100 * float(check["height_err_m"].mean()), 2),
-               "optimized_xy_err_cm": round(100 * float(check["xy_err_m"].mean()), 2), "rows": rows}
+    return {"skill": "sit", "model": args.model, "seats": args.seats, "primitives": primitives, "steps": args.steps,
+            "samples": args.samples, "collision": args.collision, "floor": args.floor, "seconds": round(seconds, 1),
+            "raw_seated": float(raw_check["seated"].float().mean()),
+            "raw_height_err_cm": round(100 * float(raw_check["height_err_m"].mean()), 2),
+            "optimized_seated": float(check["seated"].float().mean()),
+            "optimized_height_err_cm": round(100 * float(check["height_err_m"].mean()), 2),
+            "optimized_xy_err_cm": round(100 * float(check["xy_err_m"].mean()), 2), "rows": rows}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("model")
+    ap.add_argument("--skill", choices=("sit", "reach"), default="sit")
+    ap.add_argument("--seats", type=int, default=8)
+    ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--samples", type=int, default=1)
+    ap.add_argument("--seconds", type=float, default=SKILL_SECONDS["sit"])
+    ap.add_argument("--hold", type=int, default=15)
+    ap.add_argument("--collision", type=float, default=0.1)
+    ap.add_argument("--floor", type=float, default=1.0)
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    model = load_motion_model(args.model)
+    summary = (reach if args.skill == "reach" else sit)(model, args)
     print(json.dumps({k: v for k, v in summary.items() if k != "rows"}), flush=True)
     if args.out:
-        with open(args.out, "w") as f:
-            json.dump(summary, f, indent=1)
+        atomic_write_text(args.out, json.dumps(summary, indent=1))
 
 
 if __name__ == "__main__":

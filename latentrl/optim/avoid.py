@@ -22,7 +22,7 @@ import torch
 
 from latentrl.errors import LatentRLError
 from latentrl.motion.rollout import RolloutState
-from latentrl.motion.skeleton import JOINT_NAMES
+from latentrl.motion.skeleton import JOINT_NAMES, PELVIS
 from latentrl.optim.refine import predict
 from latentrl.rewards.terms import noise_prior
 from latentrl.scenes.contact import collision_cost, skin_radii
@@ -101,6 +101,11 @@ def _rows(inputs: dict, idx: torch.Tensor) -> dict:
     return out
 
 
+def _scene_rows(scene, idx: torch.Tensor):
+    """The scenes of envs ``idx`` (a one-scene batch stays as it is: it answers any batch)."""
+    return scene if scene.num_scenes == 1 else scene.index(idx)
+
+
 def _safe_sample(model, inputs: dict, scene, keep: torch.Tensor, plan: torch.Tensor, tail: torch.Tensor,
                  draws: torch.Tensor, bound: float) -> tuple[torch.Tensor, torch.Tensor]:
     """Of ``draws`` (K, R, 1, D) for R envs at risk, each env's safe draw ending nearest ``plan`` (R, T, 22, 3).
@@ -111,12 +116,12 @@ def _safe_sample(model, inputs: dict, scene, keep: torch.Tensor, plan: torch.Ten
     k, r = draws.shape[:2]
     rows = torch.arange(r, device=draws.device).repeat(k)
     inputs_k = _rows(inputs, rows)
-    scene_k = scene if scene.num_scenes == 1 else scene.index(rows)
+    scene_k = _scene_rows(scene, rows)
     z = torch.cat((draws.clamp(-bound, bound).reshape(1, k * r, *draws.shape[2:]), tail[:, rows]), dim=0)
     with torch.no_grad():
         joints = predict(model, inputs_k, z)
         unsafe = (collision_cost(joints, scene_k, keep) > 0).reshape(k, r)
-        miss = (joints[:, -1, 0, :2] - plan[rows, -1, 0, :2]).norm(dim=-1).reshape(k, r)
+        miss = (joints[:, -1, PELVIS, :2] - plan[rows, -1, PELVIS, :2]).norm(dim=-1).reshape(k, r)
     miss = miss.masked_fill(unsafe, float("inf"))
     pick = miss.argmin(dim=0)
     chosen = draws[pick, torch.arange(r, device=draws.device)].clamp(-bound, bound)
@@ -155,14 +160,14 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings,
     if settings.samples and sampler is not None:
         draws = torch.as_tensor(sampler(settings.samples), device=given.device).detach().to(torch.float32)
         draws = draws.reshape(settings.samples, n, *model.latent_shape)[:, idx]
-        sub_scene = scene if scene.num_scenes == 1 else scene.index(idx)
-        chosen, found = _safe_sample(model, _rows(inputs, idx), sub_scene, keep, plan[idx], z[1:, idx], draws, bound)
+        chosen, found = _safe_sample(model, _rows(inputs, idx), _scene_rows(scene, idx), keep, plan[idx], z[1:, idx],
+                                     draws, bound)
         out[idx[found]] = chosen[found]
         idx = idx[~found]
         if idx.numel() == 0:
             return out.reshape(n, -1)
     sub_inputs = _rows(inputs, idx)
-    sub_scene = scene if scene.num_scenes == 1 else scene.index(idx)
+    sub_scene = _scene_rows(scene, idx)
     policy, tail = z[0, idx].clone(), z[1:, idx]
     first = policy.clone().requires_grad_(True)
     opt = torch.optim.Adam([first], lr=settings.lr)

@@ -138,10 +138,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     else:  # the scene filter as the policy's card used it (its stored eval.avoid), switchable on the page
         from latentrl.evaluation.trained import stored_eval_choices
         from latentrl.optim.avoid import AvoidSettings
-
-        stored = stored_eval_choices(policy)
         from latentrl.viewer.live import PLAY_SAMPLES
 
+        stored = stored_eval_choices(policy)
         samples = stored.get("avoid_samples")
         avoid = AvoidSettings.of(int(stored.get("avoid") or 0), stored.get("avoid_horizon"), stored.get("avoid_margin"),
                                  PLAY_SAMPLES if samples is None else int(samples))

@@ -26,6 +26,7 @@ import torch
 from latentrl.envs.joystick import JoystickEnv, heading_deg, world_angle
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
+from latentrl.evaluation.runner import policy_fn
 from latentrl.evaluation.trained import stored_step_settings
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.optim.avoid import AvoidSettings, avoid, draws
@@ -494,8 +495,7 @@ class LiveController:
         with torch.no_grad():
             action = self.policy.act(self.obs, deterministic=bool(self.deterministic.value)).action
         if self.filtering.value is True and getattr(self.env, "scene", None) is not None:
-            sample = lambda obs: self.policy.act(obs, deterministic=False).action  # noqa: E731
-            action = avoid(self.env, action, self.avoid, draws(sample, self.obs))
+            action = avoid(self.env, action, self.avoid, draws(policy_fn(self.policy, False), self.obs))
         return action
 
     def _generate(self) -> None:
@@ -553,8 +553,8 @@ class LiveController:
             "the policy does not see them: trained without a scene"
         n = len(world.objects)
         dropped = f", {self.dropped} dropped" if self.dropped else ""
-        draws = f", {self.avoid.samples} draws first" if self.avoid.samples else ""
-        kept = f"; scene filter on ({self.avoid.steps} steps{draws})" if self.filtering.value is True else ""
+        first = f", {self.avoid.samples} draws first" if self.avoid.samples else ""
+        kept = f"; scene filter on ({self.avoid.steps} steps{first})" if self.filtering.value is True else ""
         return f"  \nscene: {n} object{'' if n == 1 else 's'}{dropped} ({seen}{kept})"
 
     def status_text(self) -> str:
