@@ -1,7 +1,7 @@
 """Probe closed-loop refinement (latentrl.optim.refine) on a joint-goal suite, with or without a policy.
 
     python tools/refine_probe.py SUITE [--policy FILE] [--steps 12] [--horizon 3] [--skate 0] [--pace 0.5]
-                                 [--episodes 8] [--entries 0,5] [--detail]
+                                 [--land 0] [--episodes 8] [--entries 0,5] [--detail]
 
 SUITE is a joint-goal file or a shipped suite name (pelvis_near, pelvis_far, stepping_stones, hands_walk).
 Without --policy every step starts from zero noise (the foot lock on, as the shipped policies train), which
@@ -38,6 +38,7 @@ def main() -> None:
     ap.add_argument("--horizon", type=int, default=3)
     ap.add_argument("--skate", type=float, default=0.0)
     ap.add_argument("--pace", type=float, default=0.5)
+    ap.add_argument("--land", type=int, default=0, help="frames a footstep's foot is held down (RefineSettings.land)")
     ap.add_argument("--episodes", type=int, default=8)
     ap.add_argument("--detail", action="store_true", help="per goal: touchdown error and misses")
     ap.add_argument("--entries", help="comma-separated entry indices (default: all)")
@@ -53,7 +54,8 @@ def main() -> None:
     else:
         settings.foot_lock = True
         act = lambda obs: torch.zeros(obs.shape[0], model.latent_dim)  # noqa: E731
-    refine = RefineSettings(steps=args.steps, horizon=args.horizon, skate=args.skate, pace=args.pace)
+    refine = RefineSettings(steps=args.steps, horizon=args.horizon, skate=args.skate, pace=args.pace,
+                            land=args.land)
     refine.check()
     wrap = None if args.steps == 0 else (lambda env, a: refining(env, a, refine))
     only = None if args.entries is None else {int(i) for i in args.entries.split(",")}

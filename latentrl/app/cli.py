@@ -490,6 +490,11 @@ def _eval_commands(sub) -> None:
                     help="with --refine: weight of the pace target of a goal beyond the horizon, the point that "
                          "arrives on time at the horizon's end (default: the policy's stored eval.refine_pace, "
                          "else 0.5)")
+    ev.add_argument("--refine-land", type=int, default=None, metavar="FRAMES",
+                    help="with --refine: hold each footstep's foot down on its stone (x, y and the floor) for FRAMES "
+                         "frames after its time, in place of 2 frames held in x and y: a foot that cannot be down "
+                         "in time lands on its stone, not past it (default: the policy's stored eval.refine_land, "
+                         "else 0; 6 with --refine 64 lands every footstep of stepping_stones)")
     ev.add_argument("--refine-start", choices=["policy", "zeros", "auto"], default=None,
                     help="with --refine: start each step's refinement from the policy's action, from zero noise "
                          "(for joints the policy was not trained on), or auto: the policy's for its trained joints, "

@@ -105,6 +105,9 @@ class EvalRequest:
     refine_pace: float | None = None
     """With ``refine``: the weight of the pace target of a goal beyond the horizon (None: the stored
     ``eval.refine_pace``, else 0.5)."""
+    refine_land: int | None = None
+    """With ``refine``: frames after a footstep's time its foot is held down on its stone (None: the stored
+    ``eval.refine_land``, else 0: 2 frames held in x and y)."""
     avoid: int | None = None
     """Evaluations among objects: optimizer steps that move the policy's noise off a predicted collision
     (``latentrl.optim.avoid``; 0: off; None: the policy's stored ``eval.avoid``, else off)."""
@@ -133,7 +136,8 @@ class EvalRequest:
                    ("--refine-horizon", self.refine_horizon),
                    ("--refine-skate", self.refine_skate),
                    ("--refine-start", self.refine_start),
-                   ("--refine-pace", self.refine_pace), ("--avoid", self.avoid),
+                   ("--refine-pace", self.refine_pace), ("--refine-land", self.refine_land),
+                   ("--avoid", self.avoid),
                    ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin),
                    ("--avoid-samples", self.avoid_samples), ("--route", self.route))
         for flag, value in options:
@@ -270,7 +274,8 @@ def evaluate(req: EvalRequest) -> int:
     stored = stored_eval_choices(policy_file(req.policy))
     for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
                              ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
-                             ("refine_pace", "--refine-pace", float), ("avoid", "--avoid", int),
+                             ("refine_pace", "--refine-pace", float), ("refine_land", "--refine-land", int),
+                             ("avoid", "--avoid", int),
                              ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
                              ("avoid_samples", "--avoid-samples", int), ("route", "--route", float)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
@@ -363,13 +368,14 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[s
     settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
                               skate=req.refine_skate or 0.0, start=req.refine_start or "policy",
                               pace=0.5 if req.refine_pace is None else req.refine_pace,
+                              land=req.refine_land or 0,
                               policy_joints=policy_joints)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'
         flag = str(exc).replace("refine steps:", "--refine:").replace("refine horizon:", "--refine-horizon:") \
             .replace("refine skate:", "--refine-skate:").replace("refine start:", "--refine-start:") \
-            .replace("refine pace:", "--refine-pace:")
+            .replace("refine pace:", "--refine-pace:").replace("refine land:", "--refine-land:")
         raise ConfigError(flag) from None
     return settings
 

@@ -53,6 +53,9 @@ class EvalConfig:
     from the policy's action for the joints it was trained on and from zero noise for the others."""
     refine_pace: float | None = None
     """With ``refine``: its ``--refine-pace`` weight (None: 0.5)."""
+    refine_land: int | None = None
+    """With ``refine``: its ``--refine-land`` frames, a footstep's foot held down on its stone after its time
+    (None: 0, 2 frames held in x and y)."""
     avoid: int | None = None
     """Evaluations among objects: the optimizer steps of the scene filter ``latentrl eval`` of the checkpoints
     applies by default (its ``--avoid``; the card's figures); None: off. The trainer's periodic evaluation does not
@@ -91,6 +94,8 @@ class EvalConfig:
                 f"must be a weight in [0, 1000] (or null: 0), got {self.refine_skate}")
         require(self.refine_pace is None or 0 <= self.refine_pace <= 1000, "refine_pace",
                 f"must be a weight in [0, 1000] (or null: 0.5), got {self.refine_pace}")
+        require(self.refine_land is None or 0 <= self.refine_land <= 16, "refine_land",
+                f"must be 0-16 frames (or null: 0), got {self.refine_land}")
         require(self.refine_start in (None, "policy", "zeros", "auto"), "refine_start",
                 f"must be policy, zeros or auto (or null: policy), got {self.refine_start!r:.40}")
         require(self.avoid is None or 0 <= self.avoid <= 1000, "avoid",

@@ -34,7 +34,8 @@ from latentrl.rewards.terms import noise_prior
 STARTS = ("policy", "zeros", "auto")
 """Where a step's refinement starts (:attr:`RefineSettings.start`)."""
 FOOT_HOLD = 2
-"""Frames after a footstep's frame in which the foot is also held on its stone (xy)."""
+"""Frames after a footstep's frame in which the foot is also held on its stone (xy), unless
+:attr:`RefineSettings.land` holds it down longer."""
 LANDING_FRAMES = 8
 """Frames before a footstep's frame in which a foot low over the floor is pulled onto its stone (``landing_loss``)."""
 FOOT_DOWN_M = 0.02
@@ -61,6 +62,12 @@ class RefineSettings:
     """Weight of the pace target of a goal beyond the horizon (0: off)."""
     prior: float = 0.1
     """Weight of the noise-shell penalty (the ``prior`` reward term), per primitive."""
+    land: int = 0
+    """Frames after a footstep's frame in which its foot is held down on its stone, x, y and the floor
+    (``--refine-land``), in place of the :data:`FOOT_HOLD` frames held in x and y (0). Why: a foot that cannot be
+    down by its frame (the first step from rest, due a third of a second after the start) then comes down on its
+    stone as soon as it can, not past or short of it (docs/joint_goals.md: with 6 and 64 steps every footstep of
+    ``stepping_stones`` landed)."""
     skate: float = 0.0
     """Weight of DART's foot skate (m/s) over the predicted frames and the last history frame (``--refine-skate``).
     At 1 the shipped pelvis policy's skate fell from 7-9 to 4-6.5 cm/s, its pelvis_near error rose from 2.0 to
@@ -70,6 +77,8 @@ class RefineSettings:
         """One-line :class:`LatentRLError` for a value out of range."""
         if not 0 <= self.steps <= 1000:
             raise LatentRLError(f"refine steps: expected 0-1000, got {self.steps}")
+        if not 0 <= self.land <= 16:
+            raise LatentRLError(f"refine land: expected 0-16 frames, got {self.land}")
         if not 1 <= self.horizon <= 16:
             raise LatentRLError(f"refine horizon: expected 1-16 primitives, got {self.horizon}")
         if self.start not in STARTS:
@@ -97,8 +106,11 @@ class Footsteps(NamedTuple):
     xy: torch.Tensor
 
 
-def goal_targets(env, horizon_frames: int, pace: float) -> tuple[Targets, Footsteps, torch.Tensor]:
+def goal_targets(env, horizon_frames: int, pace: float, land: int = 0) -> tuple[Targets, Footsteps, torch.Tensor]:
     """The point targets of the goals due in the next ``horizon_frames`` frames, and a pace target beyond.
+
+    ``land``: :attr:`RefineSettings.land` (0: each footstep's foot held on its stone in x and y for
+    :data:`FOOT_HOLD` frames after its frame; else held down on it, x, y and the floor, for ``land`` frames).
 
     Returns the targets (frames index the predicted frames, 0 = the next step's first), the footsteps among them
     (:func:`landing_loss`) and (N,) whether an env has anything to refine.
@@ -117,7 +129,8 @@ def goal_targets(env, horizon_frames: int, pace: float) -> tuple[Targets, Footst
     down = torch.cat((points[..., :2], torch.full_like(offset[..., None], env.floor_height + FOOT_DOWN_M,
                                                        dtype=points.dtype)), -1)
     after = [((offset + d - 1).clamp(0, horizon_frames - 1), foot & (offset + d <= horizon_frames))
-             for d in range(1, FOOT_HOLD + 1)]
+             for d in range(1, (land or FOOT_HOLD) + 1)]
+    held, held_masks = (down, torch.ones_like(masks)) if land else (points, masks)
     # the current goal beyond the horizon: where the joint is on pace at the horizon's end (one target: a pace
     # target at every predicted primitive's end held the slow entry of pelvis_far worse, 10.8 against 4.1 cm)
     current = valid[:, 0] & (offset[:, 0] > horizon_frames) & ~feet[:, 0] & (pace > 0)
@@ -127,9 +140,9 @@ def goal_targets(env, horizon_frames: int, pace: float) -> tuple[Targets, Footst
         frames=torch.cat((frames, frames, *(f for f, _ in after), torch.full_like(frames[:, :1], horizon_frames - 1)),
                          1),
         joints=torch.cat((joint, joint, *(joint for _ in after), joint[:, :1]), 1),
-        points=torch.cat((points, down, *(points for _ in after), on_pace[:, None]), 1),
-        masks=torch.cat((masks, torch.tensor([0.0, 0.0, 1.0], device=dev).expand(n, w, 3), *(masks for _ in after),
-                         masks[:, :1]), 1),
+        points=torch.cat((points, down, *(held for _ in after), on_pace[:, None]), 1),
+        masks=torch.cat((masks, torch.tensor([0.0, 0.0, 1.0], device=dev).expand(n, w, 3),
+                         *(held_masks for _ in after), masks[:, :1]), 1),
         weights=torch.cat((inside.float(), foot.float(), *(ok.float() for _, ok in after),
                            current.float()[:, None] * pace), 1),
     )
@@ -179,7 +192,7 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
     bound = float(env.action_bound)
     n = env.num_envs
     with torch.no_grad():
-        targets, steps, active = goal_targets(env, horizon, settings.pace)
+        targets, steps, active = goal_targets(env, horizon, settings.pace, settings.land)
     if not bool(active.any()):
         return action
     inputs = env.step_inputs()

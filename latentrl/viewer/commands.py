@@ -134,7 +134,8 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
                                          refine_start=str(stored.get("refine_start") or "policy"),
                                          refine_skate=float(stored.get("refine_skate") or 0.0),
                                          refine_pace=float(0.5 if stored.get("refine_pace") is None
-                                                           else stored["refine_pace"]), **common)
+                                                           else stored["refine_pace"]),
+                                         refine_land=int(stored.get("refine_land") or 0), **common)
     else:  # the scene filter as the policy's card used it (its stored eval.avoid), switchable on the page
         from latentrl.evaluation.trained import stored_eval_choices
         from latentrl.optim.avoid import AvoidSettings

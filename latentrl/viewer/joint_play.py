@@ -49,14 +49,16 @@ class JointGoalController(LiveController):
     """:class:`~latentrl.viewer.live.LiveController` for a :class:`SteeredReachJointEnv` (module docstring).
 
     The panel's joint starts on the first the policy was trained on (``env.joints``). Extra args: ``refine_steps``
-    (0: refinement off at the start), ``refine_horizon``, ``refine_start``, ``refine_skate``, ``refine_pace``.
+    (0: refinement off at the start), ``refine_horizon``, ``refine_start``, ``refine_skate``, ``refine_pace``,
+    ``refine_land``.
     """
 
     def __init__(self, server: Any, env: SteeredReachJointEnv, policy: Any, title: str, text: str,
                  refine_steps: int = 0, refine_horizon: int = 3,
-                 refine_start: str = "policy", refine_skate: float = 0.0, refine_pace: float = 0.5, **kwargs):
+                 refine_start: str = "policy", refine_skate: float = 0.0, refine_pace: float = 0.5,
+                 refine_land: int = 0, **kwargs):
         self.settings = RefineSettings(steps=refine_steps or DEFAULT_REFINE_STEPS, horizon=refine_horizon,
-                                       start=refine_start, skate=refine_skate, pace=refine_pace,
+                                       start=refine_start, skate=refine_skate, pace=refine_pace, land=refine_land,
                                        policy_joints=tuple(env.joints))
         self.settings.check()
         self.scored = 0

@@ -276,7 +276,7 @@ def test_latentrl_eval_refine_runs_the_refiner_and_records_its_settings(eval_fil
     plain, refined = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("plain", "refined"))
     assert "refine" not in plain
     assert refined["refine"] == {"steps": 3, "start": "policy", "horizon": 1, "lr": 0.1, "pace": 0.5,
-                                  "prior": 0.1, "skate": 0.0, "policy_joints": ["pelvis"]}
+                                  "prior": 0.1, "land": 0, "skate": 0.0, "policy_joints": ["pelvis"]}
     errors = [r["suites"][0]["entries"][0]["episodes"][0]["detail"]["error_cm"][0] for r in (plain, refined)]
     assert errors[1] < errors[0]  # the refiner moved the noise toward the goal
     capsys.readouterr()
@@ -289,7 +289,7 @@ def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, ti
 
     ckpt = reach_joint_policy(eval_files, tiny_model, tmp_path, {"refine": 2, "refine_horizon": 1,
                                                                  "refine_start": "zeros", "refine_skate": 0.5,
-                                                                 "refine_pace": 2.0})
+                                                                 "refine_pace": 2.0, "refine_land": 6})
     suite = tmp_path / "goals_mini.json"
     suite.write_text(json.dumps([{"text": "walk", "goals": [{"joint": "pelvis", "target": [0, 0.3], "time": 0.2}]}]))
     args = ["eval", str(ckpt), "--motion", str(eval_files["motion"]), "--paths", str(suite), "--episodes", "1",
@@ -300,12 +300,15 @@ def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, ti
     assert "--refine-start zeros (the policy's stored evaluation setting; --refine-start overrides)" in out
     stored = json.loads((tmp_path / "stored" / "report.json").read_text())["refine"]
     assert stored["horizon"] == 1 and stored["start"] == "zeros" and stored["skate"] == 0.5 and stored["pace"] == 2.0
+    assert stored["land"] == 6
     assert main([*args, "--out", str(tmp_path / "flag"), "--refine-start", "policy", "--refine-skate", "0",
-                 "--refine-pace", "0"]) == 0
+                 "--refine-pace", "0", "--refine-land", "0"]) == 0
     flagged = json.loads((tmp_path / "flag" / "report.json").read_text())["refine"]
-    assert flagged["start"] == "policy" and flagged["skate"] == 0.0 and flagged["pace"] == 0.0
+    assert flagged["start"] == "policy" and flagged["skate"] == 0.0 and flagged["pace"] == 0.0 and flagged["land"] == 0
     assert main([*args, "--out", str(tmp_path / "bad"), "--refine-pace", "-1"]) == 2
     assert "--refine-pace: expected a weight in [0, 1000], got -1.0" in capsys.readouterr().err
+    assert main([*args, "--out", str(tmp_path / "bad"), "--refine-land", "17"]) == 2
+    assert "--refine-land: expected 0-16 frames, got 17" in capsys.readouterr().err
     assert main([*args, "--out", str(tmp_path / "off"), "--refine", "0"]) == 0
     assert "refine" not in json.loads((tmp_path / "off" / "report.json").read_text())
 
@@ -316,6 +319,7 @@ def test_a_policy_stores_its_refinement_and_the_flags_override_it(eval_files, ti
     ("refine_skate", -1.0, r"refine_skate: must be a weight in \[0, 1000\] \(or null: 0\), got -1.0"),
     ("refine_start", "random", r"refine_start: must be policy, zeros or auto \(or null: policy\), got 'random'"),
     ("refine_pace", float("nan"), r"refine_pace: must be a weight in \[0, 1000\] \(or null: 0.5\), got nan"),
+    ("refine_land", 17, r"refine_land: must be 0-16 frames \(or null: 0\), got 17"),
 ])
 def test_eval_config_refine_fields_are_checked(field, value, match):
     from latentrl.errors import ConfigError

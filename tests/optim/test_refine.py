@@ -11,7 +11,15 @@ from latentrl.envs.reach_joint import JOINTS, JointGoal, JointGoalEntry, ReachJo
 from latentrl.errors import LatentRLError
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.motion.skeleton import FPS
-from latentrl.optim.refine import Footsteps, RefineSettings, goal_targets, landing_loss, predict, refine, refining
+from latentrl.optim.refine import (
+    Footsteps,
+    RefineSettings,
+    goal_targets,
+    landing_loss,
+    predict,
+    refine,
+    refining,
+)
 
 ENTRY = JointGoalEntry("walk", (JointGoal("pelvis", (0.3, 0.5, 0.8), 6 / FPS),
                                 JointGoal("left_foot", (0.1, 0.9), 12 / FPS),
@@ -113,6 +121,7 @@ def test_goal_targets_hold_the_goals_in_the_horizon_footsteps_and_a_pace_target(
     t, steps, active = goal_targets(env, 16, pace=0.5)
     # rows: three goals, three footstep rows, the two frames after a footstep (2 x 3 rows), one pace row
     assert t.weights[0].tolist() == [1.0, 1.0, 0.0, 0.0, 1.0, 0.0] + [0.0, 1.0, 0.0] * 2 + [0.0] and active.all()
+    assert t.masks[0, 7].tolist() == [1.0, 1.0, 0.0]  # held on its stone in x and y
     assert steps.on[0].tolist() == [False, True, False] and steps.frame[0, 1] == 11
     assert t.frames[0, :2].tolist() == [5, 11] and t.masks[0, 1].tolist() == [1.0, 1.0, 0.0]
     assert t.points[0, 4].tolist() == pytest.approx([0.1, 0.9, env.floor_height + 0.02])
@@ -127,6 +136,22 @@ def test_goal_targets_hold_the_goals_in_the_horizon_footsteps_and_a_pace_target(
     assert t.points[0, -1].tolist() == pytest.approx((now + (goal - now) * 16 / 60).tolist(), abs=1e-6)
     _, _, active = goal_targets(far, 16, pace=0.0)
     assert not active.any()
+
+
+def test_land_holds_the_foot_down_on_its_stone_for_that_many_frames_after_its_own(tiny_model):
+    env = make(tiny_model)
+    env.reset(seed=0)
+    plain, _, _ = goal_targets(env, 16, pace=0.5)
+    t, steps, active = goal_targets(env, 16, pace=0.5, land=6)
+    # rows: three goals, three footstep rows, six frames after the footstep (6 x 3 rows; the footstep is due at
+    # predicted frame 11 of 16, so frames 12-15 are held), one pace row
+    assert t.weights[0].tolist() == [1.0, 1.0, 0.0, 0.0, 1.0, 0.0] + [0.0, 1.0, 0.0] * 4 + [0.0] * 6 + [0.0]
+    assert t.frames[0, 7:19:3].tolist() == [12, 13, 14, 15] and t.masks[0, 7].tolist() == [1.0, 1.0, 1.0]
+    assert t.points[0, 7].tolist() == pytest.approx([0.1, 0.9, env.floor_height + 0.02])  # on the floor
+    assert torch.equal(t.points[:, :6], plain.points[:, :6]) and torch.equal(t.points[:, -1], plain.points[:, -1])
+    assert active.all() and steps.on[0].tolist() == [False, True, False]
+    with pytest.raises(LatentRLError, match="refine land: expected 0-16 frames, got 17"):
+        RefineSettings(land=17).check()
 
 
 def test_landing_loss_costs_a_foot_low_off_its_stone_only():
