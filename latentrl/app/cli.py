@@ -494,7 +494,7 @@ def _eval_commands(sub) -> None:
                     help="with --refine: hold each footstep's foot down on its stone (x, y and the floor) for FRAMES "
                          "frames after its time, in place of 2 frames held in x and y: a foot that cannot be down "
                          "in time lands on its stone, not past it (default: the policy's stored eval.refine_land, "
-                         "else 0; 6 with --refine 64 lands every footstep of stepping_stones)")
+                         "else 0; 6 with --refine 64 lands 574 of stepping_stones' 576 footsteps in 32 episodes)")
     ev.add_argument("--refine-start", choices=["policy", "zeros", "auto"], default=None,
                     help="with --refine: start each step's refinement from the policy's action, from zero noise "
                          "(for joints the policy was not trained on), or auto: the policy's for its trained joints, "

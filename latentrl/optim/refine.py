@@ -66,8 +66,8 @@ class RefineSettings:
     """Frames after a footstep's frame in which its foot is held down on its stone, x, y and the floor
     (``--refine-land``), in place of the :data:`FOOT_HOLD` frames held in x and y (0). Why: a foot that cannot be
     down by its frame (the first step from rest, due a third of a second after the start) then comes down on its
-    stone as soon as it can, not past or short of it (docs/joint_goals.md: with 6 and 64 steps every footstep of
-    ``stepping_stones`` landed)."""
+    stone as soon as it can, not past or short of it (docs/joint_goals.md: with 6 and 64 steps 574 of
+    ``stepping_stones``' 576 footsteps in 32 episodes land, against 568 with 0)."""
     skate: float = 0.0
     """Weight of DART's foot skate (m/s) over the predicted frames and the last history frame (``--refine-skate``).
     At 1 the shipped pelvis policy's skate fell from 7-9 to 4-6.5 cm/s, its pelvis_near error rose from 2.0 to
