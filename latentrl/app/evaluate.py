@@ -365,11 +365,8 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[s
                           f"policy's task is {task}; leave out --refine")
     if req.physics:
         raise ConfigError("--refine: not with --physics (the refiner predicts the kinematic step)")
-    settings = RefineSettings(steps=req.refine, horizon=3 if req.refine_horizon is None else req.refine_horizon,
-                              skate=req.refine_skate or 0.0, start=req.refine_start or "policy",
-                              pace=0.5 if req.refine_pace is None else req.refine_pace,
-                              land=req.refine_land or 0,
-                              policy_joints=policy_joints)
+    settings = RefineSettings.of(req.refine, req.refine_horizon, req.refine_start, req.refine_skate, req.refine_pace,
+                                 req.refine_land, policy_joints)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'

@@ -73,6 +73,14 @@ class RefineSettings:
     At 1 the shipped pelvis policy's skate fell from 7-9 to 4-6.5 cm/s, its pelvis_near error rose from 2.0 to
     2.4 cm and its hand targets failed more often (docs/joint_goals.md)."""
 
+    @classmethod
+    def of(cls, steps: int, horizon: int | None = None, start: str | None = None, skate: float | None = None,
+           pace: float | None = None, land: int | None = None,
+           policy_joints: tuple[str, ...] = ("pelvis",)) -> RefineSettings:
+        """The settings of these, each None taking its default (``latentrl eval``'s flags, a policy's stored ones)."""
+        chosen = {"horizon": horizon, "start": start, "skate": skate, "pace": pace, "land": land}
+        return cls(steps=steps, policy_joints=policy_joints, **{k: v for k, v in chosen.items() if v is not None})
+
     def check(self) -> None:
         """One-line :class:`LatentRLError` for a value out of range."""
         if not 0 <= self.steps <= 1000:

@@ -125,17 +125,15 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     common = dict(deterministic=deterministic, seed=seed, recorder=recorder, skeleton=skeleton)
     if task == "reach_joint":  # refined as the policy's card was (its stored eval.refine), switchable on the page
         from latentrl.evaluation.trained import stored_eval_choices
+        from latentrl.optim.refine import RefineSettings
         from latentrl.viewer.joint_play import JointGoalController
 
         stored = stored_eval_choices(policy)
-        controller = JointGoalController(server, env, loaded.policy, title, env.texts[0],
-                                         refine_steps=int(stored.get("refine") or 0),
-                                         refine_horizon=int(stored.get("refine_horizon") or 3),
-                                         refine_start=str(stored.get("refine_start") or "policy"),
-                                         refine_skate=float(stored.get("refine_skate") or 0.0),
-                                         refine_pace=float(0.5 if stored.get("refine_pace") is None
-                                                           else stored["refine_pace"]),
-                                         refine_land=int(stored.get("refine_land") or 0), **common)
+        refine = RefineSettings.of(int(stored.get("refine") or 0), stored.get("refine_horizon"),
+                                   stored.get("refine_start"), stored.get("refine_skate"), stored.get("refine_pace"),
+                                   stored.get("refine_land"))
+        controller = JointGoalController(server, env, loaded.policy, title, env.texts[0], refinement=refine,
+                                         **common)
     else:  # the scene filter as the policy's card used it (its stored eval.avoid), switchable on the page
         from latentrl.evaluation.trained import stored_eval_choices
         from latentrl.optim.avoid import AvoidSettings

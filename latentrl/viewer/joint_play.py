@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -48,18 +49,16 @@ HEIGHT_JOINTS = ("left_hand", "right_hand", "head")
 class JointGoalController(LiveController):
     """:class:`~latentrl.viewer.live.LiveController` for a :class:`SteeredReachJointEnv` (module docstring).
 
-    The panel's joint starts on the first the policy was trained on (``env.joints``). Extra args: ``refine_steps``
-    (0: refinement off at the start), ``refine_horizon``, ``refine_start``, ``refine_skate``, ``refine_pace``,
-    ``refine_land``.
+    The panel's joint starts on the first the policy was trained on (``env.joints``). ``refinement``: the refinement
+    settings (the policy's stored ones; steps 0 or None: refinement off at the start, at
+    :data:`DEFAULT_REFINE_STEPS` once switched on).
     """
 
     def __init__(self, server: Any, env: SteeredReachJointEnv, policy: Any, title: str, text: str,
-                 refine_steps: int = 0, refine_horizon: int = 3,
-                 refine_start: str = "policy", refine_skate: float = 0.0, refine_pace: float = 0.5,
-                 refine_land: int = 0, **kwargs):
-        self.settings = RefineSettings(steps=refine_steps or DEFAULT_REFINE_STEPS, horizon=refine_horizon,
-                                       start=refine_start, skate=refine_skate, pace=refine_pace, land=refine_land,
-                                       policy_joints=tuple(env.joints))
+                 refinement: RefineSettings | None = None, **kwargs):
+        refinement = refinement or RefineSettings(steps=0)
+        self.settings = replace(refinement, steps=refinement.steps or DEFAULT_REFINE_STEPS,
+                                policy_joints=tuple(env.joints))
         self.settings.check()
         self.scored = 0
         """Goals already reported (``env.scored_goals()``)."""
@@ -68,10 +67,10 @@ class JointGoalController(LiveController):
         self.joint = gui.add_dropdown("goal joint", list(JOINTS), initial_value=env.joints[0])
         self.seconds = gui.add_slider("seconds (0: as soon as possible)", 0.0, MAX_SECONDS, 0.1, DEFAULT_SECONDS)
         self.height = gui.add_slider("hand/head height (m)", *HEIGHT_RANGE, 0.05, DEFAULT_HEIGHT)
-        self.refining = gui.add_checkbox("refine", refine_steps > 0)
+        self.refining = gui.add_checkbox("refine", refinement.steps > 0)
         self.refine_steps = gui.add_slider("refine steps (fewer: faster)", 1, MAX_REFINE_STEPS, 1,
                                            min(self.settings.steps, MAX_REFINE_STEPS))
-        self.refine_from = gui.add_dropdown("refine from", list(STARTS), initial_value=refine_start)
+        self.refine_from = gui.add_dropdown("refine from", list(STARTS), initial_value=refinement.start)
 
     def _idle_message(self) -> str:
         return ("click on the floor: a goal for the joint picked below, due in the picked seconds; shift-click: "

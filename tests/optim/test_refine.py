@@ -296,3 +296,11 @@ def test_auto_start_takes_the_policy_action_only_for_the_joints_it_was_trained_o
 def test_bad_settings_are_one_line_errors(field, value, match):
     with pytest.raises(LatentRLError, match=match):
         RefineSettings(**{field: value}).check()
+
+
+def test_settings_of_takes_each_given_value_and_the_default_for_none():
+    assert RefineSettings.of(8) == RefineSettings(steps=8)
+    got = RefineSettings.of(32, 2, "auto", 3.0, None, 6, ("pelvis", "left_foot"))
+    assert got == RefineSettings(steps=32, horizon=2, start="auto", skate=3.0, land=6,
+                                 policy_joints=("pelvis", "left_foot"))
+    assert got.pace == RefineSettings().pace

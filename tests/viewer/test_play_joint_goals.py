@@ -16,6 +16,7 @@ import torch
 
 from latentrl.envs.reach_joint import JOINTS, goal_frame
 from latentrl.motion.representation import FUTURE_LENGTH
+from latentrl.optim.refine import RefineSettings
 from tests.viewer.test_security import RawClient, wait_for
 
 
@@ -113,7 +114,7 @@ def test_the_shipped_pelvis_policy_lands_clicked_goals_with_refinement(shipped, 
     loaded, _ = shipped
     env = joint_env(shipped)
     live = JointGoalController(guarded_server, env, loaded.policy, "test", "walk",
-                               refine_steps=16, deterministic=True)
+                               refinement=RefineSettings(steps=16), deterministic=True)
     assert live.refining.value and live.joint.value == "pelvis"
     live.set_goal((0.3, 1.5))
     live.add_waypoint((0.6, 2.8))
