@@ -228,7 +228,8 @@ def _load(req: EvalRequest, settings: EvalSettings) -> tuple[Any, Any, dict, dic
     if req.foot_lock_min_weight is not None:
         settings.foot_lock_min_weight = float(req.foot_lock_min_weight)
     if req.scene is not None:
-        settings.observe_scene = settings.scene is not None  # a policy trained without a scene has no rays
+        # a policy trained without a scene, or blind among one (env.observe_scene: false), has no rays
+        settings.observe_scene = settings.observe_scene and settings.scene is not None
         settings.scene = {"random_obstacles": {}} if req.scene == "random_obstacles" else req.scene
         try:
             resolve_scene(settings.scene)

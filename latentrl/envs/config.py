@@ -242,6 +242,10 @@ class EnvConfig:
     path task: each episode walks a maze of the pool along its route); None: the flat floor alone."""
     terminate_on_collision: bool = False
     """With a scene: end an episode when a joint comes inside its skin radius of an object."""
+    observe_scene: bool = True
+    """With a scene: observe it (``scene_rays``, and ``height_grid`` if set). False: the policy walks blind among the
+    objects, which reach it only through the rewards, the end at a collision and a ``route`` guide's goal (a policy
+    that follows routes without seeing what they go around; docs/scenes.md, "Routes")."""
     route: float | None = None
     """With a scene (reach and path tasks): plan each goal's shortest route keeping this many metres (pelvis, xy)
     from every object and observe the farthest route point in clear sight as the goal where an object is in the
@@ -281,6 +285,11 @@ class EnvConfig:
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",
                 "needs a scene (env.scene)")
         require(self.route is None or self.scene is not None, "route", "needs a scene (env.scene)")
+        require(isinstance(self.observe_scene, bool), "observe_scene",
+                f"expected true or false, got {self.observe_scene!r:.30}")
+        require(self.observe_scene or self.scene is not None, "observe_scene", "false needs a scene (env.scene)")
+        require(self.observe_scene or not self.height_grid, "height_grid",
+                "is observed with the scene; env.observe_scene is false")
         require(self.route is None or (not isinstance(self.route, bool) and isinstance(self.route, (int, float))
                                        and 0 < self.route <= 2), "route",
                 f"expected the route's clearance in metres, in (0, 2], or null, got {self.route!r:.30}")
@@ -349,12 +358,21 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
         common["max_episode_steps"] = cfg.max_episode_steps
     if cfg.scene is not None:  # flat-floor envs get exactly the arguments they always had
         common.update(scene=cfg.scene_spec(), terminate_on_collision=cfg.terminate_on_collision)
+        if not cfg.observe_scene:
+            common.update(observe_scene=False)
         if cfg.route is not None:
             common.update(route=cfg.route)
     if cfg.height_grid:  # the env refuses it without a scene (env.scene, or a task's own such as sit's seat)
         common.update(height_grid=cfg.height_grid, height_grid_spacing=cfg.height_grid_spacing)
     common.update(extra)
     return task_spec(cfg.task).env_class()(cfg.num_envs, **cfg.section.kwargs(), **common)
+
+
+def observes_scene(env: Mapping[str, Any] | None) -> bool:
+    """Whether a policy trained with this stored ``env`` section observes its scene (``scene_rays``): it was
+    trained with a scene and without ``observe_scene: false``."""
+    env = env or {}
+    return env.get("scene") is not None and env.get("observe_scene", True) is not False
 
 
 def stored_env_config(config: Mapping[str, Any] | None) -> EnvConfig | None:

@@ -146,7 +146,8 @@ class EvalSettings(StepSettings):
     """The eval env's scene (docs/scenes.md): the policy's training scene (``env.scene``) or ``eval --scene``;
     None: the flat floor."""
     observe_scene: bool = True
-    """Whether the policy observes the scene (False: a policy trained without one, evaluated among objects)."""
+    """Whether the policy observes the scene (False: a policy trained without one, evaluated among objects, or
+    trained blind among them: ``env.observe_scene: false``)."""
     height_grid: int = 0
     """The policy's local height grid (``env.height_grid``; 0: none), observed with the scene."""
     height_grid_spacing: float = 0.25
@@ -163,7 +164,7 @@ class EvalSettings(StepSettings):
             setattr(self, name, value)
         self.next_at_last = str(getattr(env_cfg, "next_at_last", "repeat"))
         self.scene = getattr(env_cfg, "scene", None)
-        self.observe_scene = True
+        self.observe_scene = bool(getattr(env_cfg, "observe_scene", True))
         self.height_grid = int(getattr(env_cfg, "height_grid", 0) or 0)
         self.height_grid_spacing = float(getattr(env_cfg, "height_grid_spacing", 0.25))
         self.route = getattr(env_cfg, "route", None)

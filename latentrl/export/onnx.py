@@ -24,7 +24,8 @@ next_goal                 (B, 3)          only for path/timed policies trained w
                                           waypoint: as ``latentrl.settings.next_at_last`` says)
 command_heading_deg       (B,)            joystick: commanded world heading, degrees counter-clockwise from +y
 command_speed             (B,)            joystick: commanded speed, m/s
-scene_rays                (B, 16)         only for policies trained with a scene (``env.scene``): distances to
+scene_rays                (B, 16)         only for policies that observe a scene (``env.scene``, not blind by
+                                          ``env.observe_scene: false``): distances to
                                           the objects along the 16 rays of ``ray_origin``/``ray_directions``,
                                           metres, clipped at 4 (the engine casts them in its own world)
 text_embedding            (B, E)          only when no prompt was baked in (``--text``)
@@ -77,7 +78,7 @@ import torch
 from torch import nn
 
 from latentrl.constants import OBS_GOAL_ANGLE_CLIP_DEG, OBS_GOAL_DIST_CLIP_M
-from latentrl.envs.config import stored_env_config
+from latentrl.envs.config import observes_scene, stored_env_config
 from latentrl.envs.goal import goal_features
 from latentrl.envs.joystick import command_observation, world_angle
 from latentrl.envs.observation import observe
@@ -341,7 +342,7 @@ def load_controller(policy_path: str | Path, motion: str = "default", batch: int
     if task not in EXPORT_TASKS:
         raise CheckpointError(f"{policy_path}: export onnx builds controllers of {', '.join(EXPORT_TASKS)} policies; "
                               f"this policy's task is '{task}', which it cannot export")
-    scene_rays = env_cfg.get("scene") is not None
+    scene_rays = observes_scene(env_cfg)
     if scene_rays and int(env_cfg.get("height_grid") or 0):
         raise CheckpointError(f"{policy_path}: export onnx takes scene policies that observe rays; this one also "
                               f"observes a height grid (env.height_grid {env_cfg.get('height_grid')}), which the "

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from latentrl.envs.config import observes_scene
 from latentrl.envs.joystick import JoystickEnv, heading_deg, world_angle
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
@@ -184,8 +185,8 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     settings = stored_step_settings(checkpoint.get("config"))
     world = scene if scene is not None else (training_scene(env_cfg) or Scene())
     common = dict(motion=model, texts=texts, device=device, max_episode_steps=10**9, autoreset_mode="Disabled",
-                  scene=world, observe_scene=env_cfg.get("scene") is not None, **settings.step_kwargs())
-    if env_cfg.get("scene") is not None and env_cfg.get("height_grid"):  # a grid is observed with the scene
+                  scene=world, observe_scene=observes_scene(env_cfg), **settings.step_kwargs())
+    if observes_scene(env_cfg) and env_cfg.get("height_grid"):  # a grid is observed with the scene
         common.update(height_grid=int(env_cfg["height_grid"]),
                       height_grid_spacing=float(env_cfg.get("height_grid_spacing") or 0.25))
     if task == "reach_joint":
@@ -550,7 +551,7 @@ class LiveController:
         if world is None or not world.objects:
             return ""
         seen = "the policy sees them" if self.env.observe_scene else \
-            "the policy does not see them: trained without a scene"
+            "the policy does not see them: trained blind to scenes"
         n = len(world.objects)
         dropped = f", {self.dropped} dropped" if self.dropped else ""
         first = f", {self.avoid.samples} draws first" if self.avoid.samples else ""

@@ -162,3 +162,34 @@ def test_env_route_reaches_the_env_and_the_eval_settings_and_bad_values_name_the
         f.write_text(f"env: {{task: reach, {body}}}\n")
         with pytest.raises(ConfigError, match=message):
             load_config(TrainConfig, f)
+
+
+def test_env_observe_scene_false_trains_blind_among_objects_and_the_eval_and_export_follow(tmp_path, tiny_model):
+    from latentrl.errors import ConfigError
+    from latentrl.evaluation.config import EvalSettings
+    from latentrl.envs.config import observes_scene
+
+    seeing = EnvConfig(task="reach", num_envs=2, scene={"random_obstacles": {}})
+    blind = EnvConfig(task="reach", num_envs=2, scene={"random_obstacles": {}}, observe_scene=False, route=0.5)
+    blind.validate()
+    flat = build(EnvConfig(task="reach", num_envs=2), "cpu", motion=tiny_model)
+    envs = {name: build(cfg, "cpu", motion=tiny_model) for name, cfg in (("seeing", seeing), ("blind", blind))}
+    assert "scene_rays" in envs["seeing"].observation_layout and envs["seeing"].observe_scene
+    assert "scene_rays" not in envs["blind"].observation_layout and not envs["blind"].observe_scene
+    # blind, the observation is the flat env's size: a flat-floor policy warm-starts it as it is
+    assert envs["blind"].observation_space.shape == flat.observation_space.shape
+    assert envs["blind"].scene is not None and envs["blind"].guide is not None  # the objects are there all the same
+    settings = EvalSettings()
+    settings.take_training_env(blind)
+    assert settings.scene_kwargs(blind.scene_spec())["observe_scene"] is False
+    settings.take_training_env(seeing)
+    assert settings.scene_kwargs(seeing.scene_spec())["observe_scene"] is True
+    assert observes_scene({"scene": "maze_a"}) and not observes_scene({"scene": "maze_a", "observe_scene": False})
+    assert not observes_scene({}) and not observes_scene(None)
+    f = tmp_path / "bad.yaml"
+    for body, message in (("observe_scene: false", r"env\.observe_scene: false needs a scene \(env\.scene\)"),
+                          ("scene: {random_obstacles: {}}, observe_scene: false, height_grid: 5",
+                           r"env\.height_grid: is observed with the scene; env\.observe_scene is false")):
+        f.write_text(f"env: {{task: reach, {body}}}\n")
+        with pytest.raises(ConfigError, match=message):
+            load_config(TrainConfig, f)

@@ -103,3 +103,19 @@ def test_a_scene_policy_with_a_height_grid_is_refused_in_one_line(tmp_path, caps
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "observes a height grid (env.height_grid 5)" in err, err
     assert not out.exists()
+
+
+def test_a_policy_trained_blind_among_objects_exports_without_scene_rays(walk_state, tmp_path, capsys):
+    """``env.observe_scene: false``: the graph takes the flat walk's inputs (the engine supplies the route's point
+    as the goal), not rays the policy never observed."""
+    import onnx
+
+    state = copy.deepcopy(walk_state)
+    state["config"]["env"].update(scene={"random_obstacles": {}}, observe_scene=False, route=0.5)
+    state["config_hash"] = config_hash(state["config"])
+    policy = tmp_path / "blind.pt"
+    torch.save(state, policy)
+    out = tmp_path / "controller.onnx"
+    assert main(["export", "onnx", str(policy), "--out", str(out)]) == 0, capsys.readouterr().err
+    names = [i.name for i in onnx.load(str(out)).graph.input]
+    assert "scene_rays" not in names and "goal" in names

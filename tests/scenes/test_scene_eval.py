@@ -163,3 +163,23 @@ def test_eval_route_records_its_settings_leaves_a_clear_way_alone_and_a_stored_c
     assert main([*base[:1], str(stored), *base[2:], "--out", str(tmp_path / "stored")]) == 0
     assert "--route 0.7 (the policy's stored evaluation setting; --route overrides)" in capsys.readouterr().out
     assert json.loads((tmp_path / "stored" / "report.json").read_text())["settings"]["route"] == 0.7
+
+
+def test_a_policy_trained_blind_among_objects_is_evaluated_blind_in_its_scene_and_in_another(
+        eval_files, tmp_path):
+    """``env.observe_scene: false``: the eval env draws the training scene (or ``--scene``) without the rays the
+    policy never had (with rays its observation would not fit the network)."""
+    from latentrl.app.cli import main
+    from latentrl.ppo.checkpoint import read_checkpoint, save_checkpoint
+    from tests.evaluation.conftest import NEAR, write_paths
+
+    state = read_checkpoint(eval_files["policy"], map_location="cpu")
+    state["config"] = {"env": {"task": "path", "scene": {"random_obstacles": {}}, "observe_scene": False}}
+    blind = save_checkpoint(state, tmp_path / "blind.pt")
+    paths = write_paths(tmp_path, [NEAR], "mini.json")
+    base = ["eval", str(blind), "--motion", str(eval_files["motion"]), "--paths", str(paths), "--episodes", "2",
+            "--max-steps", "2", "--device", "cpu", "--no-render", "--no-progress"]
+    for name, extra in (("own", []), ("other", ["--scene", "random_obstacles"])):
+        assert main([*base, "--out", str(tmp_path / name), *extra]) == 0
+        report = json.loads((tmp_path / name / "report.json").read_text())
+        assert report["settings"]["observe_scene"] is False and "collision" in report["overall"]["metrics"]

@@ -264,7 +264,7 @@ def test_a_play_recording_draws_the_scene_with_the_dropped_boxes(server, tiny_mo
 
 
 def test_play_observes_as_the_policy_was_trained(tiny_model):
-    """A policy trained among objects with a height grid gets both groups; a flat one neither."""
+    """A policy trained among objects with a height grid gets both groups; a flat one or a blind one neither."""
     from latentrl.viewer.live import play_env
 
     trained = {"env": {"texts": ["walk"], "scene": scene_to_dict(SCENE), "height_grid": 3}}
@@ -272,6 +272,9 @@ def test_play_observes_as_the_policy_was_trained(tiny_model):
     assert "scene_rays" in layout and layout["scene_height_grid"][1] - layout["scene_height_grid"][0] == 9
     flat = play_env({"config": {"env": {"texts": ["walk"]}}}, tiny_model, None, "cpu", "joystick", SCENE)
     assert "scene_rays" not in flat.observation_layout and flat.scene.spec == SCENE
+    blind = {"env": {"texts": ["walk"], "scene": scene_to_dict(SCENE), "observe_scene": False}}
+    env = play_env({"config": blind}, tiny_model, None, "cpu")  # trained blind among objects: no rays
+    assert "scene_rays" not in env.observation_layout and not env.observe_scene and env.scene.spec == SCENE
 
 
 def test_the_body_and_skeleton_checkboxes_take_only_true_or_false(server, motion_file, capsys):
