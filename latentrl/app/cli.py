@@ -515,7 +515,7 @@ def _eval_commands(sub) -> None:
                          "take the safe one ending nearest the policy's own plan; the optimizer only where none is "
                          "safe (default: the policy's stored eval.avoid_samples, else 0; not with --refine)")
     ev.add_argument("--route", type=float, default=None, metavar="M",
-                    help="reach and path policies among objects: plan the shortest route to each goal keeping M "
+                    help="reach, path and timed policies among objects: plan the shortest route to each goal keeping M "
                          "metres from every object, and show the policy the farthest route point in clear sight as "
                          "its goal (success stays the task's goal; default: the policy's stored eval.route, else "
                          "0: off; docs/scenes.md)")

@@ -219,3 +219,28 @@ def test_training_runs_the_task_evaluator_periodically(tiny_model, tmp_path):
     report = make_eval_hook(cfg, tiny_model, "cpu")(policy)
     assert {"heading_err_deg", "speed_err_m_s", "skate_cm_s", "floor_cm"} <= set(report.metrics)
     assert not report.stop
+
+
+def test_latentrl_eval_route_guides_a_timed_policy_around_a_wall_and_leaves_a_clear_way_alone(
+        task_policies, eval_files, tmp_path):
+    """``--route`` on a timed policy: a box far away changes no metric (the policy sees its waypoint); a wall
+    between the start and the waypoint turns the goal it sees, so the episode differs; a joystick has no goal."""
+    from latentrl.app.cli import main
+
+    suite = tmp_path / "timed_mini.json"
+    suite.write_text(json.dumps([{"goal_location": [[0, 3, 0]], "goal_text": ["walk"], "goal_time": [2.0]}]))
+    wall, far = tmp_path / "wall.json", tmp_path / "far.json"
+    wall.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [0.3, 1.5], "size": [1.6, 0.3, 1.5]}]}))
+    far.write_text(json.dumps({"format": "latentrl.scene/1", "objects": [
+        {"type": "box", "center": [8.0, 8.0], "size": [0.5, 0.5, 1.0]}]}))
+    args = ["eval", str(task_policies["timed"]), "--motion", str(eval_files["motion"]), "--paths", str(suite),
+            "--episodes", "1", "--max-steps", "4", "--device", "cpu", "--render", "0", "--deterministic"]
+    runs = {"far": ["--scene", str(far)], "far_route": ["--scene", str(far), "--route", "0.5"],
+            "wall": ["--scene", str(wall)], "wall_route": ["--scene", str(wall), "--route", "0.5"]}
+    for name, extra in runs.items():
+        assert main([*args, "--out", str(tmp_path / name), *extra]) == 0
+    reports = {name: json.loads((tmp_path / name / "report.json").read_text()) for name in runs}
+    assert reports["far_route"]["settings"]["route"] == 0.5 and reports["far"]["settings"]["route"] is None
+    assert reports["far_route"]["overall"] == reports["far"]["overall"]
+    assert reports["wall_route"]["overall"] != reports["wall"]["overall"]
