@@ -379,8 +379,7 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[s
 
 
 def _check_route(req: EvalRequest, evaluator: Any, task: str) -> None:
-    """``--route``'s clearance in range, for an evaluation that has a goal on the floor (reach, path and timed
-    policies)."""
+    """``--route``'s clearance in range, for an evaluation with a goal on the floor (reach, path, timed policies)."""
     if not req.route:
         return
     if getattr(evaluator, "suite_kind", None) not in ("paths", "timed"):

@@ -369,8 +369,10 @@ def build(cfg: EnvConfig, device: str, motion=None, **extra):
 
 
 def observes_scene(env: Mapping[str, Any] | None) -> bool:
-    """Whether a policy trained with this stored ``env`` section observes its scene (``scene_rays``): it was
-    trained with a scene and without ``observe_scene: false``."""
+    """Whether a policy trained with this stored ``env`` section observes its scene (``scene_rays``).
+
+    It does when it was trained with a scene and without ``observe_scene: false``.
+    """
     env = env or {}
     return env.get("scene") is not None and env.get("observe_scene", True) is not False
 

@@ -165,9 +165,9 @@ def test_env_route_reaches_the_env_and_the_eval_settings_and_bad_values_name_the
 
 
 def test_env_observe_scene_false_trains_blind_among_objects_and_the_eval_and_export_follow(tmp_path, tiny_model):
+    from latentrl.envs.config import observes_scene
     from latentrl.errors import ConfigError
     from latentrl.evaluation.config import EvalSettings
-    from latentrl.envs.config import observes_scene
 
     seeing = EnvConfig(task="reach", num_envs=2, scene={"random_obstacles": {}})
     blind = EnvConfig(task="reach", num_envs=2, scene={"random_obstacles": {}}, observe_scene=False, route=0.5)
