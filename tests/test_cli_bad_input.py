@@ -299,7 +299,7 @@ ROWS = [
     ("eval-route-of-five-metres", [*EVAL, "--route", "5"],
      r"--route: expected the route's clearance in metres, in \(0, 2\], got 5\.0"),
     ("eval-route-a-reach-joint-policy", ["eval", "reach_joint_default", "--route", "0.5"],
-     r"--route: the reach_joint task's goal is not a place on the floor to plan a route to \(reach, path and timed "),
+     r"--route: the reach_joint task's goal is not a place on the floor to plan a route to \(reach, path, timed and "),
     ("eval-physics-a-refined-reach-joint-policy", ["eval", "reach_joint_default", "--physics"],
      r"--physics: runs reach or path policies, this policy's task is 'reach_joint'"),
     ("eval-device", [*EVAL, "--device", "tpu"], r"argument --device: unknown device 'tpu'"),

@@ -379,12 +379,12 @@ def _refiner(req: EvalRequest, evaluator: Any, task: str, policy_joints: tuple[s
 
 
 def _check_route(req: EvalRequest, evaluator: Any, task: str) -> None:
-    """``--route``'s clearance in range, for an evaluation with a goal on the floor (reach, path, timed policies)."""
+    """``--route``'s clearance in range, for tasks with somewhere on the floor to go (reach, path, timed, joystick)."""
     if not req.route:
         return
-    if getattr(evaluator, "suite_kind", None) not in ("paths", "timed"):
+    if getattr(evaluator, "suite_kind", None) not in ("paths", "timed", "joystick"):
         raise ConfigError(f"--route: the {task} task's goal is not a place on the floor to plan a route to (reach, "
-                          "path and timed policies take one); leave out --route")
+                          "path, timed and joystick policies take one); leave out --route")
     if req.physics:
         raise ConfigError("--route: not with --physics")
     if not 0 < req.route <= 2:

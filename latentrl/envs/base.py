@@ -459,6 +459,33 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
         with torch.no_grad():
             return self._goal_features(self.history_world() if history_world is None else history_world, goal)
 
+    route_target_moves = False
+    """Whether :meth:`route_target` moves with the body (a joystick's), so a route guide replans only when it has
+    moved a cell's worth rather than at every change."""
+
+    def route_target(self, history_world: torch.Tensor) -> torch.Tensor:
+        """(N, 3) where a route guide (:mod:`latentrl.envs.guide`) plans each env's route to: the task's goal."""
+        return self.goal_world
+
+    def routed_observation(self, obs: torch.Tensor, rows: torch.Tensor, seen: torch.Tensor,
+                           history_world: torch.Tensor) -> torch.Tensor:
+        """``obs`` whose ``rows`` observe the world points ``seen`` (N, 3) as their goal (``goal_dir``, ``goal_dist``).
+
+        A route guide's hook: a task whose goal is elsewhere in its observation overrides it (the joystick's
+        command direction).
+        """
+        fields = self.observation_fields
+        a, b = fields["goal_dir"][0], fields["goal_dist"][1]
+        feats = self.goal_features_of(seen.to(self.goal_world.device, self.goal_world.dtype), history_world)
+        out = torch.as_tensor(obs).clone()
+        out[rows, a:b] = feats[rows].to(out.device, out.dtype)
+        return out
+
+    @classmethod
+    def routable(cls) -> bool:
+        """Whether a route guide can lead this task: it observes a goal on the floor (reach, path, timed)."""
+        return hasattr(cls, "goal_world") and {"goal_dir", "goal_dist"} <= {name for name, _ in cls.goal_fields}
+
     def step_inputs(self) -> dict[str, Any]:
         """What the next :meth:`step` feeds the motion model besides the noise.
 

@@ -8,6 +8,8 @@ so that the goal the policy sees lies in the direction of the farthest route poi
 the route's length left: the policy walks as it was trained to, toward a goal that happens to lie along the route.
 Where the straight line to the goal is clear the observation is left as it is, bit for bit. Success, rewards and
 metrics keep the task's own goal; the rays still see the objects; ``--avoid``'s scene filter acts after the policy.
+A joystick has no goal: its route leads to where the command points a few metres ahead, and the guide turns the
+command's direction toward the route (the speed stays the command's).
 """
 
 from __future__ import annotations
@@ -19,20 +21,24 @@ from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import PELVIS
 from latentrl.scenes.route import RouteMap, RouteSettings
 
+MOVING_TARGET_STEP_M = 0.5
+"""A target that moves with the body (a joystick's) is planned anew once it has moved into another cell of this
+size: a route from any point of the map is as good, and planning costs ~20 ms."""
+
 
 class RouteGuide:
     """The route maps of a vector env's envs, one per (goal, scene) pair, planned when either changes.
 
-    ``env``: a vector env with a scene, ``goal_world`` and the ``goal_dir`` / ``goal_dist`` observation fields.
+    ``env``: a vector env with a scene whose task is ``routable()``: it names where to plan to (``route_target``)
+    and how to show a route's point in its observation (``routed_observation``; :class:`LatentMotionVectorEnv`).
     """
 
     def __init__(self, env, settings: RouteSettings | None = None):
         settings = settings or RouteSettings()
         settings.check()
-        fields = getattr(env, "observation_fields", {})
-        if "goal_dir" not in fields or "goal_dist" not in fields or not hasattr(type(env), "goal_world"):
-            raise ConfigError(f"route: the {type(env).__name__} task has no goal_dir/goal_dist goal to guide "
-                              "(reach and path tasks have)")
+        if not (callable(getattr(env, "routable", None)) and env.routable()):
+            raise ConfigError(f"route: the {type(env).__name__} task has no place on the floor to guide to "
+                              "(reach, path, timed and joystick tasks have)")
         self.env, self.settings = env, settings
         self._maps: dict[int, tuple[tuple, RouteMap]] = {}
         self.plans = 0
@@ -53,26 +59,27 @@ class RouteGuide:
         ``history_world``: the env's :meth:`history_world`, when the caller holds it already.
         """
         env = self.env
-        goal = env.goal_world.detach().to("cpu", torch.float64)
+        history_world = env.history_world() if history_world is None else history_world
+        goal = env.route_target(history_world).detach().to("cpu", torch.float64)
         out = goal.clone()
         scene = getattr(env, "scene", None)
         if scene is None:
             return out
         counts = scene.batch.object_counts().cpu()
-        history_world = env.history_world() if history_world is None else history_world
         pelvis = history_world[:, -1, PELVIS, :2].detach().to("cpu", torch.float64).numpy()
         scene_keys = self._scene_keys()
+        cell = MOVING_TARGET_STEP_M if env.route_target_moves else 1e-5
         for i in range(env.num_envs):
             if int(counts[i if counts.numel() > 1 else 0]) == 0:
                 continue
-            key = (tuple(round(v, 5) for v in goal[i, :2].tolist()), scene_keys[i])
+            key = (tuple(round(v / cell) for v in goal[i, :2].tolist()), scene_keys[i])
             held = self._maps.get(i)
             if held is None or held[0] != key:
                 held = (key, RouteMap(scene.row(i), pelvis[i], goal[i, :2].numpy(), self.settings))
                 self._maps[i] = held
                 self.plans += 1
             point, left = held[1].carrot(pelvis[i])
-            if np.allclose(point, goal[i, :2].numpy()):
+            if np.allclose(point, held[1].goal):  # the target in clear sight: the task's own observation
                 continue
             away = point - pelvis[i]
             norm = float(np.hypot(*away))
@@ -87,16 +94,10 @@ class RouteGuide:
         ``history_world``: the env's :meth:`history_world` (the env's own observation passes what it computed).
         """
         history_world = self.env.history_world() if history_world is None else history_world
-        goal = self.env.goal_world.detach().to("cpu", torch.float64)
+        goal = self.env.route_target(history_world).detach().to("cpu", torch.float64)
         seen = self.goals(history_world)
         moved = (seen != goal).any(dim=1)
         if not bool(moved.any()):
             return obs
-        fields = self.env.observation_fields
-        a, b = fields["goal_dir"][0], fields["goal_dist"][1]
-        out = torch.as_tensor(obs).clone()
-        feats = self.env.goal_features_of(seen.to(self.env.goal_world.device, self.env.goal_world.dtype),
-                                          history_world)
-        rows = moved.nonzero().squeeze(1).to(out.device)
-        out[rows, a:b] = feats[rows].to(out.device, out.dtype)
-        return out
+        rows = moved.nonzero().squeeze(1).to(torch.as_tensor(obs).device)
+        return self.env.routed_observation(obs, rows, seen, history_world)

@@ -46,6 +46,9 @@ MAX_FILE_BYTES = 16 << 20
 """Largest timeline file read."""
 CARROT_SECONDS = 1.0
 """``goal_world`` (recorded as the episode's goals) is where the command leads in this many seconds."""
+ROUTE_AHEAD_M = 3.0
+"""Among objects with a route guide (``route``): the route leads to the point this far along the commanded heading
+from the pelvis, so the guide sees an object in the way in time to lead around it."""
 
 _ENTRY_FIELDS = ("text", "commands", "duration")
 _COMMAND_FIELDS = ("t", "heading_deg", "speed")
@@ -299,6 +302,28 @@ class JoystickEnv(LatentMotionVectorEnv):
         pelvis = self.history_world()[:, -1, 0]
         xy = pelvis[:, :2] + self._direction() * (self._speed * CARROT_SECONDS)[:, None]
         return torch.cat((xy, torch.full_like(xy[:, :1], self.floor_height)), dim=-1)
+
+    route_target_moves = True
+
+    @classmethod
+    def routable(cls) -> bool:
+        """A route guide leads a joystick too: to the point :data:`ROUTE_AHEAD_M` along the command."""
+        return True
+
+    def route_target(self, history_world: torch.Tensor) -> torch.Tensor:
+        """(N, 3) the point :data:`ROUTE_AHEAD_M` along the commanded heading from the last history frame's pelvis."""
+        xy = history_world[:, -1, 0, :2] + self._direction() * ROUTE_AHEAD_M
+        return torch.cat((xy, torch.full_like(xy[:, :1], self.floor_height)), dim=-1)
+
+    def routed_observation(self, obs: torch.Tensor, rows: torch.Tensor, seen: torch.Tensor,
+                           history_world: torch.Tensor) -> torch.Tensor:
+        """``obs`` whose ``rows`` observe a command toward the world points ``seen`` (N, 3), at the command's speed."""
+        away = seen.to(self.device, torch.float32)[:, :2] - history_world[:, -1, 0, :2].float()
+        heading = torch.atan2(away[:, 1], away[:, 0])
+        a, b = self.observation_fields["command_dir"]
+        out = torch.as_tensor(obs).clone()
+        out[rows, a:b] = command_observation(history_world, heading, self._speed)[rows, :2].to(out.device, out.dtype)
+        return out
 
     def _reached(self, future: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """No goal is ever reached: the command is tracked, not arrived at."""

@@ -70,9 +70,60 @@ def test_a_reach_env_with_random_obstacles_is_guided_and_steps(tiny_model):
     assert torch.isfinite(obs).all() and env.guide.plans >= 4
 
 
+def joystick_with(model, scene, route=None, heading_deg: float = 0.0):
+    from latentrl.envs.joystick import CommandTimeline, JoystickEnv
+
+    timeline = CommandTimeline("walk", ((0.0, heading_deg, 1.2),), 20.0)
+    env = JoystickEnv(1, motion=model, commands=[timeline], command_assignment="by_env", scene=scene, route=route,
+                      autoreset_mode="Disabled")
+    env.reset(seed=0)
+    return env
+
+
+def test_a_joystick_commanded_into_a_wall_is_turned_toward_its_end_and_left_alone_where_the_way_is_clear(
+        tiny_model):
+    """The route leads to the point 3 m along the command; the command's direction (not its speed) turns toward the
+    route's point in clear sight; with nothing in the way the observation is the joystick's own, step after step."""
+    from latentrl.envs.joystick import ROUTE_AHEAD_M, command_observation
+
+    plain, guided = joystick_with(tiny_model, FAR), joystick_with(tiny_model, FAR, route=0.5)
+    for a in torch.randn(3, 1, tiny_model.latent_dim, generator=torch.Generator().manual_seed(0)):
+        assert torch.equal(plain.observation(), guided.observation())
+        plain.step(a), guided.step(a)
+    plain, guided = joystick_with(tiny_model, WALL), joystick_with(tiny_model, WALL, route=0.5)
+    obs, seen = plain.observation(), guided.observation()
+    a, b = guided.observation_fields["command_dir"]
+    speed = guided.observation_fields["command_speed"]
+    assert torch.equal(seen[:, b:], obs[:, b:]) and float(seen[0, speed[0]]) == pytest.approx(1.2)
+    history = guided.history_world()
+    pelvis = history[:, -1, PELVIS, :2].double()
+    target = guided.route_target(history)
+    assert float((target[0, :2].double() - pelvis[0]).norm()) == pytest.approx(ROUTE_AHEAD_M, abs=1e-4)
+    assert float(target[0, 1] - pelvis[0, 1]) == pytest.approx(ROUTE_AHEAD_M, abs=1e-4)  # heading 0: +y
+    route = RouteMap(guided.scene.row(0), pelvis[0].numpy(), target[0, :2].double().numpy(), RouteSettings(0.5))
+    point, _ = route.carrot(pelvis[0].numpy())
+    assert abs(point[0]) > 0.5  # beside the wall
+    away = torch.from_numpy(point).float() - pelvis[0].float()
+    expected = command_observation(history, torch.atan2(away[1:], away[:1]), torch.tensor([1.2]))[:, :2]
+    assert torch.allclose(seen[:, a:b], expected, atol=1e-4) and not torch.allclose(seen[:, a:b], obs[:, a:b])
+
+
+def test_a_moving_joystick_target_is_planned_anew_only_after_it_moved_a_cell(tiny_model):
+    """The target 3 m ahead moves with every turn of the command: a few centimetres keep the route, a new cell plans."""
+    env = joystick_with(tiny_model, WALL, route=0.5)
+    env.observation()
+    assert env.guide.plans == 1
+    env._heading += 0.01  # the target moves 3 cm, inside its 0.5 m cell
+    env.observation()
+    assert env.guide.plans == 1
+    env._heading += 0.5  # 1.4 m
+    env.observation()
+    assert env.guide.plans == 2
+
+
 @pytest.mark.parametrize("make, message", [
     (lambda m: ReachJointEnv(1, motion=m, scene=WALL, route=0.5),
-     "^route: the ReachJointEnv task has no goal_dir/goal_dist goal to guide"),
+     "^route: the ReachJointEnv task has no place on the floor to guide to"),
     (lambda m: ReachLocationEnv(1, motion=m, route=0.5), "^route: needs a scene"),
     (lambda m: ReachLocationEnv(1, motion=m, scene=WALL, route=3.0),
      r"^route clearance: expected metres in \[0.0, 2.0\]"),
