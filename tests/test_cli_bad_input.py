@@ -776,8 +776,9 @@ ROUND3 += [
     _r3("bad value", "play-joystick-record", ["play", "joystick_walk_default", "--record", "x.txt"],
         r"--record must name a \.gif or \.mp4"),
     _r3("bad value", "play-timed", ["play", "timed_walk_default"], r"this policy's task is 'timed'"),
-    _r3("bad value", "play-route-a-joystick", ["play", "joystick_walk_default", "--route", "0.5"],
-        r"--route: only reach and path policies walk to a place on the floor; this policy's task is 'joystick'"),
+    _r3("bad value", "play-route-a-reach-joint-policy", ["play", "reach_joint_default", "--route", "0.5"],
+        r"--route: only reach, path and joystick policies walk to a place on the floor; this policy's task is "
+        r"'reach_joint'"),
     _r3("bad value", "play-route-of-three-metres", ["play", "reach_walk_default", "--route", "3"],
         r"--route: expected the route's clearance in metres, in \[0, 2\] \(0: off\), got 3\.0"),
     _r3("bad file", "play-etc-passwd", ["play", "/etc/passwd"], r"/etc/passwd: not a readable torch file"),

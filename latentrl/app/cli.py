@@ -515,7 +515,8 @@ def _eval_commands(sub) -> None:
                          "take the safe one ending nearest the policy's own plan; the optimizer only where none is "
                          "safe (default: the policy's stored eval.avoid_samples, else 0; not with --refine)")
     ev.add_argument("--route", type=float, default=None, metavar="M",
-                    help="reach, path and timed policies among objects: plan the shortest route to each goal keeping M "
+                    help="reach, path, timed and joystick policies among objects: plan the shortest route to each goal "
+                         "(a joystick's: 3 m along its command) keeping M "
                          "metres from every object, and show the policy the farthest route point in clear sight as "
                          "its goal (success stays the task's goal; default: the policy's stored eval.route, else "
                          "0: off; docs/scenes.md)")
@@ -565,7 +566,7 @@ def _viewer_commands(sub) -> None:
                                                         "tasks/scenes (default: the policy's training scene, else the "
                                                         "bare floor); ctrl-click drops boxes into it")
     play.add_argument("--route", type=float, default=None, metavar="M",
-                      help="reach and path policies: head along the shortest route keeping M metres from every "
+                      help="reach, path and joystick policies: head along the shortest route keeping M metres from every "
                            "object, so dropped boxes are walked around (default: the policy's env.route, else "
                            "0: straight for the goal; docs/scenes.md)")
     server_flags(play)

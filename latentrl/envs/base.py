@@ -110,7 +110,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
             frame (the ``scene_height_grid`` group; 0: none, the default).
         route: with a scene, the clearance (metres) of the routes a :class:`~latentrl.envs.guide.RouteGuide`
             plans to each goal; where an object stands in the way, ``goal_dir`` / ``goal_dist`` show the farthest
-            route point in clear sight instead of the goal (reach and path tasks; None: off, the default).
+            route point in clear sight instead of the goal (tasks that are ``routable()``: reach, path, timed and
+            joystick; None: off, the default).
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}

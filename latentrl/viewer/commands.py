@@ -61,8 +61,8 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     ``record``: a .gif or .mp4 that gets every frame shown, drawn when the server stops.
     ``scene``: a ``latentrl.scene/1`` file or a name in ``tasks/scenes`` to play in (default: the policy's
     training scene when it has a fixed one, else the bare floor). ``skeleton``: draw the skeleton too.
-    ``route``: a reach or path policy heads along routes keeping this many metres from the objects (None: the
-    policy's ``env.route``; 0: off).
+    ``route``: a reach, path or joystick policy heads along routes keeping this many metres from the objects (None:
+    the policy's ``env.route``; 0: off).
     """
     import torch
 
@@ -88,9 +88,9 @@ def play_command(policy: str | Path, host: str = DEFAULT_HOST, port: int = DEFAU
     check_record(record)
     if route is not None and not 0 <= route <= 2:
         raise ConfigError(f"--route: expected the route's clearance in metres, in [0, 2] (0: off), got {route}")
-    if route and task not in ("reach", "path"):
-        raise ConfigError(f"--route: only reach and path policies walk to a place on the floor; this policy's task "
-                          f"is '{task}'")
+    if route and task not in ("reach", "path", "joystick"):
+        raise ConfigError(f"--route: only reach, path and joystick policies walk to a place on the floor; this "
+                          f"policy's task is '{task}'")
     world = play_scene(scene)
     require_viser()
     check_port(host, port)  # before the models load

@@ -176,7 +176,7 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
     Its scene is ``scene`` (``--scene``), else the policy's fixed training scene, else an empty one (boxes can
     be dropped into any); the policy observes it (``scene_rays``) only when it was trained with a scene, as
     ``latentrl eval --scene`` does. An empty scene steps exactly as the flat floor. ``route`` (``--route``; None:
-    the policy's ``env.route``; 0: off): a reach or path policy heads along planned routes around the objects
+    the policy's ``env.route``; 0: off): a reach, path or joystick policy heads along planned routes around the objects
     (:mod:`latentrl.envs.guide`), so boxes dropped in its way are walked around even by a policy that cannot see.
     """
     env_cfg = (checkpoint.get("config") or {}).get("env") or {}
@@ -191,10 +191,10 @@ def play_env(checkpoint: Mapping[str, Any], model, text: str | None, device: str
                       height_grid_spacing=float(env_cfg.get("height_grid_spacing") or 0.25))
     if task == "reach_joint":
         return joint_play_env(env_cfg, **common)
+    route = env_cfg.get("route") if route is None else (route or None)
     if task == "joystick":
         speeds = tuple((env_cfg.get("joystick") or {}).get("speed_range") or (0.7, 1.4))
-        return SteeredJoystickEnv(1, speed_range=speeds, **common)
-    route = env_cfg.get("route") if route is None else (route or None)
+        return SteeredJoystickEnv(1, speed_range=speeds, route=route, **common)
     return SteeredReachEnv(1, route=route, **common)
 
 

@@ -134,7 +134,7 @@ def test_bad_routes_are_refused_in_one_line(tiny_model, make, message):
     assert "\n" not in str(err.value)
 
 
-def test_play_heads_a_reach_policy_along_routes_when_asked_or_trained_so(tiny_model):
+def test_play_heads_a_reach_or_joystick_policy_along_routes_when_asked_or_trained_so(tiny_model):
     pytest.importorskip("viser")
     from latentrl.viewer.live import play_env
 
@@ -152,3 +152,8 @@ def test_play_heads_a_reach_policy_along_routes_when_asked_or_trained_so(tiny_mo
     straight, routed = (env.observation() for env in envs)
     assert not torch.allclose(straight[:, a:b], routed[:, a:b])
     assert torch.equal(straight[:, b:], routed[:, b:])
+    joystick = play_env(plain, tiny_model, None, "cpu", "joystick", WALL, route=0.5)  # steered by the keys
+    joystick.reset(seed=0)
+    a, b = joystick.observation_fields["command_dir"]
+    turned = joystick.observation()[0, a:b]
+    assert joystick.guide is not None and float(turned[0]) < 0.99  # the wall ahead turns the command aside
