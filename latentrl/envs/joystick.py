@@ -31,6 +31,7 @@ from latentrl.motion.skeleton import FPS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS
 from latentrl.safe_io import read_json_file
+from latentrl.scenes.route import PROBE_Z
 
 STEP_SECONDS = FUTURE_LENGTH / FPS
 """One env step: 8 frames = 0.267 s."""
@@ -46,9 +47,10 @@ MAX_FILE_BYTES = 16 << 20
 """Largest timeline file read."""
 CARROT_SECONDS = 1.0
 """``goal_world`` (recorded as the episode's goals) is where the command leads in this many seconds."""
-ROUTE_AHEAD_M = 3.0
-"""Among objects with a route guide (``route``): the route leads to the point this far along the commanded heading
-from the pelvis, so the guide sees an object in the way in time to lead around it."""
+ROUTE_AHEAD_M = (3.0, 6.0)
+"""Among objects with a route guide (``route``): the route leads to the nearest point this far along the commanded
+heading from the pelvis (every 0.25 m) that keeps the route's clearance from every object, else to the nearest: far
+enough for the guide to see an object in the way in time, and past it rather than into it."""
 
 _ENTRY_FIELDS = ("text", "commands", "duration")
 _COMMAND_FIELDS = ("t", "heading_deg", "speed")
@@ -307,13 +309,24 @@ class JoystickEnv(LatentMotionVectorEnv):
 
     @classmethod
     def routable(cls) -> bool:
-        """A route guide leads a joystick too: to the point :data:`ROUTE_AHEAD_M` along the command."""
+        """A route guide leads a joystick too: to a point :data:`ROUTE_AHEAD_M` along the command."""
         return True
 
     def route_target(self, history_world: torch.Tensor) -> torch.Tensor:
-        """(N, 3) the point :data:`ROUTE_AHEAD_M` along the commanded heading from the last history frame's pelvis."""
-        xy = history_world[:, -1, 0, :2] + self._direction() * ROUTE_AHEAD_M
-        return torch.cat((xy, torch.full_like(xy[:, :1], self.floor_height)), dim=-1)
+        """(N, 3) where the command leads among the objects: the nearest point :data:`ROUTE_AHEAD_M` along the
+        commanded heading from the last history frame's pelvis that keeps the route's clearance (else the nearest)."""
+        near, far = ROUTE_AHEAD_M
+        ahead = torch.arange(near, far + 1e-6, 0.25, device=self.device)
+        xy = history_world[:, -1, 0, None, :2] + self._direction()[:, None] * ahead[:, None]  # (N, K, 2)
+        pick = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
+        if self.scene is not None and self.route is not None:
+            heights = torch.tensor(PROBE_Z, device=self.device) + self.floor_height
+            points = torch.cat((xy[:, :, None].expand(-1, -1, len(PROBE_Z), -1),
+                                heights[None, None, :, None].expand(*xy.shape[:2], -1, 1)), dim=-1)
+            clear = self.scene.batch.sdf(points).amin(dim=-1) >= self.route.clearance  # (N, K)
+            pick = torch.where(clear.any(dim=1), clear.float().argmax(dim=1), pick)
+        chosen = xy[torch.arange(self.num_envs, device=self.device), pick]
+        return torch.cat((chosen, torch.full_like(chosen[:, :1], self.floor_height)), dim=-1)
 
     def routed_observation(self, obs: torch.Tensor, rows: torch.Tensor, seen: torch.Tensor,
                            history_world: torch.Tensor) -> torch.Tensor:

@@ -98,14 +98,29 @@ def test_a_joystick_commanded_into_a_wall_is_turned_toward_its_end_and_left_alon
     history = guided.history_world()
     pelvis = history[:, -1, PELVIS, :2].double()
     target = guided.route_target(history)
-    assert float((target[0, :2].double() - pelvis[0]).norm()) == pytest.approx(ROUTE_AHEAD_M, abs=1e-4)
-    assert float(target[0, 1] - pelvis[0, 1]) == pytest.approx(ROUTE_AHEAD_M, abs=1e-4)  # heading 0: +y
+    assert float((target[0, :2].double() - pelvis[0]).norm()) == pytest.approx(ROUTE_AHEAD_M[0], abs=1e-4)
+    assert float(target[0, 1] - pelvis[0, 1]) == pytest.approx(ROUTE_AHEAD_M[0], abs=1e-4)  # heading 0: +y
     route = RouteMap(guided.scene.row(0), pelvis[0].numpy(), target[0, :2].double().numpy(), RouteSettings(0.5))
     point, _ = route.carrot(pelvis[0].numpy())
     assert abs(point[0]) > 0.5  # beside the wall
     away = torch.from_numpy(point).float() - pelvis[0].float()
     expected = command_observation(history, torch.atan2(away[1:], away[:1]), torch.tensor([1.2]))[:, :2]
     assert torch.allclose(seen[:, a:b], expected, atol=1e-4) and not torch.allclose(seen[:, a:b], obs[:, a:b])
+
+
+def test_a_joystick_route_leads_past_an_object_the_command_points_into_not_into_it(tiny_model):
+    """The target is the nearest point 3-6 m along the command that keeps the clearance: behind a deep block, not in
+    it; with no such point, 3 m ahead."""
+    deep = Scene([Box(center=(0.0, 3.5), size=(2.0, 2.0, 1.5))])  # y from 2.5 to 4.5
+    env = joystick_with(tiny_model, deep, route=0.5)
+    history = env.history_world()
+    pelvis = history[0, -1, PELVIS, :2]
+    ahead = float(env.route_target(history)[0, 1] - pelvis[1])
+    assert ahead == pytest.approx(5.0, abs=0.26) and ahead >= 4.5 + 0.5 - pelvis[1] - 1e-3
+    wall = Scene([Box(center=(0.0, 5.0), size=(2.0, 8.0, 1.5))])  # every point 3-6 m ahead is inside
+    env = joystick_with(tiny_model, wall, route=0.5)
+    history = env.history_world()
+    assert float(env.route_target(history)[0, 1] - history[0, -1, PELVIS, 1]) == pytest.approx(3.0, abs=1e-4)
 
 
 def test_a_moving_joystick_target_is_planned_anew_only_after_it_moved_a_cell(tiny_model):
