@@ -566,8 +566,8 @@ def _viewer_commands(sub) -> None:
                                                         "tasks/scenes (default: the policy's training scene, else the "
                                                         "bare floor); ctrl-click drops boxes into it")
     play.add_argument("--route", type=float, default=None, metavar="M",
-                      help="reach, path and joystick policies: head along the shortest route keeping M metres from every "
-                           "object, so dropped boxes are walked around (default: the policy's env.route, else "
+                      help="reach, path and joystick policies: head along the shortest route keeping M metres from "
+                           "every object, so dropped boxes are walked around (default: the policy's env.route, else "
                            "0: straight for the goal; docs/scenes.md)")
     server_flags(play)
     play.add_argument("--record", metavar="FILE", help="also draw every frame shown into this .gif or .mp4 when the "

@@ -313,8 +313,11 @@ class JoystickEnv(LatentMotionVectorEnv):
         return True
 
     def route_target(self, history_world: torch.Tensor) -> torch.Tensor:
-        """(N, 3) where the command leads among the objects: the nearest point :data:`ROUTE_AHEAD_M` along the
-        commanded heading from the last history frame's pelvis that keeps the route's clearance (else the nearest)."""
+        """(N, 3) where the command leads among the objects, for a route guide.
+
+        The nearest point :data:`ROUTE_AHEAD_M` along the commanded heading from the last history frame's pelvis
+        that keeps the route's clearance from every object (else the nearest of them).
+        """
         near, far = ROUTE_AHEAD_M
         ahead = torch.arange(near, far + 1e-6, 0.25, device=self.device)
         xy = history_world[:, -1, 0, None, :2] + self._direction()[:, None] * ahead[:, None]  # (N, K, 2)
