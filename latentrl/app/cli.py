@@ -516,7 +516,7 @@ def _eval_commands(sub) -> None:
                          "safe (default: the policy's stored eval.avoid_samples, else 0; not with --refine)")
     ev.add_argument("--route", type=float, default=None, metavar="M",
                     help="reach, path, timed and joystick policies among objects: plan the shortest route to each goal "
-                         "(a joystick's: 3 m along its command) keeping M "
+                         "(a joystick's: 3-6 m along its command) keeping M "
                          "metres from every object, and show the policy the farthest route point in clear sight as "
                          "its goal (success stays the task's goal; default: the policy's stored eval.route, else "
                          "0: off; docs/scenes.md)")

@@ -247,7 +247,7 @@ class EnvConfig:
     objects, which reach it only through the rewards, the end at a collision and a ``route`` guide's goal (a policy
     that follows routes without seeing what they go around; docs/scenes.md, "Routes")."""
     route: float | None = None
-    """With a scene (reach, path, timed and joystick tasks; a joystick's goal is the point 3 m along its command):
+    """With a scene (reach, path, timed and joystick tasks; a joystick's goal is a point 3-6 m along its command):
     plan each goal's shortest route keeping this many metres (pelvis, xy)
     from every object and observe the farthest route point in clear sight as the goal where an object is in the
     way (:mod:`latentrl.envs.guide`; docs/scenes.md, "Routes"); None: the task's goal."""
