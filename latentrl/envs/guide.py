@@ -19,7 +19,7 @@ import torch
 
 from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import PELVIS
-from latentrl.scenes.route import RouteMap, RouteSettings
+from latentrl.scenes.route import PROBE_Z, RouteMap, RouteSettings
 
 MOVING_TARGET_STEP_M = 0.5
 """A target that moves with the body (a joystick's) is planned anew once it has moved into another cell of this
@@ -69,8 +69,9 @@ class RouteGuide:
         pelvis = history_world[:, -1, PELVIS, :2].detach().to("cpu", torch.float64).numpy()
         scene_keys = self._scene_keys()
         cell = MOVING_TARGET_STEP_M if env.route_target_moves else 1e-5
+        clear = self._clear_line(history_world[:, -1, PELVIS], goal) if env.route_target_moves else None
         for i in range(env.num_envs):
-            if int(counts[i if counts.numel() > 1 else 0]) == 0:
+            if int(counts[i if counts.numel() > 1 else 0]) == 0 or (clear is not None and bool(clear[i])):
                 continue
             key = (tuple(round(v / cell) for v in goal[i, :2].tolist()), scene_keys[i])
             held = self._maps.get(i)
@@ -87,6 +88,26 @@ class RouteGuide:
                 continue
             out[i, :2] = torch.from_numpy(pelvis[i] + away / norm * left)
         return out
+
+    def _clear_line(self, pelvis: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """(N,) whether the straight line from each (N, 3) pelvis to its target keeps the route's clearance.
+
+        Why: a target that moves with the body would otherwise be planned for at nearly every step; where nothing
+        is in the way no route is needed. The clearance asked is the walker's own distance where it stands nearer
+        (as :meth:`RouteMap.carrot` asks), every object probed at :data:`PROBE_Z` every 5 cm along the line.
+        """
+        batch = self.env.scene.batch
+        start = pelvis[:, :2].detach().to(batch.box_center.dtype)
+        end = target[:, :2].to(start.device, start.dtype)
+        ts = torch.linspace(0.0, 1.0, max(2, int(float((end - start).norm(dim=-1).max()) / 0.05) + 1),
+                            dtype=start.dtype, device=start.device)
+        xy = start[:, None] + (end - start)[:, None] * ts[None, :, None]  # (N, T, 2)
+        z = torch.tensor(PROBE_Z, dtype=start.dtype, device=start.device) + float(self.env.floor_height)
+        points = torch.cat((xy[:, :, None].expand(-1, -1, len(PROBE_Z), -1),
+                            z[None, None, :, None].expand(*xy.shape[:2], -1, 1)), dim=-1)
+        distance = batch.sdf(points).amin(dim=-1)  # (N, T)
+        need = distance[:, 0].clamp(max=self.settings.clearance)
+        return (distance >= need[:, None] - 1e-6).all(dim=1).cpu()
 
     def observe(self, obs: torch.Tensor, history_world: torch.Tensor | None = None) -> torch.Tensor:
         """``obs`` with the goal fields of every guided env showing :meth:`goals` (others untouched).

@@ -90,6 +90,7 @@ def test_a_joystick_commanded_into_a_wall_is_turned_toward_its_end_and_left_alon
     for a in torch.randn(3, 1, tiny_model.latent_dim, generator=torch.Generator().manual_seed(0)):
         assert torch.equal(plain.observation(), guided.observation())
         plain.step(a), guided.step(a)
+    assert guided.guide.plans == 0  # nothing in the way: no route planned, although the target moves every step
     plain, guided = joystick_with(tiny_model, WALL), joystick_with(tiny_model, WALL, route=0.5)
     obs, seen = plain.observation(), guided.observation()
     a, b = guided.observation_fields["command_dir"]
