@@ -176,6 +176,11 @@ class Player:
         self.rate = float(value)
 
     def _scrubbed(self, event: Any) -> None:
+        """A client moved the slider: go to its frame, or put a bad value back with a one-line message.
+
+        While playing, the next drawn frame may replace the client's value before this runs: the value is then
+        dropped as a bad one is, only without the message.
+        """
         if event.client is None:  # our own update from the playback thread
             return
         with self.lock:

@@ -231,6 +231,8 @@ def test_bad_gui_values_are_ignored_and_playback_goes_on(guarded, eval_folder, c
             assert player.rate == 1.0
         client.gui(player.speed, "2")  # the same channel with a good value
         wait_for(lambda: player.rate == 2.0, "speed 2 taken")
+        with player.lock:  # paused: while playing, the next frame may replace a bad slider value before the
+            player.playing = False  # handler reads it (dropped then, but without the message waited for here)
         for bad in (-5, 10**9):
             client.gui(player.slider, bad)
             wait_for(lambda: "ignored frame" in capsys.readouterr().err, f"frame {bad} ignored")
@@ -240,6 +242,8 @@ def test_bad_gui_values_are_ignored_and_playback_goes_on(guarded, eval_folder, c
         assert player.label == player.source.entries[0].label
         client.gui(player.picker, player.source.entries[1].label)
         wait_for(lambda: player.label == player.source.entries[1].label, "a real episode picked")
+        with player.lock:
+            player.playing = True
         before = player.frame
         wait_for(lambda: player.frame != before and np.isfinite(player.frame), "playback still moving")
         assert player.thread.is_alive()
