@@ -19,7 +19,7 @@ import torch
 
 from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import PELVIS
-from latentrl.scenes.route import PROBE_Z, RouteMap, RouteSettings
+from latentrl.scenes.route import RouteMap, RouteSettings, footprint_distance
 
 MOVING_TARGET_STEP_M = 0.5
 """A target that moves with the body (a joystick's) is planned anew once it has moved into another cell of this
@@ -58,13 +58,17 @@ class RouteGuide:
 
         ``history_world``: the env's :meth:`history_world`, when the caller holds it already.
         """
+        return self._seen(history_world)[1]
+
+    def _seen(self, history_world: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 3) the envs' route targets and (N, 3) the goals their policies should see (:meth:`goals`)."""
         env = self.env
         history_world = env.history_world() if history_world is None else history_world
         goal = env.route_target(history_world).detach().to("cpu", torch.float64)
         out = goal.clone()
         scene = getattr(env, "scene", None)
         if scene is None:
-            return out
+            return goal, out
         counts = scene.batch.object_counts().cpu()
         pelvis = history_world[:, -1, PELVIS, :2].detach().to("cpu", torch.float64).numpy()
         scene_keys = self._scene_keys()
@@ -87,14 +91,14 @@ class RouteGuide:
             if norm < 1e-6:
                 continue
             out[i, :2] = torch.from_numpy(pelvis[i] + away / norm * left)
-        return out
+        return goal, out
 
     def _clear_line(self, pelvis: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """(N,) whether the straight line from each (N, 3) pelvis to its target keeps the route's clearance.
 
         Why: a target that moves with the body would otherwise be planned for at nearly every step; where nothing
         is in the way no route is needed. The clearance asked is the walker's own distance where it stands nearer
-        (as :meth:`RouteMap.carrot` asks), every object probed at :data:`PROBE_Z` every 5 cm along the line.
+        (as :meth:`RouteMap.carrot` asks), every object's footprint probed every 5 cm along the line.
         """
         batch = self.env.scene.batch
         start = pelvis[:, :2].detach().to(batch.box_center.dtype)
@@ -102,10 +106,7 @@ class RouteGuide:
         ts = torch.linspace(0.0, 1.0, max(2, int(float((end - start).norm(dim=-1).max()) / 0.05) + 1),
                             dtype=start.dtype, device=start.device)
         xy = start[:, None] + (end - start)[:, None] * ts[None, :, None]  # (N, T, 2)
-        z = torch.tensor(PROBE_Z, dtype=start.dtype, device=start.device) + float(self.env.floor_height)
-        points = torch.cat((xy[:, :, None].expand(-1, -1, len(PROBE_Z), -1),
-                            z[None, None, :, None].expand(*xy.shape[:2], -1, 1)), dim=-1)
-        distance = batch.sdf(points).amin(dim=-1)  # (N, T)
+        distance = footprint_distance(batch, xy, self.env.floor_height)  # (N, T)
         need = distance[:, 0].clamp(max=self.settings.clearance)
         return (distance >= need[:, None] - 1e-6).all(dim=1).cpu()
 
@@ -115,8 +116,7 @@ class RouteGuide:
         ``history_world``: the env's :meth:`history_world` (the env's own observation passes what it computed).
         """
         history_world = self.env.history_world() if history_world is None else history_world
-        goal = self.env.route_target(history_world).detach().to("cpu", torch.float64)
-        seen = self.goals(history_world)
+        goal, seen = self._seen(history_world)
         moved = (seen != goal).any(dim=1)
         if not bool(moved.any()):
             return obs

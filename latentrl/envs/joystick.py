@@ -31,7 +31,7 @@ from latentrl.motion.skeleton import FPS
 from latentrl.motion.text import prompt_problem
 from latentrl.rewards.compose import COMMON_TERMS
 from latentrl.safe_io import read_json_file
-from latentrl.scenes.route import PROBE_Z
+from latentrl.scenes.route import footprint_distance
 
 STEP_SECONDS = FUTURE_LENGTH / FPS
 """One env step: 8 frames = 0.267 s."""
@@ -323,10 +323,7 @@ class JoystickEnv(LatentMotionVectorEnv):
         xy = history_world[:, -1, 0, None, :2] + self._direction()[:, None] * ahead[:, None]  # (N, K, 2)
         pick = torch.zeros(self.num_envs, dtype=torch.long, device=self.device)
         if self.scene is not None and self.route is not None:
-            heights = torch.tensor(PROBE_Z, device=self.device) + self.floor_height
-            points = torch.cat((xy[:, :, None].expand(-1, -1, len(PROBE_Z), -1),
-                                heights[None, None, :, None].expand(*xy.shape[:2], -1, 1)), dim=-1)
-            clear = self.scene.batch.sdf(points).amin(dim=-1) >= self.route.clearance  # (N, K)
+            clear = footprint_distance(self.scene.batch, xy, self.floor_height) >= self.route.clearance  # (N, K)
             pick = torch.where(clear.any(dim=1), clear.float().argmax(dim=1), pick)
         chosen = xy[torch.arange(self.num_envs, device=self.device), pick]
         return torch.cat((chosen, torch.full_like(chosen[:, :1], self.floor_height)), dim=-1)

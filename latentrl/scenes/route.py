@@ -211,6 +211,14 @@ class RouteMap:
         return np.array(best), float(np.hypot(*(best - xy)) + self.cost[self.index(best)])
 
 
+def footprint_distance(batch: SceneBatch, xy: torch.Tensor, floor: float) -> torch.Tensor:
+    """(N, ...) distance from (N, ..., 2) floor points to the nearest object, the least over :data:`PROBE_Z`."""
+    z = torch.tensor(PROBE_Z, dtype=xy.dtype, device=xy.device) + float(floor)
+    points = torch.cat((xy[..., None, :].expand(*xy.shape[:-1], len(PROBE_Z), 2),
+                        z.expand(*xy.shape[:-1], -1)[..., None]), dim=-1)
+    return batch.sdf(points).amin(dim=-1)
+
+
 def clearance_grid(scene: SceneBatch, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     """(nx, ny) xy distance from each grid point to the nearest object, the least over :data:`PROBE_Z`, metres."""
     floor = float(scene.floor_height[0])
