@@ -190,10 +190,11 @@ def heading_change_rad(joints) -> torch.Tensor:
     return yaw[..., -1] - yaw[..., 0]
 
 
-def foot_contact_shares(joints, floor: float = 0.0, threshold: float = 0.05) -> dict[str, torch.Tensor]:
+def foot_contact_shares(joints, floor=0.0, threshold: float = 0.05) -> dict[str, torch.Tensor]:
     """Share of frames with only the left, only the right, both or no foot joint on the floor.
 
-    A foot joint is in contact within ``threshold`` of the floor. Returns
+    A foot joint is in contact within ``threshold`` of the floor: a height, or (..., T, 2) the ground under
+    each foot joint (:func:`terrain_floor`). Returns
     ``{"left_only", "right_only", "both", "none"}``, each (...).
     """
     return contact_shares(_t(joints)[..., list(FOOT_JOINTS), 2] - floor, threshold)

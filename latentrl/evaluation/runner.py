@@ -209,6 +209,7 @@ def run_path(
         motion_i = _episode_motion(env, i, steps)
         joints = torch.as_tensor(motion_i.joints)
         success = bool(outcome["success"][i])
+        terrain = env.scene.row(i) if env.scene is not None else None
         wp_times = [frames_after(int(s)) / FPS if s > 0 else None for s in outcome["wp_step"][i, : len(path.waypoints)]]
         result = EpisodeResult(
             suite=suite,
@@ -220,11 +221,10 @@ def run_path(
             reach_time_s=frames_after(steps) / FPS if success else settings.budget_s,
             waypoint_times_s=wp_times,
             final_dist_m=float(M.final_goal_distance_m(joints, final_goal)),
-            metrics={**M.episode_metrics(joints, FPS, env.floor_height,
-                                         env.scene.row(i) if env.scene is not None else None),
-                     **(scene_metrics(joints, env.scene.row(i)) if env.scene is not None else {})},
+            metrics={**M.episode_metrics(joints, FPS, env.floor_height, terrain),
+                     **(scene_metrics(joints, terrain) if terrain is not None else {})},
             pelvis_xy=joints[:, 0, :2].numpy().copy(),
-            segments=judge_clip(motion_i),
+            segments=judge_clip(motion_i, terrain),
         )
         if env.scene is not None:
             motion_i.scene = result.scene = scene_to_json(env.scene.scene_of(i))

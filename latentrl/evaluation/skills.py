@@ -9,7 +9,8 @@ time cannot tell a policy that runs where it should run from one that walks ever
 :mod:`~latentrl.evaluation.metrics`.
 
 The first :data:`TRANSITION_S` of a segment are left out (the motion is still changing skill), and
-segments shorter than :data:`MIN_SEGMENT_S` are not measured at all.
+segments shorter than :data:`MIN_SEGMENT_S` are not measured at all. On a scene's terrain a foot counts as
+down on whatever ground is under it (a tread, a box top), as the floor metrics measure it.
 """
 
 from __future__ import annotations
@@ -20,10 +21,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import torch
 
 from latentrl.evaluation import metrics as M
 from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH, HISTORY_LENGTH
+from latentrl.motion.skeleton import FOOT_JOINTS
 from latentrl.rewards.skills import (  # noqa: F401  (the rule's names, re-exported for the judge's readers)
     CONTACT_HEIGHT_M,
     HOP_OTHER_MAX_SHARE,
@@ -75,8 +78,11 @@ def segments(clip: MotionClip) -> list[Segment]:
     return out
 
 
-def judge_segment(clip: MotionClip, seg: Segment) -> dict[str, Any]:
+def judge_segment(clip: MotionClip, seg: Segment, terrain=None) -> dict[str, Any]:
     """One segment's entry: where it is, its skill, what was measured and whether it matches.
+
+    ``terrain`` (a scene's one-row ``SceneBatch``; None: the flat floor at ``clip.floor``) is the ground the
+    feet stand on (:func:`~latentrl.evaluation.metrics.terrain_floor`).
 
     Keys: ``waypoint``, ``text``, ``skill`` (None = not judged), ``start_s``, ``duration_s``,
     ``measured`` (long enough), ``match`` (None unless measured and judged), ``speed_m_s``,
@@ -92,16 +98,21 @@ def judge_segment(clip: MotionClip, seg: Segment) -> dict[str, Any]:
         return entry
     window = clip.joints[seg.start + round(TRANSITION_S * fps): seg.stop]
     speed = float(M.pelvis_speed_m_s(window, fps))
-    shares = M.foot_contact_shares(window, clip.floor, CONTACT_HEIGHT_M)
+    if terrain is None:
+        shares = M.foot_contact_shares(window, clip.floor, CONTACT_HEIGHT_M)
+    else:
+        joints = torch.as_tensor(window, dtype=torch.float32)
+        ground = M.terrain_floor(joints, terrain, clip.floor)[:, list(FOOT_JOINTS)]
+        shares = M.foot_contact_shares(joints, ground, CONTACT_HEIGHT_M)
     left, right = float(shares["left_only"]), float(shares["right_only"])
     entry.update(measured=True, match=matches(skill, speed, left, right), speed_m_s=speed, left_only=left,
                  right_only=right)
     return entry
 
 
-def judge_clip(clip: MotionClip) -> list[dict[str, Any]]:
-    """:func:`judge_segment` of every segment of an episode, in order."""
-    return [judge_segment(clip, seg) for seg in segments(clip)]
+def judge_clip(clip: MotionClip, terrain=None) -> list[dict[str, Any]]:
+    """:func:`judge_segment` of every segment of an episode, in order, on ``terrain`` (None: the flat floor)."""
+    return [judge_segment(clip, seg, terrain) for seg in segments(clip)]
 
 
 def match_share(entries: Iterable[dict[str, Any]]) -> float:

@@ -136,3 +136,19 @@ def test_evaluation_reports_segments_in_json_and_markdown(tiny_model, tmp_path):
     for block in (loaded["overall"], *loaded["suites"].values()):  # a report written before the skill check
         del block["segment_skill_match"], block["skills"]
     assert "predates the skill check" in R.report_markdown(loaded)
+
+
+def test_feet_on_a_box_top_count_as_down_on_the_terrain():
+    """A hop on a 0.3 m platform: the flat floor sees no contact at all; the scene's terrain sees the hop."""
+    from latentrl.scenes import Box, Scene, SceneBatch
+
+    clip = make_clip([(8, "hop on left leg", 0.5)], feet=lambda t: (True, False))
+    clip.joints[..., 2] += 0.3  # the whole body 0.3 m up, standing on the box below
+    platform = SceneBatch.from_scenes([Scene((Box((0.0, 1.0), (2.0, 4.0, 0.3)),))])
+    flat, = K.judge_clip(clip)
+    assert flat["left_only"] == 0.0 and flat["match"] is False
+    on_box, = K.judge_clip(clip, platform)
+    assert on_box["left_only"] == 1.0 and on_box["right_only"] == 0.0 and on_box["match"] is True
+    # Off the box (the walk starts at y = 0 and the box spans y -1..3): a scene elsewhere changes nothing.
+    far = SceneBatch.from_scenes([Scene((Box((20.0, 20.0), (1.0, 1.0, 0.3)),))])
+    assert K.judge_clip(clip, far) == [flat]

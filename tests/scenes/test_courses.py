@@ -7,10 +7,10 @@ import pytest
 import torch
 
 from latentrl.app.cli import main
-from latentrl.envs.path import load_paths
+from latentrl.envs.path import WaypointPath, load_paths
 from latentrl.errors import DataError
 from latentrl.resources import packaged
-from latentrl.scenes import Box, SceneBatch, Stairs, load_scene
+from latentrl.scenes import Box, Scene, SceneBatch, Stairs, load_scene
 from latentrl.scenes.courses import COURSES, SUITES, maze, scene_file_text, suite_file_text
 
 TASKS = packaged("tasks")
@@ -117,10 +117,12 @@ def test_eval_paths_of_a_course_suite_reports_collisions_and_terrain_metrics(sui
 
 
 def test_stairs_episodes_measure_the_feet_against_the_treads(tiny_model):
-    """Each episode's floor metrics on a stairs suite are the terrain-aware ones of its motion on those stairs."""
+    """Each episode's floor metrics and skill judgement on a stairs suite are the terrain-aware ones of its motion."""
     from latentrl.evaluation import metrics as M
     from latentrl.evaluation.config import EvalSettings
     from latentrl.evaluation.runner import run_path
+    from latentrl.evaluation.skills import judge_clip
+    from latentrl.motion.clip import MotionClip
 
     path = load_paths(TASKS / "paths" / "stairs.json")[2]  # 0.20 m risers
     motions = []
@@ -133,6 +135,20 @@ def test_stairs_episodes_measure_the_feet_against_the_treads(tiny_model):
         expected = M.episode_metrics(torch.as_tensor(motion["joints"]), 30.0, 0.0, terrain)
         assert {k: ep.metrics[k] for k in expected} == pytest.approx(expected)
         assert {"collision", "scene_penetration_cm", "scene_penetration_max_cm"} <= set(ep.metrics)
+        assert ep.segments == judge_clip(MotionClip.from_dict(motion), terrain)  # the judge stands on the treads
+
+    # On a platform the start stands on, the flat judge sees no foot down; the evaluation's judge does.
+    platform = Scene((Box((0.0, 0.0), (8.0, 8.0, 0.3)),))
+    path = WaypointPath(((0.0, 2.0, 0.0),), ("walk",), scene=platform)
+    result = run_path(lambda obs: torch.zeros(obs.shape[0], 16), tiny_model, path,
+                      EvalSettings(episodes=1, max_steps=6), suite="platform",
+                      sink=lambda ep, m: motions.append(m) or None)
+    [seg] = result.episodes[0].segments
+    clip = MotionClip.from_dict(motions[-1])
+    assert clip.joints[2:, :, 2].min() > 0.29  # after the seed frames the body stands on the platform
+    [flat] = judge_clip(clip)
+    assert seg["measured"] and seg == judge_clip(clip, SceneBatch.from_scenes([platform]))[0]
+    assert flat["left_only"] == flat["right_only"] == 0.0 and seg != flat
 
 
 def load_scene_text(text):
