@@ -20,7 +20,8 @@ Metrics of an episode:
 - ``skate_cm_s``, ``floor_cm``: DART's metrics (:func:`~latentrl.evaluation.metrics.episode_metrics`; with a
   scene, over the terrain under each foot);
 - with a scene (``latentrl eval --scene``): ``collision``, ``scene_penetration_cm``, ``scene_penetration_max_cm``
-  (:func:`~latentrl.scenes.contact.scene_metrics`). A footstep's touchdown is judged against the flat floor.
+  (:func:`~latentrl.scenes.contact.scene_metrics`). A footstep's touchdown is judged against the ground under the
+  foot (a stone on a box top touches down on the box).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.envs.reach_joint import FEET, JOINTS, JointGoalEntry, ReachJointConfig, ReachJointEnv, load_joint_goals
@@ -113,6 +115,8 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
     (None: the flat floor), which adds the scene metrics.
     """
     j = np.asarray(joints, dtype=np.float64)
+    ground = (np.full(j.shape[:2], floor) if terrain is None else
+              M.terrain_floor(torch.as_tensor(j, dtype=torch.float32), terrain, floor).double().numpy())
     last = len(j) - 1
     errors, steps, near = [], [], []
     previous = 0
@@ -132,7 +136,8 @@ def goal_metrics(joints: np.ndarray, entry: JointGoalEntry, frames: Sequence[int
             following = [f for f in frames[k + 1:] if f >= 0]
             high = clip_frame(following[0]) if following else last
             foot = j[:, JOINTS[goal.joint]]
-            onset = touchdown(foot[:, 2] - floor, t, clip_frame(previous), high, criteria.contact_height_m)
+            onset = touchdown(foot[:, 2] - ground[:, JOINTS[goal.joint]], t, clip_frame(previous), high,
+                              criteria.contact_height_m)
             steps.append(None if onset is None else float(np.linalg.norm(foot[onset, :2] - target)))
         previous = frame
     feet = [g.joint in FEET for g in entry.goals]

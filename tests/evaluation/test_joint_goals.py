@@ -60,6 +60,27 @@ def test_footstep_error_is_measured_at_the_touchdown_nearest_the_goal_time():
     assert J.touchdown(j[:, right, 2], 27, 22, 41, 0.03) is None  # the window starts after the landing
 
 
+def test_a_footstep_onto_a_box_top_touches_down_on_the_box():
+    """On a scene the touchdown is the contact onset over the ground under the foot; the flat floor sees none."""
+    from latentrl.scenes import Box, Scene, SceneBatch
+
+    j = still_body(2 + 40)
+    right = JOINTS["right_foot"]
+    j[:, right, 2] = 0.45  # swinging over the box ...
+    j[2 + 20:, right, 2] = 0.3  # ... until it lands on its 0.3 m top at frame 20 (clip 22)
+    j[:, right, :2] = [0.0, 0.5]
+    entry = JointGoalEntry("walk", (JointGoal("right_foot", (0.0, 0.5), 25 / 30),))
+    box = SceneBatch.from_scenes([Scene((Box((0.0, 0.5), (0.4, 0.4, 0.3)),))])
+    flat, flat_detail = J.goal_metrics(j, entry, [25], J.JointGoalCriteria(radius_m=0.1))
+    assert flat_detail["touchdown_err_cm"] == [None] and flat["steps_reached"] == 0.0
+    on_box, detail = J.goal_metrics(j, entry, [25], J.JointGoalCriteria(radius_m=0.1), terrain=box)
+    assert detail["touchdown_err_cm"] == [pytest.approx(0.0, abs=1e-4)] and on_box["success"] == 1.0
+    # A box elsewhere: the foot at 0.3 m hovers over the floor, as on the flat floor.
+    far = SceneBatch.from_scenes([Scene((Box((9.0, 9.0), (0.4, 0.4, 0.3)),))])
+    _, far_detail = J.goal_metrics(j, entry, [25], J.JointGoalCriteria(radius_m=0.1), terrain=far)
+    assert far_detail["touchdown_err_cm"] == [None]
+
+
 def test_shipped_suites_load_and_the_spec_has_the_evaluator():
     import latentrl.evaluation.tasks  # noqa: F401  (attaches the evaluators)
 
