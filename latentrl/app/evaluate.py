@@ -254,8 +254,11 @@ def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
         raise ConfigError(f"{policy}: task '{spec.name}' has no evaluator (give its TaskSpec an evaluator)")
     defaults = evaluator.default_suites(spec.suites, env.texts if env is not None else ())
     scene = env.scene if env is not None else None
-    if isinstance(scene, dict) and "random_mazes" in scene and evaluator.suite_kind == "paths":
-        defaults = ("maze",)  # its training mazes came with their routes: judge it on the shipped mazes
+    if isinstance(scene, dict) and evaluator.suite_kind == "paths":  # its training courses came with their routes:
+        if "random_mazes" in scene:  # judge it on the shipped courses of that kind
+            defaults = ("maze",)
+        elif "random_stairs" in scene:
+            defaults = ("stairs",)
     return spec, resolve_path_files(paths, evaluator.suite_kind, defaults)
 
 

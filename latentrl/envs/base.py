@@ -120,7 +120,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
     reward_terms: tuple[str, ...] = (*DART_TERMS, *COMMON_TERMS)
     """The reward terms this task computes and reports (``infos["reward/<name>"]``)."""
     walks_courses: bool = False
-    """The task takes its goals from a course's route, so it accepts ``{random_mazes: ...}`` scenes."""
+    """The task takes its goals from a course's route, so it accepts course pools (``{random_mazes: ...}``,
+    ``{random_stairs: ...}``) as scenes."""
 
     def __init__(
         self,
@@ -196,9 +197,9 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
             self.motion.prepare_compile()  # no cache fill inside the graph (it would recompile it)
         self._core = compile_step_core(self._motion_core, self.device) if self.compiled else self._motion_core
         self.scene = env_scene(scene, self.num_envs, self.device, self.floor_height)
-        require(self.scene is None or not self.scene.courses or type(self).walks_courses, "scene",
-                f"random_mazes: the env walks each maze's route, which only the path task does (got "
-                f"{type(self).__name__})")
+        if self.scene is not None and self.scene.courses:
+            require(type(self).walks_courses, "scene", f"{self.scene.spec.kind}: the env walks each course's route, "
+                    f"which only the path task does (got {type(self).__name__})")
         self.terminate_on_collision = bool(terminate_on_collision)
         self.observe_scene = self.scene is not None and bool(observe_scene)
         require(self.scene is not None or not self.terminate_on_collision, "terminate_on_collision",

@@ -36,7 +36,7 @@ from latentrl.motion.rollout import LOCK_MIN_WEIGHT
 from latentrl.motion.text import prompt_problem
 from latentrl.resources import packaged, task_file
 from latentrl.rewards import REWARD_TERMS, RewardConfig
-from latentrl.scenes.courses import RandomMazes
+from latentrl.scenes.courses import CoursePool
 
 MAX_NUM_ENVS = 1 << 20
 """Parallel envs, at most (each holds a motion-model history on the device)."""
@@ -238,8 +238,9 @@ class EnvConfig:
     """Arguments of a registered task that has no section of its own above (its spec's ``config`` fields)."""
     scene: Any = None
     """Objects in the world (docs/scenes.md): a ``latentrl.scene/1`` file (a path, or a name in tasks/scenes), or
-    ``{random_obstacles: {count: [3, 8], ...}}`` drawn per episode, or ``{random_mazes: {count: 256, ...}}`` (the
-    path task: each episode walks a maze of the pool along its route); None: the flat floor alone."""
+    ``{random_obstacles: {count: [3, 8], ...}}`` drawn per episode, or a course pool, ``{random_mazes: {count: 256,
+    ...}}`` or ``{random_stairs: {...}}`` (the path task: each episode walks a course of the pool along its route);
+    None: the flat floor alone."""
     terminate_on_collision: bool = False
     """With a scene: end an episode when a joint comes inside its skin radius of an object."""
     observe_scene: bool = True
@@ -302,12 +303,12 @@ class EnvConfig:
                 spec = self.scene_spec()
             except LatentRLError as exc:
                 raise ConfigError(f"scene: {exc}" if not str(exc).startswith("scene") else str(exc)) from None
-            if isinstance(spec, RandomMazes):
+            if isinstance(spec, CoursePool):
                 require(getattr(TASKS[self.task].env_class(), "walks_courses", False), "scene",
-                        f"random_mazes: the env walks each maze's route, which only the path task does (got task "
+                        f"{spec.kind}: the env walks each course's route, which only the path task does (got task "
                         f"'{self.task}')")
                 require(not getattr(self.section, "paths", None), "path.paths",
-                        "random_mazes brings its own paths (each maze's route); leave path.paths unset")
+                        f"{spec.kind} brings its own paths (each course's route); leave path.paths unset")
 
     def scene_spec(self) -> Any:
         """The env's scene (:func:`latentrl.envs.scene.scene_spec`), a file name resolved; None without one."""

@@ -196,8 +196,9 @@ class FollowPathEnv(LatentMotionVectorEnv):
     ``next_goal_*`` shows at the last waypoint), ``random_waypoints`` (5), ``random_segment``
     ((1.0, 3.0) m), ``random_turn_deg`` (45), ``text_per_waypoint`` (random paths: a text per
     waypoint instead of per path); the rest are :class:`~latentrl.envs.base.LatentMotionVectorEnv`'s.
-    With ``scene={"random_mazes": {...}}`` each episode draws a maze of the pool and walks its route (cell
-    centres from the origin; ``paths`` must be unset), with a text drawn per episode.
+    With a course pool as the scene (``{"random_mazes": {...}}``, ``{"random_stairs": {...}}``) each episode draws a
+    course of the pool and walks its route (a maze's cell centres, a staircase's flights, from the origin; ``paths``
+    must be unset), with a text drawn per episode.
 
     ## Version History
 
@@ -246,8 +247,9 @@ class FollowPathEnv(LatentMotionVectorEnv):
         if self.observe_next:
             self.goal_fields = (*type(self).goal_fields, ("next_goal_dir", 3), ("next_goal_dist", 1))
         super().__init__(num_envs, max_episode_steps=max_episode_steps, **kwargs)
-        require(self.paths is None or not self._courses, "paths",
-                "random_mazes brings its own paths (each maze's route); leave paths unset")
+        if self._courses:
+            require(self.paths is None, "paths",
+                    f"{self.scene.spec.kind} brings its own paths (each course's route); leave paths unset")
         self._setup_paths()
 
     def _all_texts(self, texts: tuple[str, ...]) -> tuple[str, ...]:
@@ -255,7 +257,7 @@ class FollowPathEnv(LatentMotionVectorEnv):
 
     @property
     def _courses(self) -> list:
-        """The maze pool of a ``random_mazes`` scene (empty without one)."""
+        """The course pool of a ``random_mazes`` or ``random_stairs`` scene (empty without one)."""
         return self.scene.courses if self.scene is not None else []
 
     def _setup_paths(self) -> None:

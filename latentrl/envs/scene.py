@@ -1,4 +1,6 @@
-"""An env's scene: a fixed scene shared by every env, random obstacles or a maze drawn per episode, and its rays.
+"""An env's scene: a fixed scene for every env, or random obstacles or a course drawn per episode, and its rays.
+
+A course is a maze or a staircase of a pool (:mod:`latentrl.scenes.courses`).
 
 The env (:class:`~latentrl.envs.base.LatentMotionVectorEnv`, argument ``scene``) holds one :class:`EnvScene`
 when a scene is set and None otherwise, so a flat-floor env runs exactly the code it ran before scenes existed.
@@ -21,7 +23,7 @@ from latentrl.envs.goal import body_forward
 from latentrl.errors import ConfigError
 from latentrl.motion.skeleton import PELVIS
 from latentrl.resources import packaged, task_file
-from latentrl.scenes.courses import Course, RandomMazes
+from latentrl.scenes.courses import POOLS, Course, CoursePool
 from latentrl.scenes.random import RandomObstacles, clear_around
 from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch
 from latentrl.scenes.spec import load_scene, parse_scene
@@ -47,18 +49,19 @@ def height_grid_problem(size: object, spacing: object) -> str | None:
     return None
 
 
-RANDOM_KINDS = {"random_obstacles": RandomObstacles, "random_mazes": RandomMazes}
+RANDOM_KINDS = {"random_obstacles": RandomObstacles, **POOLS}
 """The scenes drawn per episode, by their ``env.scene`` key."""
 
 
-def scene_spec(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
+def scene_spec(value: Any) -> Scene | RandomObstacles | CoursePool | None:
     """The scene ``env.scene`` names: None, a scene file, an inline scene, a random kind or an object.
 
-    Random kinds: ``{random_obstacles: {...}}`` and ``{random_mazes: {...}}``.
+    Random kinds: ``{random_obstacles: {...}}`` and the course pools ``{random_mazes: {...}}``,
+    ``{random_stairs: {...}}``.
 
     One-line :class:`ConfigError` / :class:`~latentrl.errors.DataError` on a bad value.
     """
-    if value is None or isinstance(value, (Scene, RandomObstacles, RandomMazes)):
+    if value is None or isinstance(value, (Scene, RandomObstacles, CoursePool)):
         return value
     if isinstance(value, (str, Path)):
         return load_scene(value)
@@ -70,11 +73,11 @@ def scene_spec(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
                 return kind.of(dict(value[key] or {}))
         if "format" in value:
             return parse_scene(value, "env.scene")
-    raise ConfigError(f"scene: expected a scene file, a latentrl.scene/1 object, {{random_obstacles: {{...}}}} or "
-                      f"{{random_mazes: {{...}}}}, got {str(value)[:60]}")
+    raise ConfigError(f"scene: expected a scene file, a latentrl.scene/1 object, {{random_obstacles: {{...}}}}, "
+                      f"{{random_mazes: {{...}}}} or {{random_stairs: {{...}}}}, got {str(value)[:60]}")
 
 
-def resolve_scene(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
+def resolve_scene(value: Any) -> Scene | RandomObstacles | CoursePool | None:
     """:func:`scene_spec` with a file name looked up as task files are: a path, or a name in ``tasks/scenes``."""
     if isinstance(value, str):
         found = task_file(value, "scenes")
@@ -88,11 +91,11 @@ def resolve_scene(value: Any) -> Scene | RandomObstacles | RandomMazes | None:
 class EnvScene:
     """The scenes of N envs on one device: ``batch`` (one row for a fixed scene, N for scenes drawn per episode).
 
-    Random mazes: :attr:`courses` holds the pool and :attr:`pool` its scenes; the path task draws a course per
-    episode (:meth:`draw`) and walks its route, so :meth:`reset` leaves maze rows to it.
+    Course pools (random mazes, random stairs): :attr:`courses` holds the pool and :attr:`pool` its scenes; the path
+    task draws a course per episode (:meth:`draw`) and walks its route, so :meth:`reset` leaves course rows to it.
     """
 
-    def __init__(self, spec: Scene | RandomObstacles | RandomMazes, num_envs: int, device: torch.device,
+    def __init__(self, spec: Scene | RandomObstacles | CoursePool, num_envs: int, device: torch.device,
                  floor_height: float):
         self.spec = spec
         self.floor_height = float(floor_height)
@@ -100,7 +103,7 @@ class EnvScene:
         if isinstance(spec, RandomObstacles):
             self.batch = spec.empty(num_envs, device)
             self.batch.floor_height[:] = self.floor_height
-        elif isinstance(spec, RandomMazes):
+        elif isinstance(spec, CoursePool):
             self.courses = spec.courses()
             self.pool = SceneBatch.from_scenes([Scene(c.scene.objects, self.floor_height) for c in self.courses],
                                                device)
@@ -118,11 +121,11 @@ class EnvScene:
 
     @property
     def random(self) -> bool:
-        """Each env has its own scene, drawn per episode (random obstacles or random mazes)."""
-        return isinstance(self.spec, (RandomObstacles, RandomMazes))
+        """Each env has its own scene, drawn per episode (random obstacles or a course pool)."""
+        return isinstance(self.spec, (RandomObstacles, CoursePool))
 
     def draw(self, idx: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
-        """Random mazes: a course of the pool for each of envs ``idx``, put in place; returns their (M,) ids."""
+        """Course pools: a course of the pool for each of envs ``idx``, put in place; returns their (M,) ids."""
         ids = torch.randint(len(self.courses), (len(idx),), generator=generator, device=self._course.device)
         self._course[idx] = ids
         self.batch.set_rows(idx, self.pool.index(ids))

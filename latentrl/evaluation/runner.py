@@ -48,7 +48,7 @@ from latentrl.motion.clip import MotionClip
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS
 from latentrl.scenes.contact import scene_metrics
-from latentrl.scenes.courses import RandomMazes
+from latentrl.scenes.courses import CoursePool
 from latentrl.scenes.scene import Scene
 from latentrl.scenes.spec import scene_to_json
 
@@ -129,7 +129,7 @@ def make_env(
     """
     scene = paths[0].scene if paths[0].scene is not None else (
         resolve_scene(settings.scene) if settings.scene is not None else None)
-    if isinstance(scene, RandomMazes):
+    if isinstance(scene, CoursePool):
         scene = Scene()
     return FollowPathEnv(
         num_envs,

@@ -23,7 +23,7 @@ from latentrl.errors import ConfigError
 from latentrl.evaluation.metrics import mean_ci95
 from latentrl.evaluation.video import recorder_for, takes_sink
 from latentrl.scenes.contact import scene_metrics
-from latentrl.scenes.courses import RandomMazes
+from latentrl.scenes.courses import CoursePool
 from latentrl.scenes.spec import scene_to_json
 
 FORMAT = "latentrl.eval.task/1"
@@ -95,11 +95,12 @@ def episode_clip(env, i: int, steps: int):
 def goal_scene(settings: Any, entries: str):
     """``settings.scene`` resolved for an evaluation of ``entries`` ("timed paths"): a scene, random obstacles or None.
 
-    Random mazes come with their own routes, which these entries cannot follow: refused in one line.
+    Course pools (random mazes, random stairs) come with their own routes, which these entries cannot follow:
+    refused in one line.
     """
     scene = resolve_scene(settings.scene) if settings.scene is not None else None
-    if isinstance(scene, RandomMazes):
-        raise ConfigError(f"scene: random mazes bring their own routes (path suites); {entries} take a scene file "
+    if isinstance(scene, CoursePool):
+        raise ConfigError(f"scene: {scene.kind} brings its own routes (path suites); {entries} take a scene file "
                           "or random_obstacles")
     return scene
 

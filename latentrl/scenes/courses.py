@@ -22,6 +22,7 @@ from __future__ import annotations
 import random
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from latentrl.scenes.scene import Box, Scene, Stairs
 from latentrl.scenes.settings import check_number, check_range, settings_of
@@ -146,6 +147,29 @@ def stairs_up_down(riser: float, count: int = 5, tread: float = 0.3, width: floa
     return Course(Scene(tuple(objects)), tuple((round(x, 6), round(y, 6)) for x, y in points), texts)
 
 
+class CoursePool:
+    """A seeded pool of generated courses for training (``env.scene: {KIND: {...}}``).
+
+    The path task draws a course per episode and walks its route (docs/scenes.md); the pool is made once, when
+    the env is built. Subclasses name their ``env.scene`` key (:attr:`kind`) and make the pool (:meth:`courses`).
+    """
+
+    kind: ClassVar[str] = ""
+
+    def validate(self) -> None:  # pragma: no cover - every pool checks its own fields
+        """Sizes in range; one-line :class:`ConfigError` naming the field."""
+        raise NotImplementedError
+
+    @classmethod
+    def of(cls, raw: dict) -> CoursePool:
+        """A checked spec from its YAML/JSON mapping (unknown keys are one-line errors)."""
+        return settings_of(cls, raw, cls.kind)
+
+    def courses(self) -> list[Course]:  # pragma: no cover - every pool makes its own
+        """The pool, in order (the same for the same settings)."""
+        raise NotImplementedError
+
+
 MAX_RANDOM_MAZES = 4096
 MAX_MAZE_CELLS = 12
 """Largest side of a random maze, cells."""
@@ -154,7 +178,7 @@ MIN_CORRIDOR_M = 1.2
 
 
 @dataclass
-class RandomMazes:
+class RandomMazes(CoursePool):
     """A pool of ``count`` seeded mazes of random size for training (``env.scene: {random_mazes: {...}}``).
 
     Maze k has ``cols`` x ``rows`` cells (each drawn uniformly from its [min, max]) of side ``cell`` metres
@@ -163,6 +187,7 @@ class RandomMazes:
     draws one per episode and walks its route (docs/scenes.md); the pool is made once, when the env is built.
     """
 
+    kind: ClassVar[str] = "random_mazes"
     count: int = 256
     cols: list[int] = field(default_factory=lambda: [3, 5])
     rows: list[int] = field(default_factory=lambda: [3, 5])
@@ -179,11 +204,6 @@ class RandomMazes:
         check_range("random_mazes.cell", self.cell, round(self.wall + MIN_CORRIDOR_M, 6), 10.0)
         check_number("random_mazes.seed", self.seed, 0, 2**31 - 1, integer=True)
 
-    @classmethod
-    def of(cls, raw: dict) -> RandomMazes:
-        """A checked spec from its YAML/JSON mapping (unknown keys are one-line errors)."""
-        return settings_of(cls, raw, "random_mazes")
-
     def courses(self) -> list[Course]:
         """The pool, in order (the same for the same settings)."""
         out = []
@@ -195,6 +215,57 @@ class RandomMazes:
             out.append(maze(cols, rows, seed=seed, cell=cell, wall=self.wall))
         return out
 
+
+MAX_RANDOM_STAIRS = 4096
+MAX_STAIR_STEPS = 12
+
+
+@dataclass
+class RandomStairs(CoursePool):
+    """A pool of ``count`` seeded staircases for training (``env.scene: {random_stairs: {...}}``).
+
+    Course k is :func:`stairs_up_down` with its riser, number of steps, tread, width and landing each drawn
+    uniformly from their [min, max] (metres; steps an integer), and turned (the way down leaves the landing along
+    +x) with probability ``turn``, all from ``random.Random(seed * 1,000,003 + 2,000 + k)``. The shipped
+    ``stairs`` suite's four courses (five steps of 0.10 / 0.15 / 0.20 m, 0.3 m treads, a 1.4 m flight) are fixed
+    sizes a pool draws only by chance.
+    """
+
+    kind: ClassVar[str] = "random_stairs"
+    count: int = 256
+    riser: list[float] = field(default_factory=lambda: [0.10, 0.20])
+    steps: list[int] = field(default_factory=lambda: [3, 6])
+    tread: list[float] = field(default_factory=lambda: [0.26, 0.36])
+    width: list[float] = field(default_factory=lambda: [1.2, 1.8])
+    landing: list[float] = field(default_factory=lambda: [1.0, 1.8])
+    turn: float = 0.25
+    seed: int = 0
+
+    def validate(self) -> None:
+        """Sizes in range; one-line :class:`ConfigError` naming the field."""
+        check_number("random_stairs.count", self.count, 1, MAX_RANDOM_STAIRS, integer=True)
+        check_range("random_stairs.riser", self.riser, 0.02, 0.4)
+        check_range("random_stairs.steps", self.steps, 1, MAX_STAIR_STEPS, integer=True)
+        check_range("random_stairs.tread", self.tread, 0.15, 1.0)
+        check_range("random_stairs.width", self.width, 0.6, 4.0)
+        check_range("random_stairs.landing", self.landing, 0.6, 4.0)
+        check_number("random_stairs.turn", self.turn, 0.0, 1.0)
+        check_number("random_stairs.seed", self.seed, 0, 2**31 - 1, integer=True)
+
+    def courses(self) -> list[Course]:
+        """The pool, in order (the same for the same settings)."""
+        out = []
+        for k in range(self.count):
+            rng = random.Random(self.seed * 1_000_003 + 2_000 + k)
+            riser, count = round(rng.uniform(*self.riser), 3), rng.randint(*self.steps)
+            tread, width = round(rng.uniform(*self.tread), 3), round(rng.uniform(*self.width), 3)
+            landing, turn = round(rng.uniform(*self.landing), 3), rng.random() < self.turn
+            out.append(stairs_up_down(riser, count, tread, width, landing, turn=turn))
+        return out
+
+
+POOLS: dict[str, type[CoursePool]] = {pool.kind: pool for pool in (RandomMazes, RandomStairs)}
+"""The course pools by their ``env.scene`` key."""
 
 COURSES: dict[str, Callable[[], Course]] = {
     "maze_a": lambda: maze(4, 4, seed=1, cell=2.0),

@@ -1,7 +1,11 @@
-"""Checks shared by the random-scene specs (``random_obstacles``, ``random_mazes``): one-line errors naming the key."""
+"""Checks shared by the random-scene specs: one-line errors naming the key.
+
+Used by ``random_obstacles``, ``random_mazes`` and ``random_stairs``.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, TypeVar
 
@@ -35,7 +39,7 @@ def settings_of(cls: type[T], raw: Any, name: str) -> T:
     """
     if not isinstance(raw, dict):
         raise ConfigError(f"{name}: expected a mapping of settings, got {raw!r:.40}")
-    known = list(cls.__dataclass_fields__)
+    known = [f.name for f in dataclasses.fields(cls)]  # not __dataclass_fields__: it lists class variables too
     for k in raw:
         if k not in known:
             raise ConfigError(f"{name}.{k}: unknown setting{closest(str(k), known)}; expected {', '.join(known)}")

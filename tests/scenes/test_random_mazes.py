@@ -75,7 +75,7 @@ def test_rays_see_the_first_wall_of_the_drawn_maze(tiny_model):
 
 
 def test_random_mazes_need_the_path_task_and_no_paths_of_its_own(tiny_model, tmp_path):
-    with pytest.raises(ConfigError, match="random_mazes: the env walks each maze's route, which only the path task"):
+    with pytest.raises(ConfigError, match="random_mazes: the env walks each course's route, which only the path task"):
         ReachLocationEnv(2, motion=tiny_model, scene={"random_mazes": {"count": 2}})
     with pytest.raises(ConfigError, match="paths: random_mazes brings its own paths"):
         FollowPathEnv(2, motion=tiny_model, paths=[WaypointPath(((0.0, 1.0, 0.0),), ("walk",))],

@@ -131,13 +131,24 @@ def test_env_config_scene_from_a_file_a_generator_or_inline(tmp_path, tiny_model
      "c.yaml: scene: random_obstacles.clearance: expected a number in [0, 100], got -1"),
     ("scene: {format: latentrl.scene/1, objects: [{type: box, center: [0, 0], size: [1, 1, 0]}]}\n",
      "c.yaml: scene: env.scene: objects[0].size[2]: expected a number > 0, got 0"),
-    ("scene: 3\n", "c.yaml: scene: expected a scene file, a latentrl.scene/1 object, {random_obstacles: {...}} "
-                   "or {random_mazes: {...}}, got 3"),
+    ("scene: 3\n", "c.yaml: scene: expected a scene file, a latentrl.scene/1 object, {random_obstacles: {...}}, "
+                   "{random_mazes: {...}} or {random_stairs: {...}}, got 3"),
     ("terminate_on_collision: true\n", "c.yaml: terminate_on_collision: needs a scene (env.scene)"),
     ("task: reach\nscene: {random_mazes: {}}\n",
-     "c.yaml: scene: random_mazes: the env walks each maze's route, which only the path task does (got task 'reach')"),
+     "c.yaml: scene: random_mazes: the env walks each course's route, which only the path task does (got task "
+     "'reach')"),
+    ("task: joystick\nscene: {random_stairs: {}}\n",
+     "c.yaml: scene: random_stairs: the env walks each course's route, which only the path task does (got task "
+     "'joystick')"),
     ("task: path\npath: {paths: dart_walk_long}\nscene: {random_mazes: {}}\n",
-     "c.yaml: path.paths: random_mazes brings its own paths (each maze's route); leave path.paths unset"),
+     "c.yaml: path.paths: random_mazes brings its own paths (each course's route); leave path.paths unset"),
+    ("task: path\nscene: {random_stairs: {riser: [0.1, 0.5]}}\n",
+     "c.yaml: scene: random_stairs.riser: expected [min, max] numbers with 0.02 <= min <= max <= 0.4, got [0.1, 0.5]"),
+    ("task: path\nscene: {random_stairs: {step: [2, 3]}}\n",
+     "c.yaml: scene: random_stairs.step: unknown setting (did you mean 'steps'?); expected count, riser, steps, "
+     "tread, width, landing, turn, seed"),
+    ("task: path\nscene: {random_stairs: {turn: 2}}\n",
+     "c.yaml: scene: random_stairs.turn: expected a number in [0, 1], got 2"),
     ("task: path\nscene: {random_mazes: {cel: [1, 2]}}\n",
      "c.yaml: scene: random_mazes.cel: unknown setting (did you mean 'cell'?); expected count, cols, rows, cell, "
      "wall, seed"),
