@@ -23,6 +23,7 @@ POLICIES = {  # name -> (suite, step budget for path 0: 5 waypoints 4 m apart al
     "path_mixed_default": ("mixed_skills", 96),  # walk, run, hop on left leg along +y: 30 m (23.9 s)
     "reach_obstacles_default": ("reach_obstacles", 64),  # one goal 3.4 m ahead among 3-8 random objects: ~5 s
     "path_maze_default": ("maze", 112),  # maze_a's route of 11 cell centres, 22 m between 1.8 m corridors: ~22 s
+    "path_stairs_default": ("stairs", 64),  # stairs_10: up five 0.10 m steps, a landing, down five: 6.7 m, ~5 s
 }
 SHIPPED = [name for name in POLICIES if (ROOT / "policies" / f"{name}.pt").is_file()]
 
@@ -66,6 +67,8 @@ def test_shipped_policy_drives_its_first_path(name, tmp_path):
     if name in ("reach_obstacles_default", "path_maze_default"):  # among objects: there without touching one
         assert episode["success"] and episode["collision"] == 0, episode
         assert report["avoid"]["steps"] == 16  # with the scene filter its card's figures were taken with
+    if name == "path_stairs_default":  # over the stairs and down again, the feet never inside a tread
+        assert episode["success"] and episode["penetration_mm"] < 10.0, episode
 
 
 def _first_entry_metrics(name: str, task: str, suite: str, tmp_path) -> dict:
