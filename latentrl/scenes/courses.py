@@ -15,6 +15,10 @@ from the walls (the corridor is ``cell - wall`` wide).
 
 **Stairs** (:func:`stairs_up_down`): a flight of ``count`` steps up along +y, a landing, and a flight down, either
 straight on (+y) or turned to +x; waypoints on each flight, on the landing and on the floor beyond.
+
+**Pools for training** (:class:`CoursePool`, :data:`POOLS`): :class:`RandomMazes` and :class:`RandomStairs` make
+seeded pools of such courses with random sizes; the path task walks one per episode (``env.scene: {random_mazes:
+...}`` or ``{random_stairs: ...}``).
 """
 
 from __future__ import annotations
