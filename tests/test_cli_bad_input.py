@@ -924,8 +924,8 @@ ROUND3 += [  # scenes, joint goals, physics: the formats and commands added afte
                           "size: [.nan, 1, 1]}}]}}"],
         r"env\.scene: objects\[0\]\.size\[0\]: expected a finite number, got nan"),
     _r3("bad value", "train-scene-number", [*TRAIN, "--set", "env.scene=5"],
-        r"env\.scene: expected a scene file, a latentrl\.scene/1 object, \{random_obstacles: \{\.\.\.\}\} or "
-        r"\{random_mazes"),
+        r"env\.scene: expected a scene file, a latentrl\.scene/1 object, \{random_obstacles: \{\.\.\.\}\}, "
+        r"\{random_mazes: \{\.\.\.\}\} or \{random_stairs"),
     *[_r3(kind, f"optimize-suite-scene-{name}", ["optimize", f"{{fx}}/suites/scene-{name}.json", "--no-progress"],
           pattern) for name, kind, pattern in (
         ("nan", "bad file", r"size-nan\.json: objects\[0\]\.size\[0\]: expected a finite number, got nan"),

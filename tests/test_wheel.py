@@ -17,7 +17,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 MAX_WHEEL_BYTES = 60 * 1000 * 1000
-MAX_PT_FILES = 10
+MAX_PT_FILES = 11  # the default motion model and the ten shipped *_default policies
 
 CHECK = """
 import sys

@@ -61,7 +61,7 @@ def test_the_stairs_config_trains_on_random_stairs_and_evaluates_on_the_stairs_s
                                                                                                capsys):
     from latentrl.app.cli import main
 
-    config = Path(__file__).resolve().parents[2] / "configs" / "policies" / "path_stairs.yaml"
+    config = Path(__file__).resolve().parents[2] / "configs" / "policies" / "path_stairs_default.yaml"
     sets = [f"env.motion={eval_files['motion']}", "env.num_envs=4", "env.max_episode_steps=4", "ppo.num_steps=4",
             "ppo.total_steps=16", "ppo.num_minibatches=2", "ppo.update_epochs=1", "ppo.eval_every=0",
             "ppo.init_from=null", "policy.latent_dim=32", "env.scene.random_stairs.count=4", "threads=1"]
