@@ -94,25 +94,3 @@ def test_eval_of_a_maze_policy_runs_a_suite_of_plain_paths_on_the_open_floor(tin
     assert env.scene is not None and env.observe_scene and env.scene.spec.objects == ()
     env.reset(seed=0)
     assert torch.allclose(env.goal_world, torch.tensor([[0.0, 3.0, 0.0]] * 2))
-
-
-def test_the_maze_config_trains_on_random_mazes_and_evaluates_on_the_maze_suite_by_default(eval_files, tmp_path,
-                                                                                           capsys):
-    import json
-    from pathlib import Path
-
-    from latentrl.app.cli import main
-
-    config = Path(__file__).resolve().parents[2] / "configs" / "policies" / "path_maze_default.yaml"
-    sets = [f"env.motion={eval_files['motion']}", "env.num_envs=4", "env.max_episode_steps=4", "ppo.num_steps=4",
-            "ppo.total_steps=16", "ppo.num_minibatches=2", "ppo.update_epochs=1", "ppo.eval_every=0",
-            "ppo.init_from=null", "policy.latent_dim=32", "env.scene.random_mazes.count=4", "threads=1"]
-    run = tmp_path / "run"
-    assert main(["train", str(config), "--run-dir", str(run), "--no-progress",
-                 *[x for s in sets for x in ("--set", s)]]) == 0, capsys.readouterr().err
-    out = tmp_path / "ev"
-    assert main(["eval", str(run / "final.pt"), "--episodes", "1", "--max-steps", "2", "--device", "cpu",
-                 "--out", str(out), "--no-progress"]) == 0, capsys.readouterr().err
-    report = json.loads((out / "report.json").read_text())
-    assert list(report["suites"]) == ["maze"]
-    assert {"collision", "scene_penetration_max_cm"} <= set(report["overall"]["metrics"])

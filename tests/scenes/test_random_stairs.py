@@ -1,5 +1,5 @@
 """Random staircases for training: a seeded pool within its ranges, a staircase, its terrain and its route per path
-episode, and a stairs-trained policy judged on the shipped stairs suite (tiny model)."""
+episode, and the maze and stairs configs trained and judged on their shipped suites by default (tiny model)."""
 
 import json
 from pathlib import Path
@@ -57,20 +57,24 @@ def test_each_path_episode_walks_the_route_of_the_staircase_it_drew(tiny_model):
         assert float(env.scene.row(i).height(torch.zeros(1, 1, 2))[0, 0]) == 0.0
 
 
-def test_the_stairs_config_trains_on_random_stairs_and_evaluates_on_the_stairs_suite_by_default(eval_files, tmp_path,
-                                                                                               capsys):
+@pytest.mark.parametrize(("config", "pool", "suite", "metrics"), [
+    ("path_maze_default", "random_mazes", "maze", {"collision", "scene_penetration_max_cm"}),
+    ("path_stairs_default", "random_stairs", "stairs", {"penetration_mm", "floating_mm", "collision"}),
+])
+def test_a_course_pool_config_trains_and_evaluates_on_its_shipped_suite_by_default(eval_files, tmp_path, capsys,
+                                                                                   config, pool, suite, metrics):
     from latentrl.app.cli import main
 
-    config = Path(__file__).resolve().parents[2] / "configs" / "policies" / "path_stairs_default.yaml"
+    path = Path(__file__).resolve().parents[2] / "configs" / "policies" / f"{config}.yaml"
     sets = [f"env.motion={eval_files['motion']}", "env.num_envs=4", "env.max_episode_steps=4", "ppo.num_steps=4",
             "ppo.total_steps=16", "ppo.num_minibatches=2", "ppo.update_epochs=1", "ppo.eval_every=0",
-            "ppo.init_from=null", "policy.latent_dim=32", "env.scene.random_stairs.count=4", "threads=1"]
+            "ppo.init_from=null", "policy.latent_dim=32", f"env.scene.{pool}.count=4", "threads=1"]
     run = tmp_path / "run"
-    assert main(["train", str(config), "--run-dir", str(run), "--no-progress",
+    assert main(["train", str(path), "--run-dir", str(run), "--no-progress",
                  *[x for s in sets for x in ("--set", s)]]) == 0, capsys.readouterr().err
     out = tmp_path / "ev"
     assert main(["eval", str(run / "final.pt"), "--episodes", "1", "--max-steps", "2", "--device", "cpu",
                  "--out", str(out), "--no-progress"]) == 0, capsys.readouterr().err
     report = json.loads((out / "report.json").read_text())
-    assert list(report["suites"]) == ["stairs"]
-    assert {"penetration_mm", "floating_mm", "collision"} <= set(report["overall"]["metrics"])
+    assert list(report["suites"]) == [suite]
+    assert metrics <= set(report["overall"]["metrics"])
