@@ -51,6 +51,7 @@ from latentrl.preflight import check_device, check_output_file, check_writable, 
 from latentrl.render import video_problem
 from latentrl.resources import is_packaged, policy_file, suites_folder
 from latentrl.safe_io import atomic_write_text
+from latentrl.scenes.courses import POOLS
 from latentrl.timing import hardware
 
 UNNAMED_TASK = "path"
@@ -245,7 +246,8 @@ SCENE_SUITES = ("paths", "joint_goals", "timed", "joystick")
 def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
     """The policy's task spec and the suite files to run: ``paths``, else the task's suites of its prompts.
 
-    A policy trained on random mazes runs the ``maze`` suite by default.
+    A policy trained on a course pool runs that pool's shipped suite by default (random mazes: ``maze``, random
+    stairs: ``stairs``).
     """
     env = stored_env(policy_file(policy))
     spec = task_spec(env.task if env is not None else UNNAMED_TASK)
@@ -254,11 +256,9 @@ def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
         raise ConfigError(f"{policy}: task '{spec.name}' has no evaluator (give its TaskSpec an evaluator)")
     defaults = evaluator.default_suites(spec.suites, env.texts if env is not None else ())
     scene = env.scene if env is not None else None
-    if isinstance(scene, dict) and evaluator.suite_kind == "paths":  # its training courses came with their routes:
-        if "random_mazes" in scene:  # judge it on the shipped courses of that kind
-            defaults = ("maze",)
-        elif "random_stairs" in scene:
-            defaults = ("stairs",)
+    pool = next((POOLS[key] for key in scene if key in POOLS), None) if isinstance(scene, dict) else None
+    if pool is not None and evaluator.suite_kind == "paths":  # its training courses came with their routes:
+        defaults = (pool.suite,)  # judge it on the shipped courses of that kind
     return spec, resolve_path_files(paths, evaluator.suite_kind, defaults)
 
 

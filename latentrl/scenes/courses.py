@@ -155,10 +155,13 @@ class CoursePool:
     """A seeded pool of generated courses for training (``env.scene: {KIND: {...}}``).
 
     The path task draws a course per episode and walks its route (docs/scenes.md); the pool is made once, when
-    the env is built. Subclasses name their ``env.scene`` key (:attr:`kind`) and make the pool (:meth:`courses`).
+    the env is built. Subclasses name their ``env.scene`` key (:attr:`kind`), the shipped suite of their kind that
+    ``latentrl eval`` runs by default for a policy trained on them (:attr:`suite`), and make the pool
+    (:meth:`courses`).
     """
 
     kind: ClassVar[str] = ""
+    suite: ClassVar[str] = ""
 
     def validate(self) -> None:  # pragma: no cover - every pool checks its own fields
         """Sizes in range; one-line :class:`ConfigError` naming the field."""
@@ -192,6 +195,7 @@ class RandomMazes(CoursePool):
     """
 
     kind: ClassVar[str] = "random_mazes"
+    suite: ClassVar[str] = "maze"
     count: int = 256
     cols: list[int] = field(default_factory=lambda: [3, 5])
     rows: list[int] = field(default_factory=lambda: [3, 5])
@@ -236,6 +240,7 @@ class RandomStairs(CoursePool):
     """
 
     kind: ClassVar[str] = "random_stairs"
+    suite: ClassVar[str] = "stairs"
     count: int = 256
     riser: list[float] = field(default_factory=lambda: [0.10, 0.20])
     steps: list[int] = field(default_factory=lambda: [3, 6])

@@ -9,7 +9,7 @@ import torch
 
 from latentrl.envs.path import FollowPathEnv
 from latentrl.scenes import Box, SceneBatch, Stairs
-from latentrl.scenes.courses import COURSES, POOLS, RandomMazes, RandomStairs
+from latentrl.scenes.courses import COURSES, POOLS, SUITES, RandomMazes, RandomStairs
 
 
 def test_the_pool_is_seeded_and_every_staircase_keeps_its_ranges():
@@ -32,6 +32,7 @@ def test_the_pool_is_seeded_and_every_staircase_keeps_its_ranges():
         assert float(heights[1]) == pytest.approx(up.riser * up.count) and float(heights[-1]) == 0.0
     assert 0 < turned < len(pool)  # both kinds at turn 0.5
     assert POOLS == {"random_mazes": RandomMazes, "random_stairs": RandomStairs}
+    assert {pool.suite for pool in POOLS.values()} == {"maze", "stairs"} <= set(SUITES)
     shipped = {COURSES[n]().scene for n in COURSES if n.startswith("stairs")}
     assert not shipped & {c.scene for c in RandomStairs(count=64).courses()}
 
