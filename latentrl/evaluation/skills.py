@@ -98,12 +98,9 @@ def judge_segment(clip: MotionClip, seg: Segment, terrain=None) -> dict[str, Any
         return entry
     window = clip.joints[seg.start + round(TRANSITION_S * fps): seg.stop]
     speed = float(M.pelvis_speed_m_s(window, fps))
-    if terrain is None:
-        shares = M.foot_contact_shares(window, clip.floor, CONTACT_HEIGHT_M)
-    else:
-        joints = torch.as_tensor(window, dtype=torch.float32)
-        ground = M.terrain_floor(joints, terrain, clip.floor)[:, list(FOOT_JOINTS)]
-        shares = M.foot_contact_shares(joints, ground, CONTACT_HEIGHT_M)
+    ground = clip.floor if terrain is None else M.terrain_floor(
+        torch.as_tensor(window, dtype=torch.float32), terrain, clip.floor)[:, list(FOOT_JOINTS)]
+    shares = M.foot_contact_shares(window, ground, CONTACT_HEIGHT_M)
     left, right = float(shares["left_only"]), float(shares["right_only"])
     entry.update(measured=True, match=matches(skill, speed, left, right), speed_m_s=speed, left_only=left,
                  right_only=right)
