@@ -117,6 +117,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
     goal_fields: tuple[tuple[str, int], ...] = (("goal_dir", 3), ("goal_dist", 1))
     """Named fields of the ``goal`` observation group, in order; tasks may extend."""
+    task_group: tuple[str, ...] = ()
+    """The tail of ``goal_fields`` observed as a ``task`` group of its own (:class:`ObservationLayout`)."""
     reward_terms: tuple[str, ...] = (*DART_TERMS, *COMMON_TERMS)
     """The reward terms this task computes and reports (``infos["reward/<name>"]``)."""
     walks_courses: bool = False
@@ -240,7 +242,8 @@ class LatentMotionVectorEnv(TaskHooks, RecordedEpisodes, VectorEnv):
     # ------------------------------------------------------------------ construction
     def _setup_spaces(self) -> None:
         self._obs = ObservationLayout(self.goal_fields, self.text_table.dim,
-                                      self.scene.num_rays if self.observe_scene else 0, self.height_grid ** 2)
+                                      self.scene.num_rays if self.observe_scene else 0, self.height_grid ** 2,
+                                      self.task_group)
         bound, latent = self.step_settings.action_bound, self.motion.latent_dim
         self.single_action_space = gym.spaces.Box(-bound, bound, (latent,), np.float32)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (self._obs.size,), np.float32)

@@ -27,9 +27,13 @@ class ObservationLayout:
         text_dim: E, the size of a prompt embedding.
         rays: R, the scene rays (0: no scene, no ``scene_rays`` group).
         grid: K, the samples of the local height grid (0: no ``scene_height_grid`` group).
+        task_group: goal fields that form a group of their own after ``goal``, named ``task``. Why: a task that
+            adds fields to a goal-reaching task's (the sit task's seat and phase) keeps ``goal`` the size it has
+            in a reach policy, so that policy can warm-start it (``ppo.init_from``: a new group starts silent).
     """
 
-    def __init__(self, goal_fields: Sequence[tuple[str, int]], text_dim: int, rays: int = 0, grid: int = 0):
+    def __init__(self, goal_fields: Sequence[tuple[str, int]], text_dim: int, rays: int = 0, grid: int = 0,
+                 task_group: Sequence[str] = ()):
         named = (*goal_fields, ("text", text_dim), ("motion", HISTORY_LENGTH * FEATURE_DIM), ("scene", 1),
                  *((("scene_rays", rays),) if rays else ()), *((("scene_height_grid", grid),) if grid else ()))
         self.fields: OrderedDict[str, tuple[int, int]] = OrderedDict()
@@ -40,12 +44,18 @@ class ObservationLayout:
             start += size
         self.size = start
         """Length of the observation vector."""
-        goal_stop = self.fields[goal_fields[-1][0]][1]
+        names = [name for name, _ in goal_fields]
+        own = [name in task_group for name in names]
+        if any(own) and (not own[-1] or own.index(True) == 0 or not all(own[own.index(True):])):
+            raise ValueError(f"task_group {list(task_group)} must be the goal fields' tail after at least one field")
+        split = own.index(True) if any(own) else len(names)
+        goal_stop = self.fields[names[split - 1]][1]
+        task = {"task": (goal_stop, self.fields[names[-1]][1])} if split < len(names) else {}
         self.groups: OrderedDict[str, tuple[int, int]] = OrderedDict(
-            goal=(0, goal_stop), **{k: self.fields[k] for k in ("text", "motion", "scene", "scene_rays",
-                                                                "scene_height_grid") if k in self.fields})
-        """Group name -> ``[start, stop)``: goal, text, motion, scene[, scene_rays][, scene_height_grid] (what trainers
-        split by)."""
+            goal=(0, goal_stop), **task, **{k: self.fields[k] for k in ("text", "motion", "scene", "scene_rays",
+                                                                        "scene_height_grid") if k in self.fields})
+        """Group name -> ``[start, stop)``: goal[, task], text, motion, scene[, scene_rays][, scene_height_grid]
+        (what trainers split by)."""
 
 
 def observe(history: torch.Tensor, history_world: torch.Tensor, goal: torch.Tensor, text: torch.Tensor,

@@ -200,6 +200,7 @@ class SitEnv(LatentMotionVectorEnv):
 
     goal_fields = (("goal_dir", 3), ("goal_dist", 1), ("seat_facing", 2), ("seat_height", 1), ("pelvis_target", 1),
                    ("hold", 1), ("phase", 4))
+    task_group = ("seat_facing", "seat_height", "pelvis_target", "hold", "phase")
     reward_terms = ("dist", "success", "pelvis_height", "foot_floor", "skate", "rotation", "jerk", *COMMON_TERMS)
 
     def __init__(self, num_envs: int = 1, *, seats: str | Path | Sequence[SeatSpec] | None = None,

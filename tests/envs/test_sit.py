@@ -100,7 +100,8 @@ def test_pelvis_height_term_known_values():
 def test_env_draws_seats_observes_them_and_registers(tiny_model):
     env = gym.make_vec("latentrl/Sit-v0", num_envs=64, vectorization_mode="vector_entry_point", motion=tiny_model)
     obs, _ = env.reset(seed=3)
-    assert env.observation_layout["goal"] == (0, 13) and "scene_rays" in env.observation_layout
+    assert env.observation_layout["goal"] == (0, 4) and env.observation_layout["task"] == (4, 13)
+    assert "scene_rays" in env.observation_layout
     seat = env.seat
     assert float(seat[:, 2].min()) >= 0.2 and float(seat[:, 2].max()) <= 0.6
     dist = torch.linalg.vector_norm(seat[:, :2], dim=-1)

@@ -75,3 +75,24 @@ def test_a_resumed_run_continues_its_own_weights_without_reading_the_source(tiny
     result = train(ReachLocationEnv(4, motion=tiny_model, scene=WALL), run,
                    tiny_ppo(total_steps=64, init_from=str(source)), tiny_policy(), resume=True, progress=False)
     assert result.env_steps == 64
+
+
+def test_a_reach_policy_warm_starts_the_sit_task_and_acts_as_itself(tiny_model, tmp_path):
+    """The sit task observes its seat and phase as a ``task`` group after the reach task's ``goal``: a reach policy
+    warm-starts it (new groups silent), so the sit policy begins by walking to the goal as the reach policy did."""
+    from latentrl.envs.sit import SitEnv
+
+    source, path = trained_flat(tiny_model, tmp_path, obs_norm=True)
+    sit = SitEnv(4, motion=tiny_model)
+    trainer = NativeTrainer(sit, tmp_path / "sit", tiny_ppo(total_steps=32, init_from=str(path)),
+                            tiny_policy(obs_norm=True), progress=False)
+    trainer.warm_start()
+    assert trainer.warm_started == ["task", "scene_rays"]
+    obs, _ = sit.reset(seed=1)
+    layout = sit.observation_layout
+    reach_part = torch.cat([obs[:, a:b] for name, (a, b) in layout.items() if name in ("goal", "text", "motion",
+                                                                                          "scene")], dim=1)
+    trainer.policy.eval()
+    with torch.no_grad():
+        old, new = source(reach_part), trainer.policy(obs)
+    assert torch.allclose(old.mean, new.mean, atol=1e-6) and torch.allclose(old.value, new.value, atol=1e-6)
