@@ -40,6 +40,9 @@ FLIGHT_CAP_M = 0.15
 LOCK_MIN_WEIGHT = 0.5
 #: Highest terrain a primitive steps onto (metres above the body's lowest joint before it): :func:`ground_under`.
 MAX_STEP_UP_M = 0.3
+#: A primitive crosses a step when the ground under its lowest joint changes by more than this (metres) over its
+#: frames: :func:`follow_steps`.
+STEP_M = 0.03
 
 
 def lock_min_weight_problem(value: float) -> str | None:
@@ -154,6 +157,8 @@ class MotionModel(nn.Module):
         self.floor_snap: float | None = FLOOR_SNAP_M
         self.floor_snap_ramp = False
         """Spread each primitive's floor-snap shift over its frames (:func:`ramp_snap`) instead of one step."""
+        self.follow_steps = True
+        """On terrain, let a primitive that crosses a step follow it frame by frame (:func:`follow_steps`)."""
         self.foot_lock = False
         """Keep feet on the floor from sliding (:func:`lock_feet`); off by default, envs turn it on (``foot_lock``)."""
         self._text_cache: dict[str, torch.Tensor] = {}
@@ -370,7 +375,9 @@ class MotionModel(nn.Module):
         joints_world = placement.apply(joints_of(sample.future))
         airborne = state.airborne  # without the snap nothing lands: the flags pass through
         future = sample.future
-        if floor_snap and self.floor_snap is not None:
+        snap = floor_snap and self.floor_snap is not None
+        follow = snap and terrain is not None and self.follow_steps and not self.floor_snap_ramp
+        if snap:
             ground = None
             if terrain is not None:  # the snap moves z only: the ground under each joint stays the same
                 stand = state.world.apply(joints_of(state.history))[..., 2].flatten(1).amin(dim=1)
@@ -378,8 +385,8 @@ class MotionModel(nn.Module):
             joints_world, placement, airborne = self._snap_to_floor(
                 joints_world, placement, state.airborne_flags(), ground
             )
+            lift = placement.translation[:, 2] - state.world.translation[:, 2]
             if self.floor_snap_ramp:
-                lift = placement.translation[:, 2] - state.world.translation[:, 2]
                 joints_world, future = ramp_snap(future, joints_world, lift, ground)
         history, rotation, origin = canonicalize(sample.future[:, -HISTORY_LENGTH:], self.pelvis_delta)
         world = placement.compose(rotation, origin)
@@ -388,6 +395,12 @@ class MotionModel(nn.Module):
             joints_world, future, shift = lock_feet(future, joints_world, placement, before, lock_min_weight,
                                                     terrain)
             world = WorldTransform(world.rotation, world.translation + shift)
+        if follow:  # after the lock: the ground under each joint where the lock leaves it
+            joints_world, future, drop = follow_steps(future, joints_world, lift, terrain, stand, airborne,
+                                                      self.floor_snap)
+            down = torch.nn.functional.pad(drop[:, None], (2, 0))  # (B, 3): z only
+            placement = WorldTransform(placement.rotation, placement.translation + down)
+            world = WorldTransform(world.rotation, world.translation + down)
         return StepResult(future, joints_world, sample.latent, RolloutState(history, world, airborne), placement)
 
     def differentiable_step(
@@ -545,6 +558,11 @@ def ramp_snap(
     off = torch.maximum(off, -lowest.clamp(min=0.0))
     joints_world = joints_world.clone()
     joints_world[..., 2] += off[..., None]
+    return joints_world, future + _height_edit(future, off)
+
+
+def _height_edit(future: torch.Tensor, off: torch.Tensor) -> torch.Tensor:
+    """(B, F, 276) the change of canonical features that raises frame k by ``off`` (B, F) metres (z up)."""
     delta = torch.cat((off[:, 1:], off[:, -1:]), dim=1) - off  # delta k = frame k+1 - frame k (last: 0)
     edit = torch.zeros_like(future)
     edit[..., SLICES["transl"].start + 2] = off
@@ -553,7 +571,68 @@ def ramp_snap(
     z_deltas = torch.arange(SLICES["joints_delta"].start + 2, SLICES["joints_delta"].stop, 3, device=future.device)
     edit[..., z_joints] = off[..., None].expand(-1, -1, NUM_JOINTS)
     edit[..., z_deltas] = delta[..., None].expand(-1, -1, NUM_JOINTS)
-    return joints_world, future + edit
+    return edit
+
+
+def follow_steps(
+    future: torch.Tensor, joints_world: torch.Tensor, lift: torch.Tensor, terrain: Terrain, stand: torch.Tensor,
+    airborne: torch.Tensor, band: float,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """On a step, let a snapped primitive follow the ground frame by frame instead of moving as a whole.
+
+    Why: the floor snap moves a primitive by its lowest joint over all its frames. Stepping up, the lift that
+    stands the foot on the upper tread also lifts the frames before it, where the body still stands on the
+    lower one: that foot floats by up to a riser. Stepping down, the foot still on the upper tread holds the
+    whole primitive up, so the foot that steps down lands in the air and floats over the lower tread until a
+    later primitive lets the body down. Here, in a primitive whose ground under its lowest joint changes by
+    more than :data:`STEP_M` over its frames (a landed one, not a flight):
+
+    - a lift grows over the frames (frame ``i`` of ``F`` keeps ``(i + 1) / F`` of it), as :func:`ramp_snap`;
+    - the end comes down onto the lower ground: when the last frame's lowest joint is above the ground under
+      it but no higher than ``band`` over the highest ground the primitive stood on, that ground at most
+      :data:`MAX_STEP_UP_M` higher (a foot stepping down, not a flight or a ledge walked off), frame ``i`` goes
+      down ``(i + 1) / F`` of that height, and the next primitive starts there;
+
+    no frame ever below the ground under it, and no frame with a joint inside an obstacle (terrain too high to
+    step on, :func:`ground_under`) lower than the snap put it. Primitives on even ground (every primitive on a
+    flat floor) come back bit for bit as they went in.
+
+    Args:
+        future: (B, F, 276) canonical features of the primitive.
+        joints_world: (B, F, 22, 3) the primitive snapped as a whole.
+        lift: (B,) metres the snap moved it (z).
+        terrain: the terrain (``height(xy)``).
+        stand: (B,) world z of the body's lowest joint before the primitive (:func:`ground_under`).
+        airborne: (B,) the snap's flags: the primitive is in flight (left as it is).
+        band: the floor snap's contact band, metres.
+
+    Returns ``(joints_world, future, drop)``: the followed joints and features, and (B,) the z the placement
+    moves by (<= 0: the end's descent; the features are relative to the moved placement).
+    """
+    raw = terrain.height(joints_world[..., :2])
+    ground = torch.where(raw <= stand[:, None, None] + MAX_STEP_UP_M, raw, float("-inf"))  # as ground_under
+    height = joints_world[..., 2] - ground  # (B, F, J); a joint over an obstacle reads +inf
+    lowest, at = height.min(dim=-1)  # (B, F)
+    blocked = ((joints_world[..., 2] < raw) & torch.isinf(ground)).any(dim=-1)  # (B, F) a joint inside an obstacle
+    under = ground.gather(-1, at[..., None])[..., 0]
+    finite = torch.isfinite(under)
+    top = torch.where(finite, under, -torch.inf).amax(dim=1)  # the highest ground the primitive stood on
+    step = (top - torch.where(finite, under, torch.inf).amin(dim=1) > STEP_M) & ~airborne
+    f = future.shape[1]
+    frac = torch.arange(1, f + 1, device=future.device, dtype=future.dtype) / f
+    end = lowest[:, -1]
+    down = top - under[:, -1]  # how far the ground under the end lies below the highest the primitive stood on
+    landing = (end > 0) & torch.isfinite(end) & (end <= down + band) & (down <= MAX_STEP_UP_M)
+    drop = torch.where(step & landing & ~blocked[:, -1], -end, torch.zeros_like(end))
+    off = lift.clamp(min=0)[:, None] * (frac - 1.0) + drop[:, None] * frac
+    off = torch.maximum(off, -lowest)
+    off = torch.where(step[:, None] & ~(blocked & (off < 0)), off, torch.zeros_like(off))
+    moved = joints_world.clone()
+    moved[..., 2] += off[..., None]
+    rows = step[:, None, None, None]
+    joints_world = torch.where(rows, moved, joints_world)
+    future = torch.where(step[:, None, None], future + _height_edit(future, off - drop[:, None]), future)
+    return joints_world, future, drop
 
 
 def lock_feet(

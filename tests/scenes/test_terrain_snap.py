@@ -5,10 +5,10 @@ import torch
 
 from latentrl.envs.reach import ReachLocationEnv
 from latentrl.motion import load_motion_model
-from latentrl.motion.canonical import WorldTransform
+from latentrl.motion.canonical import WorldTransform, features_to_world
 from latentrl.motion.representation import joints_of
-from latentrl.motion.rollout import FLOOR_SNAP_M, MAX_STEP_UP_M, ground_under, ramp_snap
-from latentrl.scenes import Box, Scene, SceneBatch
+from latentrl.motion.rollout import FLOOR_SNAP_M, MAX_STEP_UP_M, follow_steps, ground_under, ramp_snap
+from latentrl.scenes import Box, Scene, SceneBatch, Stairs
 
 STEP = Scene((Box((0.5, 0.0), (1.0, 2.0, 0.2)),))  # a 0.2 m step over 0 <= x <= 1
 FLAT = Scene(())
@@ -79,6 +79,82 @@ def test_the_ramped_snap_keeps_frames_above_the_tread():
     out, _ = ramp_snap(torch.zeros(1, 8, 276), joints, torch.tensor([0.08]), ground)
     assert (out[0, :, 10, 2] >= 0.2 - 1e-7).all()
     torch.testing.assert_close(out[0, :3, 10, 2], torch.full((3,), 0.2))
+
+
+def test_a_step_down_lands_the_primitive_end_on_the_lower_ground():
+    """Known answer: the left foot stands on the 0.2 m tread, then lifts; the right one stepped off over the floor.
+
+    Snapped as a whole, the right foot would hover 0.2 m over the floor; following the step, each frame after
+    the left foot leaves goes down (i + 1) / 8 of it, so the last frame stands on the floor and the placement
+    moves down 0.2 m (the features follow, relative to it)."""
+    joints = primitive((0.5, -0.5), (0.2, 0.2))
+    joints[:, 4:, 10, 2] = 0.5  # the left foot lifts off the tread
+    future = torch.zeros(1, 8, 276)
+    out, feats, drop = follow_steps(future, joints, torch.zeros(1), SceneBatch.from_scenes([STEP]),
+                                    torch.tensor([0.2]), torch.tensor([False]), FLOOR_SNAP_M)
+    torch.testing.assert_close(drop, torch.tensor([-0.2]))
+    right = torch.tensor([0.2, 0.2, 0.2, 0.2, 0.075, 0.05, 0.025, 0.0])
+    torch.testing.assert_close(out[0, :, 11, 2], right)
+    assert torch.equal(out[0, :4], joints[0, :4])  # the left foot still on the tread: not moved
+    torch.testing.assert_close(feats[0, :, 2], right)  # the pelvis translation's z, relative to the moved placement
+
+
+def test_a_step_up_lifts_the_frames_before_the_landing_gradually(tiny_model):
+    """Known answer: the right foot lands on the tread at frame 4; the snap lifted the primitive 0.2 m as a whole,
+    so the left foot (on the floor) floated 0.2 m in frames 0-3; now frame i keeps (i + 1) / 8 of the lift."""
+    joints = primitive((-0.5, -0.3), (0.0, 0.1))
+    joints[:, 4:, 11, 0], joints[:, 4:, 11, 2] = 0.5, 0.0  # the right foot lands 0.2 m inside the tread
+    snapped, world, _ = snap(tiny_model, joints, SceneBatch.from_scenes([STEP]))
+    lift = world.translation[:, 2]
+    torch.testing.assert_close(lift, torch.tensor([0.2]))
+    out, _, drop = follow_steps(torch.zeros(1, 8, 276), snapped, lift, SceneBatch.from_scenes([STEP]),
+                                torch.zeros(1), torch.tensor([False]), FLOOR_SNAP_M)
+    torch.testing.assert_close(out[0, :4, 10, 2], torch.tensor([0.025, 0.05, 0.075, 0.1]))
+    assert torch.equal(out[0, 4:], snapped[0, 4:]) and drop.item() == 0.0
+
+
+def test_a_frame_with_a_joint_inside_an_obstacle_is_not_lowered():
+    """The step down of the first test, with a hand inside a 1 m box in frame 5: that frame keeps its height."""
+    scene = SceneBatch.from_scenes([Scene((*STEP.objects, Box((-1.5, 0.0), (0.4, 0.4, 1.0))))])
+    joints = primitive((0.5, -0.5), (0.2, 0.2))
+    joints[:, 4:, 10, 2] = 0.5
+    joints[:, 5, 20, :2] = torch.tensor([-1.5, 0.0])  # a hand 0.6-1.6 m up, inside the box top
+    joints[:, 5, 20, 2] = 0.9
+    out, _, drop = follow_steps(torch.zeros(1, 8, 276), joints, torch.zeros(1), scene, torch.tensor([0.2]),
+                                torch.tensor([False]), FLOOR_SNAP_M)
+    assert torch.equal(out[0, 5], joints[0, 5]) and drop.item() == pytest.approx(-0.2)
+    assert out[0, 6, 11, 2].item() == pytest.approx(0.025)
+
+
+@pytest.mark.parametrize("lock", [False, True])
+def test_rollouts_down_stairs_keep_features_and_placement_in_step(tiny_model, lock):
+    """On stairs, the returned features placed by the returned placement are the returned joints, the next
+    state starts at the last frame, and no foot ends a step below the tread under it."""
+    stairs = SceneBatch.from_scenes([Scene((Stairs((0.0, 1.0), -90.0, 6.0, 0.06, 0.1, 20),))] * 6)
+    tiny_model.foot_lock = lock
+    try:
+        g = torch.Generator().manual_seed(0)
+        state = tiny_model.initial_state(6, generator=g)
+        start = state.world.apply(joints_of(state.history))
+        up = stairs.height(start[:, -1, :1, :2])[:, 0] - start[..., 2].flatten(1).amin(dim=1)  # onto the tread
+        state = state._replace(world=WorldTransform(state.world.rotation, state.world.translation
+                                                    + torch.nn.functional.pad(up[:, None], (2, 0))))
+        text = torch.zeros(6, tiny_model.text_dim)
+        drops = 0
+        for _ in range(12):
+            before = state.world.translation[:, 2]
+            out = tiny_model.rollout_step(state, text, torch.randn(6, *tiny_model.latent_shape, generator=g),
+                                          terrain=stairs)
+            placed = joints_of(features_to_world(out.future, out.placement, tiny_model.pelvis_delta))
+            torch.testing.assert_close(placed, out.joints_world, atol=1e-4, rtol=0)
+            if not lock:  # the lock places the next history one frame's correction away (docs/motion.md)
+                nxt = out.state.world.apply(joints_of(out.state.history))[:, -1]
+                torch.testing.assert_close(nxt, out.joints_world[:, -1], atol=1e-4, rtol=0)
+            drops += int((out.state.world.translation[:, 2] < before - 0.05).sum())
+            state = out.state
+        assert drops > 0  # the test walks down stairs
+    finally:
+        tiny_model.foot_lock = False
 
 
 @pytest.fixture(scope="module", params=["default", "parity"])
