@@ -885,6 +885,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
     if program:
         interrupts.install()  # SIGTERM (preemption, kill) saves and stops like Ctrl-C
+    code = _dispatch(args, program)
+    if program:
+        from latentrl.ppo import distributed
+
+        if distributed.launched():  # a torchrun rank: leave without tearing the C++ runtime down
+            distributed.end_process(code)
+    return code
+
+
+def _dispatch(args: argparse.Namespace, program: bool) -> int:
+    """Run the parsed command; every error becomes its one line and exit status."""
     try:
         return args.func(args)
     except LatentRLError as exc:

@@ -330,6 +330,27 @@ def shutdown() -> None:
     _current = SINGLE
 
 
+def end_process(code: int) -> None:
+    """End a torchrun-launched rank's process now with ``code``, its output flushed (and after :func:`shutdown`).
+
+    A failed rank (``code`` != 0) skips the shutdown: it must not wait at a barrier for peers that may be gone.
+
+    Why: at interpreter exit, C++ objects the process group leaves behind (gloo's threads) are destroyed in no
+    fixed order, and now and then one aborts the process ("terminate called without an active exception"),
+    which torchrun reports as a failed rank after a run that finished. Everything a run writes is on disk by
+    now (checkpoints and logs are closed), so the rank skips the teardown (``os._exit``).
+    """
+    import logging
+
+    if code == 0:
+        shutdown()
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code)
+
+
 # --------------------------------------------------------------------------- torchrun's report
 _ELASTIC_LOG = re.compile(r"^[IWE]\d{4} [\d:.]+ +\d+ .*torch/distributed/")
 _TIMED_OUT = re.compile(r"^(?:\[rank\d+\]: ?)?latentrl: error: rank (\d+): \S+ timed out after ([\d.e+]+) s")

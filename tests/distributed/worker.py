@@ -79,6 +79,8 @@ def main(mode: str, run_dir: Path) -> None:
                 "env_steps": trainer.env_steps, "iterations": trainer.iteration,
                 "rollout": tuple(result.rollout) if result else None, "world_size": collective.world_size,
                 "interrupted": interrupted}, run_dir / f"rank{collective.rank}.pt")
+    if collective.world_size > 1:
+        distributed.end_process(0)  # as latentrl train's ranks end
     distributed.shutdown()
 
 
