@@ -8,7 +8,8 @@ file. The env runs a state machine and switches the text itself (CLoSD section 4
 phase name        text          ends when
 ====  ==========  ============  ===========================================================================
 0     approach    walk          the pelvis comes within ``approach_radius`` (xy) of the sit-down spot,
-                                ``approach_offset`` in front of the seat centre
+                                ``approach_offset`` in front of the seat centre, the body facing within
+                                ``approach_facing_deg`` of the sitter's facing (its back to the seat)
 1     sit         sit down      **sit success**: for ``hold_frames`` frames in a row the pelvis is within
                                 ``sit_radius`` (xy) of the seat centre and within ``height_tolerance`` of the
                                 seated height (seat top + :data:`SEATED_PELVIS_ABOVE_SEAT_M`)
@@ -116,6 +117,10 @@ class SitConfig:
     approach_offset: float = 0.4
     """The sit-down spot lies this far in front of the seat centre, metres."""
     approach_radius: float = 0.3
+    approach_facing_deg: float | None = 45.0
+    """The approach also needs the body's forward axis within this of the sitter's facing, degrees (None: any).
+    Why: a sit down lowers the pelvis back over planted feet (about a thigh length), so a body that arrives
+    facing the seat sits down beside it, not on it."""
     sit_radius: float = 0.3
     height_tolerance: float = 0.05
     hold_frames: int = 15
@@ -132,6 +137,9 @@ class SitConfig:
         _pair(self.seat_size, "seat_size", 0.05, 5.0)
         require(is_finite_number(self.seat_angle_deg) and 0 <= self.seat_angle_deg <= 180, "seat_angle_deg",
                 f"must be degrees in [0, 180], got {self.seat_angle_deg}")
+        facing = self.approach_facing_deg
+        require(facing is None or (is_finite_number(facing) and 0 < facing <= 180), "approach_facing_deg",
+                f"must be degrees in (0, 180] or null (any facing), got {facing!r}")
         for name in ("approach_offset", "approach_radius", "sit_radius", "height_tolerance", "leave_distance"):
             v = getattr(self, name)
             require(is_finite_number(v) and 0 < v <= 10, name, f"must be metres in (0, 10], got {v!r}")
@@ -148,6 +156,7 @@ class SitConfig:
         return {"seat_height": tuple(self.seat_height), "seat_distance": tuple(self.seat_distance),
                 "seat_angle_deg": self.seat_angle_deg, "seat_size": tuple(self.seat_size),
                 "approach_offset": self.approach_offset, "approach_radius": self.approach_radius,
+                "approach_facing_deg": self.approach_facing_deg,
                 "sit_radius": self.sit_radius, "height_tolerance": self.height_tolerance,
                 "hold_frames": self.hold_frames, "leave_distance": self.leave_distance,
                 "stand_fraction": self.stand_fraction, "walk_text": self.walk_text, "sit_text": self.sit_text,
@@ -206,12 +215,13 @@ class SitEnv(LatentMotionVectorEnv):
     def __init__(self, num_envs: int = 1, *, seats: str | Path | Sequence[SeatSpec] | None = None,
                  seat_height: Sequence[float] = (0.2, 0.6), seat_distance: Sequence[float] = (1.5, 3.0),
                  seat_angle_deg: float = 60.0, seat_size: Sequence[float] = (0.5, 0.5), approach_offset: float = 0.4,
-                 approach_radius: float = 0.3, sit_radius: float = 0.3, height_tolerance: float = 0.05,
+                 approach_radius: float = 0.3, approach_facing_deg: float | None = 45.0, sit_radius: float = 0.3,
+                 height_tolerance: float = 0.05,
                  hold_frames: int = 15, leave_distance: float = 0.6, stand_fraction: float = 0.9,
                  walk_text: str = "walk", sit_text: str = "sit down", stand_text: str = "stand up", **kwargs):
         cfg = SitConfig(list(seat_height), list(seat_distance), seat_angle_deg, list(seat_size), approach_offset,
-                        approach_radius, sit_radius, height_tolerance, hold_frames, leave_distance, stand_fraction,
-                        walk_text, sit_text, stand_text)
+                        approach_radius, approach_facing_deg, sit_radius, height_tolerance, hold_frames,
+                        leave_distance, stand_fraction, walk_text, sit_text, stand_text)
         cfg.validate()
         require(kwargs.get("scene") is None, "scene", "the sit task places its own seat; leave env.scene unset")
         require(not kwargs.get("compile", False), "compile", "the sit task runs eagerly (its phase logic)")
@@ -252,6 +262,16 @@ class SitEnv(LatentMotionVectorEnv):
 
     def _facing(self) -> torch.Tensor:
         return torch.stack((torch.cos(self._seat[:, 3]), torch.sin(self._seat[:, 3])), dim=-1)
+
+    def _facing_seat(self, future: torch.Tensor) -> torch.Tensor:
+        """(N, F) each frame faces within ``approach_facing_deg`` of the sitter's facing (all True when None)."""
+        limit = self.cfg.approach_facing_deg
+        if limit is None:
+            return torch.ones(future.shape[:2], dtype=torch.bool, device=future.device)
+        n, f = future.shape[:2]
+        forward, _ = body_forward(future.reshape(n * f, *future.shape[2:]))
+        cos = (forward[:, :2].reshape(n, f, 2) * self._facing()[:, None, :]).sum(dim=-1)
+        return cos >= math.cos(math.radians(limit))
 
     def _point_in_front(self, distance: float) -> torch.Tensor:
         xy = self._seat[:, :2] + self._facing() * distance
@@ -316,7 +336,7 @@ class SitEnv(LatentMotionVectorEnv):
         upright = height >= cfg.stand_fraction * self._stand_z[:, None]
         phase = self._phase
         self._events = {
-            "approached": (phase == 0) & (to_goal.amin(dim=1) < cfg.approach_radius),
+            "approached": (phase == 0) & ((to_goal < cfg.approach_radius) & self._facing_seat(future)).any(dim=1),
             "sat": (phase == 1) & held,
             "stood": (phase == 2) & upright[:, -1],
             "left": (phase == 3) & (upright & (from_seat >= cfg.leave_distance)).any(dim=1),

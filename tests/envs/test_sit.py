@@ -23,10 +23,15 @@ CONFIG = packaged("configs", "sit.yaml")
 SEAT = SeatSpec((0.0, 2.0), 0.45, -90.0)
 
 
-def frames(env: SitEnv, x: float, y: float, z: float) -> torch.Tensor:
-    """(N, 8, 22, 3) new frames with every joint at the given pelvis position."""
+def frames(env: SitEnv, x: float, y: float, z: float, facing_deg: float = -90.0) -> torch.Tensor:
+    """(N, 8, 22, 3) new frames with every joint at the given pelvis position but the hips, 0.1 m to either side
+    of it so that the body faces ``facing_deg`` (SEAT's sitter facing by default)."""
     out = torch.zeros(env.num_envs, 8, 22, 3)
     out[..., 0], out[..., 1], out[..., 2] = x, y, z
+    a = math.radians(facing_deg)
+    right = torch.tensor([math.sin(a), -math.cos(a)]) * 0.1  # the body's right: forward turned -90 degrees
+    out[..., 2, :2] += right  # SMPL joint 2: right hip; 1: left hip
+    out[..., 1, :2] -= right
     return out
 
 
@@ -54,8 +59,12 @@ def test_phases_and_successes_on_hand_made_motion(tiny_model):
     texts = env.text_table.texts
     assert env.phase.tolist() == [0] and texts[int(env._text_idx[0])] == "walk"
     assert env.goal_world[0, :2].tolist() == pytest.approx([0.0, 1.6], abs=1e-6)  # 0.4 m in front of the seat
-    # approach: the pelvis passes within 0.3 m of the sit-down spot
-    reached, done, _ = step_hooks(env, frames(env, 0.1, 1.5, stand))
+    # approach: within 0.3 m of the sit-down spot but facing the seat (+y), or 50 degrees off: not yet
+    for facing in (90.0, -40.0):
+        assert step_hooks(env, frames(env, 0.1, 1.5, stand, facing))[0].tolist() == [False]
+    assert env.phase.tolist() == [0]
+    # the pelvis passes within 0.3 m of the sit-down spot, its back to the seat (within 45 degrees)
+    reached, done, _ = step_hooks(env, frames(env, 0.1, 1.5, stand, -130.0))
     assert reached.tolist() == [True] and not done.any() and env.phase.tolist() == [1]
     assert texts[int(env._text_idx[0])] == "sit down" and env.goal_world[0, :2].tolist() == [0.0, 2.0]
     seated = 0.45 + SEATED_PELVIS_ABOVE_SEAT_M
@@ -142,6 +151,14 @@ def test_seat_files_and_bad_arguments(tiny_model, tmp_path):
         SitEnv(1, motion=tiny_model, seat_height=(0.6, 0.2))
     with pytest.raises(ConfigError, match="hold_frames"):
         SitEnv(1, motion=tiny_model, hold_frames=0)
+    with pytest.raises(ConfigError, match=r"approach_facing_deg: must be degrees in \(0, 180\] or null"):
+        SitEnv(1, motion=tiny_model, approach_facing_deg=270)
+
+
+def test_any_facing_ends_the_approach_when_the_facing_is_not_asked(tiny_model):
+    env = SitEnv(1, motion=tiny_model, seats=[SEAT], approach_facing_deg=None)
+    env.reset(seed=0)
+    assert step_hooks(env, frames(env, 0.1, 1.5, float(env._stand_z[0]), 90.0))[0].tolist() == [True]
 
 
 def test_sit_config_trains_a_few_iterations_and_evaluates(eval_files, tmp_path, capsys):
