@@ -523,8 +523,12 @@ def ground_under(joints_world: torch.Tensor, terrain: Terrain, stand: torch.Tens
     body's lowest joint in the frames before the primitive, where it stands) is an obstacle to collide with,
     not a step: it reads ``-inf`` (the joint never decides the snap).
     """
-    ground = terrain.height(joints_world[..., :2])
-    return torch.where(ground <= stand[:, None, None] + step_up, ground, float("-inf"))
+    return _steppable(terrain.height(joints_world[..., :2]), stand, step_up)
+
+
+def _steppable(raw: torch.Tensor, stand: torch.Tensor, step_up: float = MAX_STEP_UP_M) -> torch.Tensor:
+    """(B, F, J) terrain heights ``raw`` where a step reaches them from ``stand`` (B,), ``-inf`` (an obstacle) above."""
+    return torch.where(raw <= stand[:, None, None] + step_up, raw, float("-inf"))
 
 
 def ramp_snap(
@@ -610,7 +614,7 @@ def follow_steps(
     moves by (<= 0: the end's descent; the features are relative to the moved placement).
     """
     raw = terrain.height(joints_world[..., :2])
-    ground = torch.where(raw <= stand[:, None, None] + MAX_STEP_UP_M, raw, float("-inf"))  # as ground_under
+    ground = _steppable(raw, stand)  # as ground_under
     height = joints_world[..., 2] - ground  # (B, F, J); a joint over an obstacle reads +inf
     lowest, at = height.min(dim=-1)  # (B, F)
     blocked = ((joints_world[..., 2] < raw) & torch.isinf(ground)).any(dim=-1)  # (B, F) a joint inside an obstacle
