@@ -18,6 +18,8 @@ phase name        text          ends when
                                 at least ``leave_distance`` (xy) from the seat centre; the episode ends
 ====  ==========  ============  ===========================================================================
 
+With ``settle_steps`` > 0 the sit phase begins with that many primitives of ``settle_text`` (``stand still``).
+
 The goal (observed as ``goal_dir``/``goal_dist``, rewarded by ``dist``) is the sit-down spot in phase 0, the seat
 centre in phase 1 and the leave point (``leave_distance`` in front of the seat) after. ``success`` pays 1 at
 each phase's end but the stand-up; ``pelvis_height`` pulls the pelvis to the seated height in phase 1 and to the
@@ -129,6 +131,10 @@ class SitConfig:
     walk_text: str = "walk"
     sit_text: str = "sit down"
     stand_text: str = "stand up"
+    settle_steps: int = 0
+    """Primitives of ``settle_text`` between the approach and ``sit_text`` (0: none). Why: the procedural data
+    enters a sit only from standing still, so a sit down straight out of a walk asks for a transition it never saw."""
+    settle_text: str = "stand still"
 
     def validate(self) -> None:
         """Ranges ordered and positive; one-line ConfigError naming the field."""
@@ -148,7 +154,10 @@ class SitConfig:
                 f"{self.hold_frames!r}")
         require(is_finite_number(self.stand_fraction) and 0 < self.stand_fraction <= 1, "stand_fraction",
                 f"must be in (0, 1], got {self.stand_fraction!r}")
-        for name in ("walk_text", "sit_text", "stand_text"):
+        require(isinstance(self.settle_steps, int) and not isinstance(self.settle_steps, bool)
+                and 0 <= self.settle_steps <= 64, "settle_steps", f"must be an integer in [0, 64], got "
+                f"{self.settle_steps!r}")
+        for name in ("walk_text", "sit_text", "stand_text", "settle_text"):
             require(isinstance(getattr(self, name), str) and getattr(self, name).strip(), name, "must be a prompt")
 
     def kwargs(self) -> dict[str, Any]:
@@ -160,7 +169,7 @@ class SitConfig:
                 "sit_radius": self.sit_radius, "height_tolerance": self.height_tolerance,
                 "hold_frames": self.hold_frames, "leave_distance": self.leave_distance,
                 "stand_fraction": self.stand_fraction, "walk_text": self.walk_text, "sit_text": self.sit_text,
-                "stand_text": self.stand_text}
+                "stand_text": self.stand_text, "settle_steps": self.settle_steps, "settle_text": self.settle_text}
 
 
 class SeatScene(EnvScene):
@@ -218,10 +227,11 @@ class SitEnv(LatentMotionVectorEnv):
                  approach_radius: float = 0.3, approach_facing_deg: float | None = 45.0, sit_radius: float = 0.3,
                  height_tolerance: float = 0.05,
                  hold_frames: int = 15, leave_distance: float = 0.6, stand_fraction: float = 0.9,
-                 walk_text: str = "walk", sit_text: str = "sit down", stand_text: str = "stand up", **kwargs):
+                 walk_text: str = "walk", sit_text: str = "sit down", stand_text: str = "stand up",
+                 settle_steps: int = 0, settle_text: str = "stand still", **kwargs):
         cfg = SitConfig(list(seat_height), list(seat_distance), seat_angle_deg, list(seat_size), approach_offset,
                         approach_radius, approach_facing_deg, sit_radius, height_tolerance, hold_frames,
-                        leave_distance, stand_fraction, walk_text, sit_text, stand_text)
+                        leave_distance, stand_fraction, walk_text, sit_text, stand_text, settle_steps, settle_text)
         cfg.validate()
         require(kwargs.get("scene") is None, "scene", "the sit task places its own seat; leave env.scene unset")
         require(not kwargs.get("compile", False), "compile", "the sit task runs eagerly (its phase logic)")
@@ -236,13 +246,16 @@ class SitEnv(LatentMotionVectorEnv):
         self._phase = torch.zeros(n, dtype=torch.long, device=dev)
         self._hold = torch.zeros(n, dtype=torch.long, device=dev)
         self._stand_z = torch.ones(n, device=dev)
+        self._settle = torch.zeros(n, dtype=torch.long, device=dev)  # settle primitives left before the sit text
         self._events: dict[str, torch.Tensor] = {}
-        rows = {t: self.text_table.texts.index(t) for t in (walk_text, sit_text, stand_text)}
+        rows = {t: self.text_table.texts.index(t) for t in self._all_texts(())}
+        self._settle_text = torch.tensor(rows.get(settle_text, rows[sit_text]), device=dev)  # unused at 0 steps
         self._phase_text = torch.tensor([rows[walk_text], rows[sit_text], rows[stand_text], rows[walk_text]],
                                         device=dev)
 
     def _all_texts(self, texts: tuple[str, ...]) -> tuple[str, ...]:
-        return (*texts, self.cfg.walk_text, self.cfg.sit_text, self.cfg.stand_text)
+        settle = (self.cfg.settle_text,) if self.cfg.settle_steps else ()
+        return (*texts, self.cfg.walk_text, self.cfg.sit_text, self.cfg.stand_text, *settle)
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -305,6 +318,7 @@ class SitEnv(LatentMotionVectorEnv):
         self.scene.place(idx, self._seat[idx], tuple(self.cfg.seat_size))
         self._phase[idx] = 0
         self._hold[idx] = 0
+        self._settle[idx] = 0
         self._stand_z[idx] = self.history_world(idx)[:, -1, PELVIS, 2] - self.floor_height
         self._text_idx[idx] = self._phase_text[0]
         self._goal[idx] = self._point_in_front(self.cfg.approach_offset)[idx]
@@ -356,8 +370,12 @@ class SitEnv(LatentMotionVectorEnv):
         self._goal = torch.where((nxt == 1)[:, None], torch.cat((self._seat[:, :2], self._goal[:, 2:]), dim=1),
                                  self._goal)
         self._goal = torch.where((nxt >= 2)[:, None], leave, self._goal)
+        entering = (nxt == 1) & (self._phase == 0)
+        left = torch.where(nxt == 1, (self._settle - 1).clamp(min=0), torch.zeros_like(self._settle))
+        self._settle = torch.where(entering, torch.full_like(self._settle, self.cfg.settle_steps), left)
         self._phase = nxt
-        self._text_idx = torch.where(e["left"], self._text_idx, self._phase_text[nxt])
+        text = torch.where((nxt == 1) & (self._settle > 0), self._settle_text, self._phase_text[nxt])
+        self._text_idx = torch.where(e["left"], self._text_idx, text)
         return e["left"], e["left"]
 
     def _task_infos(self, infos: dict[str, Any], reached: torch.Tensor) -> None:

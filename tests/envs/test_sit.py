@@ -201,3 +201,23 @@ def test_restoring_the_episode_state_restores_the_seats(tiny_model):
     assert not torch.equal(env.seat, seats)
     env.set_rng_state(saved)
     assert torch.equal(env.seat, seats) and torch.allclose(env.scene.batch.box_center, rows)
+
+
+def test_settle_steps_stand_still_before_the_sit_down(tiny_model):
+    """With ``settle_steps: 2`` the two steps after the approach have ``stand still``, then ``sit down``; a new
+    approach starts the count again."""
+    env = SitEnv(1, motion=tiny_model, seats=[SEAT], settle_steps=2)
+    env.reset(seed=0)
+    texts = env.text_table.texts
+    stand = float(env._stand_z[0])
+    step_hooks(env, frames(env, 0.1, 1.5, stand, -130.0))  # the approach ends
+    away = frames(env, 0.0, 0.5, stand)  # nowhere near the seat: phase 1 goes on
+    seen = [texts[int(env._text_idx[0])]]
+    for _ in range(3):
+        step_hooks(env, away)
+        seen.append(texts[int(env._text_idx[0])])
+    assert env.phase.tolist() == [1] and seen == ["stand still", "stand still", "sit down", "sit down"]
+    env.reset(seed=1)
+    assert int(env._settle[0]) == 0 and texts[int(env._text_idx[0])] == "walk"
+    with pytest.raises(ConfigError, match="settle_steps: must be an integer in"):
+        SitEnv(1, motion=tiny_model, settle_steps=-1)
