@@ -1438,7 +1438,10 @@ def test_bad_input_gets_one_clear_line_exit_2_and_leaves_nothing(argv, pattern, 
     values = {"fx": fx, "TINY": TINY, "MTINY": MTINY, "LONG": LONG}
     for name, value in ENV.get(request.node.callspec.id, {}).items():
         monkeypatch.setenv(name, value.format(**values))
-    code = main([a.format(**values) for a in argv])
+    args = [a.format(**values) for a in argv]
+    if args[0] in ("view", "play") and "--port" not in args:  # any free port: 8080 may be another test's server
+        args += ["--port", "0"]
+    code = main(args)
     out = capsys.readouterr()
     assert code == 2, out.err
     assert out.err.endswith("\n") and out.err.count("\n") == 1, f"not one line: {out.err!r}"
