@@ -886,7 +886,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if program:
         interrupts.install()  # SIGTERM (preemption, kill) saves and stops like Ctrl-C
     code = _dispatch(args, program)
-    if program:
+    if program and "latentrl.ppo.distributed" in sys.modules:  # a command that never loaded it has no process group
         from latentrl.ppo import distributed
 
         if distributed.launched():  # a torchrun rank: leave without tearing the C++ runtime down
