@@ -45,10 +45,9 @@ class ObservationLayout:
         self.size = start
         """Length of the observation vector."""
         names = [name for name, _ in goal_fields]
-        own = [name in task_group for name in names]
-        if any(own) and (not own[-1] or own.index(True) == 0 or not all(own[own.index(True):])):
+        split = len(names) - len(task_group)  # the task group is the last len(task_group) goal fields
+        if task_group and not (split > 0 and set(names[split:]) == set(task_group)):
             raise ValueError(f"task_group {list(task_group)} must be the goal fields' tail after at least one field")
-        split = own.index(True) if any(own) else len(names)
         goal_stop = self.fields[names[split - 1]][1]
         task = {"task": (goal_stop, self.fields[names[-1]][1])} if split < len(names) else {}
         self.groups: OrderedDict[str, tuple[int, int]] = OrderedDict(
