@@ -21,9 +21,8 @@ from dataclasses import dataclass
 import torch
 
 from latentrl.errors import LatentRLError
-from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import JOINT_NAMES, PELVIS
-from latentrl.optim.refine import predict
+from latentrl.optim.refine import inputs_rows, predict, scene_rows
 from latentrl.rewards.terms import noise_prior
 from latentrl.scenes.contact import collision_cost, skin_radii
 
@@ -85,27 +84,6 @@ def band(joints: torch.Tensor, margin: float) -> torch.Tensor:
     return torch.where(ground, out, out + margin)
 
 
-def _rows(inputs: dict, idx: torch.Tensor) -> dict:
-    """The step inputs of envs ``idx`` (a one-scene terrain stays as it is: it answers any batch)."""
-    state = inputs["state"]
-    out = dict(inputs)
-    out["state"] = RolloutState(state.history[idx], state.world.index(idx),
-                                None if state.airborne is None else state.airborne[idx])
-    out["text_embedding"] = inputs["text_embedding"][idx]
-    guidance = inputs.get("guidance_scale")
-    if isinstance(guidance, torch.Tensor) and guidance.dim() > 0:  # one scale per env
-        out["guidance_scale"] = guidance[idx]
-    terrain = inputs.get("terrain")
-    if terrain is not None and terrain.num_scenes != 1:
-        out["terrain"] = terrain.index(idx)
-    return out
-
-
-def _scene_rows(scene, idx: torch.Tensor):
-    """The scenes of envs ``idx`` (a one-scene batch stays as it is: it answers any batch)."""
-    return scene if scene.num_scenes == 1 else scene.index(idx)
-
-
 def _safe_sample(model, inputs: dict, scene, keep: torch.Tensor, plan: torch.Tensor, tail: torch.Tensor,
                  draws: torch.Tensor, bound: float) -> tuple[torch.Tensor, torch.Tensor]:
     """Of ``draws`` (K, R, 1, D) for R envs at risk, each env's safe draw ending nearest ``plan`` (R, T, 22, 3).
@@ -115,8 +93,8 @@ def _safe_sample(model, inputs: dict, scene, keep: torch.Tensor, plan: torch.Ten
     """
     k, r = draws.shape[:2]
     rows = torch.arange(r, device=draws.device).repeat(k)
-    inputs_k = _rows(inputs, rows)
-    scene_k = _scene_rows(scene, rows)
+    inputs_k = inputs_rows(inputs, rows)
+    scene_k = scene_rows(scene, rows)
     z = torch.cat((draws.clamp(-bound, bound).reshape(1, k * r, *draws.shape[2:]), tail[:, rows]), dim=0)
     with torch.no_grad():
         joints = predict(model, inputs_k, z)
@@ -160,14 +138,14 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings,
     if settings.samples and sampler is not None:
         draws = torch.as_tensor(sampler(settings.samples), device=given.device).detach().to(torch.float32)
         draws = draws.reshape(settings.samples, n, *model.latent_shape)[:, idx]
-        chosen, found = _safe_sample(model, _rows(inputs, idx), _scene_rows(scene, idx), keep, plan[idx], z[1:, idx],
-                                     draws, bound)
+        chosen, found = _safe_sample(model, inputs_rows(inputs, idx), scene_rows(scene, idx), keep, plan[idx],
+                                     z[1:, idx], draws, bound)
         out[idx[found]] = chosen[found]
         idx = idx[~found]
         if idx.numel() == 0:
             return out.reshape(n, -1)
-    sub_inputs = _rows(inputs, idx)
-    sub_scene = _scene_rows(scene, idx)
+    sub_inputs = inputs_rows(inputs, idx)
+    sub_scene = scene_rows(scene, idx)
     policy, tail = z[0, idx].clone(), z[1:, idx]
     first = policy.clone().requires_grad_(True)
     opt = torch.optim.Adam([first], lr=settings.lr)

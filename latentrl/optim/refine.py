@@ -26,6 +26,7 @@ from latentrl.constants import CONTACT_HEIGHT_M
 from latentrl.envs.reach_joint import JOINTS
 from latentrl.errors import LatentRLError
 from latentrl.motion.representation import FUTURE_LENGTH
+from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS
 from latentrl.optim.losses import pseudo_huber, regularizers, target_squared
 from latentrl.optim.problems import Targets
@@ -190,6 +191,27 @@ def predict(model, inputs: dict, noise: torch.Tensor) -> torch.Tensor:
         frames.append(out.joints_world)
         state = out.state
     return torch.cat(frames, dim=1)
+
+
+def inputs_rows(inputs: dict, idx: torch.Tensor) -> dict:
+    """The step inputs of envs ``idx`` (a one-scene terrain stays as it is: it answers any batch)."""
+    state = inputs["state"]
+    out = dict(inputs)
+    out["state"] = RolloutState(state.history[idx], state.world.index(idx),
+                                None if state.airborne is None else state.airborne[idx])
+    out["text_embedding"] = inputs["text_embedding"][idx]
+    guidance = inputs.get("guidance_scale")
+    if isinstance(guidance, torch.Tensor) and guidance.dim() > 0:  # one scale per env
+        out["guidance_scale"] = guidance[idx]
+    terrain = inputs.get("terrain")
+    if terrain is not None and terrain.num_scenes != 1:
+        out["terrain"] = terrain.index(idx)
+    return out
+
+
+def scene_rows(scene, idx: torch.Tensor):
+    """The scenes of envs ``idx`` (a one-scene batch stays as it is: it answers any batch)."""
+    return scene if scene.num_scenes == 1 else scene.index(idx)
 
 
 def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:

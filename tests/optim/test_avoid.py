@@ -9,8 +9,8 @@ from latentrl.envs.reach import ReachLocationEnv
 from latentrl.errors import LatentRLError
 from latentrl.motion.checkpoint import load_motion_model
 from latentrl.motion.skeleton import JOINT_NAMES
-from latentrl.optim.avoid import AvoidSettings, _rows, avoid, avoiding, band
-from latentrl.optim.refine import predict
+from latentrl.optim.avoid import AvoidSettings, avoid, avoiding, band
+from latentrl.optim.refine import inputs_rows, predict
 from latentrl.scenes.contact import collision_cost, penetration, skin_radii
 from latentrl.scenes.scene import Box, Cylinder, Scene, SceneBatch
 
@@ -69,7 +69,7 @@ def test_step_inputs_of_some_envs_plan_those_envs_as_the_whole_batch_does(model)
     idx = torch.tensor([2, 0])
     with torch.no_grad():
         whole = predict(model, inputs, z)
-        some = predict(model, _rows(inputs, idx), z[:, idx])
+        some = predict(model, inputs_rows(inputs, idx), z[:, idx])
     assert torch.allclose(some, whole[idx], atol=1e-5)
 
 
