@@ -288,6 +288,8 @@ ROWS = [
     ("eval-refine-a-reach-policy", [*EVAL, "--refine", "4"],
      r"--refine: only ReachJoint policies are refined \(the optimizer lands joint goals\); the policy's task is "),
     ("eval-negative-avoid", [*EVAL, "--avoid", "-1"], r"--avoid: expected 0-1000, got -1"),
+    ("eval-sit-plan-a-reach-policy", [*EVAL, "--sit-plan", "8"],
+     r"--sit-plan: only sit policies plan their sits; the policy's task is "),
     ("eval-avoid-zero-horizon", [*EVAL, "--avoid", "4", "--avoid-horizon", "0"],
      r"--avoid-horizon: expected 1-16 primitives, got 0"),
     ("eval-avoid-margin-of-two-metres", [*EVAL, "--avoid", "4", "--avoid-margin", "2"],

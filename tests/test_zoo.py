@@ -50,6 +50,12 @@ def test_zoo_configs_load():
         cfg.ppo.plan(cfg.env.num_envs)
     for path in sorted((ZOO / "configs" / "motion").glob("*.yaml")):
         load_config(MotionTrainConfig, path)
+    candidates = sorted((ZOO / "configs" / "candidates").glob("*.yaml"))  # policies on unshipped models
+    assert candidates
+    for path in candidates:
+        cfg = load_config(TrainConfig, path)
+        assert cfg.env.motion.startswith("zoo/weights/") and cfg.ppo.init_from.startswith("runs/"), path
+        cfg.ppo.plan(cfg.env.num_envs)
 
 
 def _git(*args: str, **kw) -> subprocess.CompletedProcess:

@@ -514,6 +514,18 @@ def _eval_commands(sub) -> None:
                     help="with --avoid: first try K more draws of the stochastic policy in one batched prediction and "
                          "take the safe one ending nearest the policy's own plan; the optimizer only where none is "
                          "safe (default: the policy's stored eval.avoid_samples, else 0; not with --refine)")
+    ev.add_argument("--sit-plan", type=int, default=None, metavar="STEPS",
+                    help="sit policies: when the approach ends, plan the settle steps and the sit instead of the "
+                         "policy's actions: draw --sit-plan-samples plans, keep the one ending with the pelvis nearest "
+                         "its seated point over the seat, and refine it by STEPS optimizer steps (default: the "
+                         "policy's stored eval.sit_plan, else 0: off; docs/scenes.md)")
+    ev.add_argument("--sit-plan-samples", type=int, default=None, metavar="K",
+                    help="with --sit-plan: N(0, I) plans drawn and scored first (0: start from zero noise; default: "
+                         "the policy's stored eval.sit_plan_samples, else 32)")
+    ev.add_argument("--sit-plan-getup", type=int, default=None, metavar="PRIMITIVES",
+                    help="with --sit-plan: plan the stand-up and the walk away too, PRIMITIVES at a time (the pelvis "
+                         "back at standing height, then 0.7 m from the seat centre; 0: the policy stands up and "
+                         "walks away; default: the policy's stored eval.sit_plan_getup, else 3)")
     ev.add_argument("--route", type=float, default=None, metavar="M",
                     help="reach, path, timed and joystick policies among objects: plan the shortest route to each goal "
                          "(a joystick's: 3-6 m along its command) keeping M "

@@ -46,6 +46,7 @@ from latentrl.motion.checkpoint import attach_seed_history, file_sha256, load_mo
 from latentrl.motion.rollout import lock_min_weight_problem
 from latentrl.optim.avoid import AvoidSettings, avoiding
 from latentrl.optim.refine import RefineSettings, refining
+from latentrl.optim.sit_plan import SitPlanSettings, sit_planning
 from latentrl.ppo import load_policy
 from latentrl.preflight import check_device, check_output_file, check_writable, locked_output
 from latentrl.render import video_problem
@@ -120,6 +121,14 @@ class EvalRequest:
     avoid_samples: int | None = None
     """With ``avoid``: draws of the policy tried before the optimizer (None: the stored ``eval.avoid_samples``,
     else 0)."""
+    sit_plan: int | None = None
+    """Sit policies: optimizer steps of the planned sit that replaces the policy's actions while it sits
+    (``latentrl.optim.sit_plan``; 0: off; None: the policy's stored ``eval.sit_plan``, else off)."""
+    sit_plan_samples: int | None = None
+    """With ``sit_plan``: plans drawn before the optimizer (None: the stored ``eval.sit_plan_samples``, else 32)."""
+    sit_plan_getup: int | None = None
+    """With ``sit_plan``: primitives per plan of the stand-up and the walk away (0: the policy's; None: the stored
+    ``eval.sit_plan_getup``, else 3)."""
     route: float | None = None
     """Evaluations among objects: the policy sees the next point of the shortest route keeping this many metres
     from every object in place of its goal (``latentrl.envs.guide``; 0: off; None: the policy's stored
@@ -140,7 +149,9 @@ class EvalRequest:
                    ("--refine-pace", self.refine_pace), ("--refine-land", self.refine_land),
                    ("--avoid", self.avoid),
                    ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin),
-                   ("--avoid-samples", self.avoid_samples), ("--route", self.route))
+                   ("--avoid-samples", self.avoid_samples), ("--sit-plan", self.sit_plan),
+                   ("--sit-plan-samples", self.sit_plan_samples), ("--sit-plan-getup", self.sit_plan_getup),
+                   ("--route", self.route))
         for flag, value in options:
             if value is not None:
                 args += [flag, *map(str, value)] if isinstance(value, list) else [flag, str(value)]
@@ -281,15 +292,18 @@ def evaluate(req: EvalRequest) -> int:
                              ("refine_pace", "--refine-pace", float), ("refine_land", "--refine-land", int),
                              ("avoid", "--avoid", int),
                              ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
-                             ("avoid_samples", "--avoid-samples", int), ("route", "--route", float)):
+                             ("avoid_samples", "--avoid-samples", int), ("sit_plan", "--sit-plan", int),
+                             ("sit_plan_samples", "--sit-plan-samples", int),
+                             ("sit_plan_getup", "--sit-plan-getup", int), ("route", "--route", float)):
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
-        head = name.split("_")[0]
+        head = "sit_plan" if name.startswith("sit_plan") else name.split("_")[0]
         if getattr(req, name) is None and name in stored and not req.physics and (name == head or getattr(req, head)):
             setattr(req, name, kind(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
     trained = tuple(env.reach_joint.joints) if env is not None and env.reach_joint is not None else ("pelvis",)
     refiner = _refiner(req, evaluator, spec.name, trained)
     avoider = _avoider(req, evaluator, spec.name)
+    sitter = _sit_planner(req, spec.name)
     _check_route(req, evaluator, spec.name)
     if req.foot_lock_min_weight is None and "foot_lock_min_weight" in stored:  # what the policy's card used
         req.foot_lock_min_weight = float(stored["foot_lock_min_weight"])
@@ -314,13 +328,15 @@ def evaluate(req: EvalRequest) -> int:
     sample = policy_fn(policy, False)  # the scene filter's draws (--avoid-samples) are the policy's own
     info = {"policy": policy_info, "motion": motion, "hardware": hardware()}
     extra_run: dict[str, Any] = {}
-    if refiner is not None or avoider is not None:
+    if refiner is not None or avoider is not None or sitter is not None:
         info.update({"refine": asdict(refiner)} if refiner is not None else {},
-                    **({"avoid": asdict(avoider)} if avoider is not None else {}))
+                    **({"avoid": asdict(avoider)} if avoider is not None else {}),
+                    **({"sit_plan": asdict(sitter)} if sitter is not None else {}))
 
         def wrap(env: Any, policy_act: Callable) -> Callable:
-            """The policy, then the refiner, then the scene filter (the last word is the filter's)."""
+            """The policy, then the refiner or the sit plan, then the scene filter (the last word is the filter's)."""
             out = refining(env, policy_act, refiner) if refiner is not None else policy_act
+            out = sit_planning(env, out, sitter) if sitter is not None else out
             return avoiding(env, out, avoider, sample) if avoider is not None else out
 
         extra_run["wrap"] = wrap
@@ -413,6 +429,23 @@ def _avoider(req: EvalRequest, evaluator: Any, task: str) -> AvoidSettings | Non
     if settings.samples and req.refine:
         raise ConfigError("--avoid-samples: not with --refine (the draws would drop the refinement); "
                           "leave out one of them")
+    return settings
+
+
+def _sit_planner(req: EvalRequest, task: str) -> SitPlanSettings | None:
+    """``--sit-plan``'s settings, checked; None when off. Only the sit task has a sit to plan."""
+    if not req.sit_plan and not req.sit_plan_samples:
+        return None
+    if task != "sit":
+        raise ConfigError(f"--sit-plan: only sit policies plan their sits; the policy's task is {task}; leave out "
+                          "--sit-plan")
+    settings = SitPlanSettings.of(req.sit_plan or 0, req.sit_plan_samples, req.sit_plan_getup)
+    try:
+        settings.check()
+    except LatentRLError as exc:  # the flags' names, not the settings'
+        raise ConfigError(str(exc).replace("sit plan steps:", "--sit-plan:")
+                          .replace("sit plan samples:", "--sit-plan-samples:")
+                          .replace("sit plan getup primitives:", "--sit-plan-getup:")) from None
     return settings
 
 

@@ -273,6 +273,23 @@ class SitEnv(LatentMotionVectorEnv):
         """(N,) long: 0 approach, 1 sit, 2 stand, 3 leave (:data:`PHASES`)."""
         return self._phase
 
+    def plan_texts(self, idx: torch.Tensor, primitives: int) -> torch.Tensor:
+        """(S, M) the text rows of the next ``primitives`` steps of envs ``idx`` if each stays in its phase.
+
+        In the sit phase: its settle steps left, then the sit text (what a planner of a phase predicts with).
+        """
+        k = torch.arange(primitives, device=self.device)[:, None]
+        own = self._phase_text[self._phase[idx]][None, :].expand(primitives, -1)
+        return torch.where(k < self._settle[idx][None, :], self._settle_text, own)
+
+    def upright_height(self) -> torch.Tensor:
+        """(N,) the world z the pelvis must reach to count as standing (``stand_fraction`` of its start height)."""
+        return self.floor_height + self.cfg.stand_fraction * self._stand_z
+
+    def seated_height(self) -> torch.Tensor:
+        """(N,) the world z of a seated pelvis: each seat's top plus :data:`SEATED_PELVIS_ABOVE_SEAT_M`."""
+        return self._seated_z()
+
     def _facing(self) -> torch.Tensor:
         return torch.stack((torch.cos(self._seat[:, 3]), torch.sin(self._seat[:, 3])), dim=-1)
 

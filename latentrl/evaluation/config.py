@@ -66,6 +66,14 @@ class EvalConfig:
     """With ``avoid``: its ``--avoid-margin``, metres (None: 0.1)."""
     avoid_samples: int | None = None
     """With ``avoid``: its ``--avoid-samples``, draws of the policy tried before the optimizer (None: 0)."""
+    sit_plan: int | None = None
+    """Sit policies: the optimizer steps of the planned sit ``latentrl eval`` of the checkpoints applies by default
+    (its ``--sit-plan``; the card's figures); None: off. The trainer's periodic evaluation does not plan."""
+    sit_plan_samples: int | None = None
+    """With ``sit_plan``: its ``--sit-plan-samples``, plans drawn before the optimizer (None: 32)."""
+    sit_plan_getup: int | None = None
+    """With ``sit_plan``: its ``--sit-plan-getup``, primitives per plan of the stand-up and the walk away (None: 3;
+    0: the policy's)."""
     route: float | None = None
     """Reach and path policies among objects: the route guide's clearance, metres, that ``latentrl eval`` applies by
     default (its ``--route``; the card's figures); None: off. The trainer's periodic evaluation does not guide."""
@@ -106,6 +114,12 @@ class EvalConfig:
                 f"must be metres in [0, 1] (or null: 0.1), got {self.avoid_margin}")
         require(self.avoid_samples is None or 0 <= self.avoid_samples <= 256, "avoid_samples",
                 f"must be 0-256 draws (or null: 0), got {self.avoid_samples}")
+        require(self.sit_plan is None or 0 <= self.sit_plan <= 1000, "sit_plan",
+                f"must be 0-1000 optimizer steps (or null: off), got {self.sit_plan}")
+        require(self.sit_plan_samples is None or 0 <= self.sit_plan_samples <= 1024, "sit_plan_samples",
+                f"must be 0-1024 drawn plans (or null: 32), got {self.sit_plan_samples}")
+        require(self.sit_plan_getup is None or 0 <= self.sit_plan_getup <= 32, "sit_plan_getup",
+                f"must be 0-32 primitives (or null: 3), got {self.sit_plan_getup}")
         require(self.route is None or 0 <= self.route <= 2, "route",
                 f"must be metres in [0, 2] (or null: off), got {self.route}")
 

@@ -76,8 +76,9 @@ def seat_label(seat: SeatSpec) -> str:
 
 def run_seat(act: Callable, motion, seat: SeatSpec, settings: EvalSettings, *, suite: str = "sit", index: int = 0,
              criteria: SitCriteria | None = None, seed: int = 0,
-             sink: Callable[[TaskEpisode, Any], str | None] | None = None) -> TaskResult:
-    """``settings.episodes`` episodes on one seat in one batch."""
+             sink: Callable[[TaskEpisode, Any], str | None] | None = None,
+             wrap: Callable[[Any, Callable], Callable] | None = None) -> TaskResult:
+    """``settings.episodes`` episodes on one seat in one batch (``wrap``: as ``runner.run_path``'s)."""
     t0 = time.perf_counter()
     env = make_env(motion, seat, settings.episodes, settings, record_history=True, criteria=criteria)
     sat_step = torch.zeros(settings.episodes, dtype=torch.long)
@@ -86,7 +87,7 @@ def run_seat(act: Callable, motion, seat: SeatSpec, settings: EvalSettings, *, s
         first = infos["sit_success"].cpu() & live.cpu() & (sat_step == 0)
         sat_step[first] = k
 
-    outcome = rollout(env, act, settings.max_steps, seed, on_step=note)
+    outcome = rollout(env, act if wrap is None else wrap(env, act), settings.max_steps, seed, on_step=note)
     episodes = []
     for i in range(settings.episodes):
         steps = int(outcome["steps"][i])
@@ -111,11 +112,12 @@ def run_seat(act: Callable, motion, seat: SeatSpec, settings: EvalSettings, *, s
 
 def run_suites(act: Callable, motion, files: Sequence[str | Path], settings: EvalSettings, *,
                criteria: SitCriteria | None = None, sink=None,
-               progress: Callable[[TaskResult], None] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
+               progress: Callable[[TaskResult], None] | None = None,
+               wrap: Callable[[Any, Callable], Callable] | None = None) -> list[tuple[str, str, list[TaskResult]]]:
     """Every seat of every file (all files parsed first); ``[(suite name, file, results)]``."""
     settings.validate()
     return run_each(files, load_seats, lambda seat, **where: run_seat(
-        act, motion, seat, settings, criteria=criteria, sink=sink, **where), settings.seed, progress)
+        act, motion, seat, settings, criteria=criteria, sink=sink, wrap=wrap, **where), settings.seed, progress)
 
 
 def training_eval_hook(files: Sequence[str | Path], motion, env_cfg: Any, eval_cfg: Any, device: str = "cpu"):

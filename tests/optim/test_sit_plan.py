@@ -1,0 +1,180 @@
+"""The planned sit (``latentrl.optim.sit_plan``): the plan the env executes is the plan it predicted, texts and all;
+the best draw is kept and the optimizer only improves on it; outside the sit phase the policy acts; the loss's
+known answers; bad settings in one line (tiny model: the default model has no sit)."""
+
+import pytest
+import torch
+
+from latentrl.envs.sit import SEATED_PELVIS_ABOVE_SEAT_M, SitEnv
+from latentrl.errors import LatentRLError
+from latentrl.motion.skeleton import PELVIS
+from latentrl.optim.refine import inputs_rows
+from latentrl.optim.sit_plan import (
+    LEAVE_MARGIN_M,
+    PlanGoals,
+    SitPlanner,
+    SitPlanSettings,
+    plan_goals,
+    plan_loss,
+    plan_sits,
+    predict_texts,
+)
+from latentrl.scenes.scene import SceneBatch
+from tests.envs.test_sit import SEAT, frames, step_hooks
+
+
+def sitting_env(model, n: int = 2, settle: int = 2) -> SitEnv:
+    """``n`` envs whose approach just ended (the next ``settle`` steps are ``stand still``, then ``sit down``)."""
+    env = SitEnv(n, motion=model, seats=[SEAT], settle_steps=settle, autoreset_mode="Disabled",
+                 record_history=True, max_episode_steps=64)
+    env.reset(seed=0)
+    step_hooks(env, frames(env, 0.1, 1.5, float(env._stand_z[0]), -130.0))  # the approach ends (hand-made)
+    assert env.phase.tolist() == [1] * n
+    return env
+
+
+def zeros(env):
+    return lambda obs: torch.zeros(env.num_envs, env.single_action_space.shape[0])
+
+
+def test_the_plans_texts_are_the_settle_steps_left_then_the_sit(tiny_model):
+    env = sitting_env(tiny_model, settle=2)
+    rows = env.plan_texts(torch.arange(2), 5)
+    texts = env.text_table.texts
+    assert [texts[int(r)] for r in rows[:, 0]] == ["stand still"] * 2 + ["sit down"] * 3
+    assert rows.shape == (5, 2) and torch.equal(rows[:, 0], rows[:, 1])
+
+
+def test_the_env_executes_the_plan_it_predicted(tiny_model):
+    """Stepping the env with the planned noises gives the predicted frames (settle texts, then the sit's)."""
+    env = sitting_env(tiny_model)
+    settings = SitPlanSettings(steps=2, samples=3, primitives=4, hold=8)
+    idx = torch.arange(2)
+    z = plan_sits(env, idx, settings)
+    assert z.shape == (4, 2, *tiny_model.latent_shape)
+    with torch.no_grad():
+        texts = env.text_table.embeddings[env.plan_texts(idx, 4)]
+        predicted = predict_texts(tiny_model, inputs_rows(env.step_inputs(), idx), z, texts)
+    planner = SitPlanner(env, zeros(env), settings)
+    for s in range(4):
+        env.step(planner(env.observation()))
+        assert torch.allclose(env.history_world(), predicted[:, 8 * s + 6:8 * s + 8], atol=1e-5)  # its last 2 frames
+    assert planner.planned == 2
+
+
+def test_the_best_draw_is_kept_and_the_optimizer_only_lowers_its_loss(tiny_model):
+    env = sitting_env(tiny_model, n=1)
+    idx = torch.arange(1)
+    goals, scene = plan_goals(env, idx), env.scene.batch
+    texts = env.text_table.embeddings[env.plan_texts(idx, 3)]
+
+    def loss_of(z, settings):
+        with torch.no_grad():
+            joints = predict_texts(tiny_model, inputs_rows(env.step_inputs(), idx), z, texts)
+            return float(plan_loss(joints, z, goals, scene, env.floor_height, settings))
+
+    drawn = SitPlanSettings(steps=0, samples=6, primitives=3, hold=8)
+    best = plan_sits(env, idx, drawn)
+    g = torch.Generator().manual_seed(0)  # the planner's own draws (seed 0, first call)
+    draws = torch.randn(6, 3, 1, *tiny_model.latent_shape, generator=g).clamp(-env.action_bound, env.action_bound)
+    each = [loss_of(d, drawn) for d in draws]
+    assert loss_of(best, drawn) == pytest.approx(min(each), rel=1e-5)
+    tuned = SitPlanSettings(steps=6, samples=6, primitives=3, hold=8)
+    assert loss_of(plan_sits(env, idx, tuned), tuned) <= min(each) + 1e-6
+
+
+def test_outside_the_planned_phases_the_policy_acts_and_a_plan_is_dropped(tiny_model):
+    env = SitEnv(2, motion=tiny_model, seats=[SEAT], autoreset_mode="Disabled", record_history=True)
+    obs, _ = env.reset(seed=0)
+    action = torch.full((2, env.single_action_space.shape[0]), 0.3)
+    planner = SitPlanner(env, lambda o: action, SitPlanSettings(steps=1, samples=2, primitives=3, hold=4,
+                                                                  getup_primitives=0))
+    assert torch.equal(planner(obs), action) and planner.planned == 0  # the approach: the policy's
+    env._phase[1] = 1  # env 1 begins its sit: planned, env 0 still the policy's
+    out = planner(obs)
+    assert planner.planned == 1 and torch.equal(out[0], action[0]) and not torch.equal(out[1], action[1])
+    assert int(planner.cursor[1]) == 1 and int(planner.length[1]) == 3
+    env._phase[1] = 2  # it sat: the rest of its plan is dropped, the policy stands it up (get-up not planned)
+    assert torch.equal(planner(obs), action) and int(planner.length[1]) == 0
+    env._phase[1] = 1
+    planner(obs)
+    assert planner.planned == 2  # sitting again: a new plan
+
+
+def test_the_get_up_is_planned_in_plans_of_its_own_length_one_per_phase(tiny_model):
+    env = SitEnv(1, motion=tiny_model, seats=[SEAT], autoreset_mode="Disabled", record_history=True)
+    obs, _ = env.reset(seed=0)
+    planner = SitPlanner(env, zeros(env), SitPlanSettings(steps=0, samples=2, primitives=4, hold=4,
+                                                          getup_primitives=2))
+    texts = env.text_table.texts
+    env._phase[0] = 2  # standing up
+    assert [texts[int(r)] for r in env.plan_texts(torch.arange(1), 2)[:, 0]] == ["stand up"] * 2
+    planner(obs)
+    assert planner.planned == 1 and int(planner.length[0]) == 2 and int(planner.phase[0]) == 2
+    env._phase[0] = 3  # stood: the walk away gets a new plan at once
+    planner(obs)
+    assert planner.planned == 2 and int(planner.phase[0]) == 3 and int(planner.cursor[0]) == 1
+    assert [texts[int(r)] for r in env.plan_texts(torch.arange(1), 2)[:, 0]] == ["walk"] * 2
+
+
+def test_a_plan_that_ran_out_is_made_again_while_the_env_still_sits(tiny_model):
+    env = sitting_env(tiny_model, n=1, settle=0)
+    planner = SitPlanner(env, zeros(env), SitPlanSettings(steps=0, samples=2, primitives=2, hold=4))
+    for _ in range(3):
+        planner(env.observation())  # the env is not stepped: it stays in its sit phase
+    assert planner.planned == 2 and int(planner.cursor[0]) == 1
+
+
+def test_a_non_finite_action_goes_through_for_the_env_to_refuse(tiny_model):
+    env = sitting_env(tiny_model, n=1)
+    bad = torch.full((1, env.single_action_space.shape[0]), float("nan"))
+    planner = SitPlanner(env, lambda o: bad, SitPlanSettings(steps=1, samples=1, primitives=2, hold=4))
+    assert torch.isnan(planner(env.observation())).all() and planner.planned == 0
+
+
+def test_the_loss_is_zero_at_each_goal_and_pulls_only_beyond_its_slack():
+    """Known answers with the regularizers off. Sit: the pelvis at its seated point, 0.05 m inside the slack, 0.1 m
+    beyond it (the pseudo-Huber distance of 0.1 m) or 0.1 m too high. Stand: at or above the upright height, or
+    0.1 m under it. Leave: upright and far enough, or 0.1 m too near the seat."""
+    seat = torch.tensor([[0.0, 2.0, 0.45 + SEATED_PELVIS_ABOVE_SEAT_M]])
+    settings = SitPlanSettings(hold=4, collision=0.0, floor=0.0, skate=0.0, prior=0.0, slack=0.1)
+    noise = torch.zeros(1, 1, 1, 4)
+    scene = SceneBatch.empty(1, boxes=1)
+    leave = 0.6 + LEAVE_MARGIN_M
+
+    def loss(phase, pelvis, early=None):
+        j = torch.zeros(1, 16, 22, 3)
+        j[:, :, PELVIS] = torch.tensor(pelvis)
+        if early is not None:  # the first frames, before the goal's own frames
+            j[:, :4, PELVIS] = torch.tensor(early)
+        goals = PlanGoals(torch.tensor([phase]), seat, torch.tensor([0.8]), torch.tensor([leave]))
+        return float(plan_loss(j, noise, goals, scene, 0.0, settings))
+
+    huber = (0.1**2 + 0.01**2) ** 0.5 - 0.01
+    z = float(seat[0, 2])
+    assert loss(1, [0.0, 2.0, z]) == 0.0 and loss(1, [0.05, 2.0, z]) == 0.0
+    assert loss(1, [0.2, 2.0, z]) == pytest.approx(huber, rel=1e-5)
+    assert loss(1, [0.0, 2.0, z + 0.1]) == pytest.approx(huber, rel=1e-5)
+    assert loss(1, [0.0, 2.0, z], early=[0.0, 2.0, 1.5]) == 0.0  # off only before the held frames: not counted
+    assert loss(2, [0.0, 2.2, 0.8]) == 0.0 and loss(2, [0.0, 2.2, 0.9]) == 0.0
+    assert loss(2, [0.0, 2.2, 0.7]) == pytest.approx(huber, rel=1e-5)
+    assert loss(3, [0.0, 2.0 + leave, 0.85]) == 0.0
+    assert loss(3, [0.0, 2.0 + leave - 0.1, 0.85]) == pytest.approx(huber, rel=1e-4)
+    assert loss(3, [0.0, 2.0 + leave - 0.1, 0.85], early=[0.0, 2.0, 0.4]) == pytest.approx(huber, rel=1e-4)
+
+
+def test_the_settings_refuse_values_out_of_range_in_one_line(tiny_model):
+    for field, value, match in (("steps", -1, "sit plan steps: expected 0-1000"),
+                                ("samples", 2000, "sit plan samples: expected 0-1024"),
+                                ("hold", 100, "sit plan hold: expected 1-72 frames"),
+                                ("getup_primitives", 40, "sit plan getup primitives: expected 0-32"),
+                                ("slack", 2.0, r"sit plan slack: expected metres in \[0, 1\]"),
+                                ("lr", 0.0, r"sit plan lr: expected a learning rate in \(0, 10\]"),
+                                ("floor", -1.0, r"sit plan floor: expected a weight in \[0, 1000\]")):
+        with pytest.raises(LatentRLError, match=match):
+            SitPlanSettings(**{field: value}).check()
+    from latentrl.envs.reach import ReachLocationEnv
+
+    env = ReachLocationEnv(1, motion=tiny_model)
+    with pytest.raises(LatentRLError, match="has no sit phase"):
+        SitPlanner(env, zeros(env), SitPlanSettings())
