@@ -282,6 +282,15 @@ class SitEnv(LatentMotionVectorEnv):
         own = self._phase_text[self._phase[idx]][None, :].expand(primitives, -1)
         return torch.where(k < self._settle[idx][None, :], self._settle_text, own)
 
+    @property
+    def got_up(self) -> torch.Tensor:
+        """(N,) bool: the last step ended the env's episode with the get-up success.
+
+        Without autoreset an env stays there until reset.
+        """
+        left = self._events.get("left")
+        return left if left is not None else torch.zeros_like(self._phase, dtype=torch.bool)
+
     def upright_height(self) -> torch.Tensor:
         """(N,) the world z the pelvis must reach to count as standing (``stand_fraction`` of its start height)."""
         return self.floor_height + self.cfg.stand_fraction * self._stand_z

@@ -249,6 +249,7 @@ class SitPlanner:
         self.cursor = torch.zeros(n, dtype=torch.long, device=env.device)
         self.length = torch.zeros(n, dtype=torch.long, device=env.device)  # cursor >= length: no plan left
         self.phase = torch.zeros(n, dtype=torch.long, device=env.device)  # the phase each plan was made in
+        self.ended = torch.zeros(n, dtype=torch.bool, device=env.device)  # got up, not reset since: nothing to plan
         self.calls = 0
         self.planned = 0
         """Plans made so far."""
@@ -261,7 +262,8 @@ class SitPlanner:
         n = given.shape[0]
         phase = env.phase.to(env.device)
         planned = (phase == 1) | ((phase >= 2) & (settings.getup_primitives > 0))
-        active = planned & torch.isfinite(given).all(dim=1)  # a NaN action goes through: the env's own check sees it
+        self.ended = (self.ended | env.got_up.to(env.device)) & (phase != 0)  # an evaluation steps ended envs on
+        active = planned & ~self.ended & torch.isfinite(given).all(dim=1)  # a NaN action: the env's own check
         self.length = torch.where(active & (phase == self.phase), self.length, torch.zeros_like(self.length))
         for sitting, length in ((True, settings.primitives), (False, settings.getup_primitives)):
             need = active & (self.cursor >= self.length) & ((phase == 1) == sitting)

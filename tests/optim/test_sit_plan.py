@@ -117,6 +117,24 @@ def test_the_get_up_is_planned_in_plans_of_its_own_length_one_per_phase(tiny_mod
     assert [texts[int(r)] for r in env.plan_texts(torch.arange(1), 2)[:, 0]] == ["walk"] * 2
 
 
+def test_an_env_that_got_up_is_left_to_the_policy_until_it_is_reset(tiny_model):
+    """An evaluation without autoreset steps an ended env on: its walk away is not planned again."""
+    env = SitEnv(1, motion=tiny_model, seats=[SEAT], autoreset_mode="Disabled", record_history=True)
+    obs, _ = env.reset(seed=0)
+    action = torch.full((1, env.single_action_space.shape[0]), 0.3)
+    planner = SitPlanner(env, lambda o: action, SitPlanSettings(steps=0, samples=2, primitives=3, hold=4))
+    env._phase[0] = 3
+    env._events = {"left": torch.tensor([True])}  # the step that just ended: the get-up success
+    assert torch.equal(planner(obs), action) and planner.planned == 0
+    env._events = {"left": torch.tensor([False])}  # the steps after it
+    assert torch.equal(planner(obs), action) and planner.planned == 0
+    env.reset(seed=1)
+    planner(obs)  # the approach of the next episode: the policy's, and the mark is gone
+    env._phase[0] = 3
+    planner(obs)
+    assert planner.planned == 1
+
+
 def test_a_plan_that_ran_out_is_made_again_while_the_env_still_sits(tiny_model):
     env = sitting_env(tiny_model, n=1, settle=0)
     planner = SitPlanner(env, zeros(env), SitPlanSettings(steps=0, samples=2, primitives=2, hold=4))
