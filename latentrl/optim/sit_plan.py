@@ -64,18 +64,13 @@ class SitPlanSettings:
     prior: float = 0.1
     """Weight of the noise-shell penalty (the ``prior`` reward term), per primitive."""
     seed: int = 0
-    """Seed of the drawn plans (each call draws from its own generator, so a batch never changes a plan)."""
+    """Seed of the drawn plans (each planning call seeds its own generator from it and the number of calls before)."""
 
     @classmethod
     def of(cls, steps: int, samples: int | None = None, getup: int | None = None) -> SitPlanSettings:
         """The settings of these, None taking its default (flags, a policy's stored ones)."""
         chosen = {"samples": samples, "getup_primitives": getup}
         return cls(steps=steps, **{k: v for k, v in chosen.items() if v is not None})
-
-    @property
-    def on(self) -> bool:
-        """Whether the sit is planned at all."""
-        return self.steps > 0 or self.samples > 0
 
     def check(self) -> None:
         """One-line :class:`LatentRLError` for a value out of range."""
