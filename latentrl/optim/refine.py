@@ -182,11 +182,16 @@ def landing_loss(joints: torch.Tensor, steps: Footsteps, floor: float) -> torch.
     return loss
 
 
-def predict(model, inputs: dict, noise: torch.Tensor) -> torch.Tensor:
-    """(N, S x 8, 22, 3) world joints of the next S primitives of noises (S, N, 1, D), placed as the env will."""
+def predict(model, inputs: dict, noise: torch.Tensor, texts: torch.Tensor | None = None) -> torch.Tensor:
+    """(N, S x 8, 22, 3) world joints of the next S primitives of noises (S, N, 1, D), placed as the env will.
+
+    ``texts``: (S, N, E) a text embedding per primitive (a planner of text changes); None: the inputs' own text.
+    """
     state, frames = inputs["state"], []
     kwargs = {k: v for k, v in inputs.items() if k != "state"}
-    for z in noise:
+    for s, z in enumerate(noise):
+        if texts is not None:
+            kwargs["text_embedding"] = texts[s]
         out = model.differentiable_step(state, noise=z, post_process=True, **kwargs)
         frames.append(out.joints_world)
         state = out.state

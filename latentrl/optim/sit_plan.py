@@ -31,7 +31,7 @@ from latentrl.evaluation.metrics import foot_floor_distance_cm, foot_skate_cm_s
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
 from latentrl.optim.losses import pseudo_huber
-from latentrl.optim.refine import inputs_rows, scene_rows
+from latentrl.optim.refine import inputs_rows, predict, scene_rows
 from latentrl.rewards.terms import noise_prior
 from latentrl.scenes.contact import collision_cost
 
@@ -161,17 +161,6 @@ def plan_loss(joints: torch.Tensor, noise: torch.Tensor, goals: PlanGoals, scene
     return loss
 
 
-def predict_texts(model, inputs: dict, noise: torch.Tensor, embeddings: torch.Tensor) -> torch.Tensor:
-    """(B, S x 8, 22, 3) world joints of noises (S, B, 1, D), primitive s with text embeddings ``embeddings[s]``."""
-    state, frames = inputs["state"], []
-    kwargs = {k: v for k, v in inputs.items() if k not in ("state", "text_embedding")}
-    for z, emb in zip(noise, embeddings):
-        out = model.differentiable_step(state, text_embedding=emb, noise=z, post_process=True, **kwargs)
-        frames.append(out.joints_world)
-        state = out.state
-    return torch.cat(frames, dim=1)
-
-
 def plan_sits(env, idx: torch.Tensor, settings: SitPlanSettings, calls: int = 0, length: int | None = None
               ) -> torch.Tensor:
     """(S, M, 1, D) the planned noises of envs ``idx`` (M,) from their current state, toward their phases' goals.
@@ -197,7 +186,7 @@ def plan_sits(env, idx: torch.Tensor, settings: SitPlanSettings, calls: int = 0,
         rows = torch.arange(m, device=env.device).repeat(settings.samples)
         z = draws.transpose(0, 1).reshape(s, settings.samples * m, *shape[2:])  # draw k of env j: column k*m + j
         with torch.no_grad():
-            joints = predict_texts(model, inputs_rows(inputs, rows), z, texts[:, rows])
+            joints = predict(model, inputs_rows(inputs, rows), z, texts[:, rows])
             losses = plan_loss(joints, z, goals.rows(rows), scene_rows(scene, rows), floor, settings)
         pick = losses.reshape(settings.samples, m).argmin(dim=0)
         best = draws[pick, :, torch.arange(m, device=env.device)].transpose(0, 1).contiguous()  # (S, M, 1, D)
@@ -208,7 +197,7 @@ def plan_sits(env, idx: torch.Tensor, settings: SitPlanSettings, calls: int = 0,
     kept, kept_loss = best.clone(), torch.full((m,), float("inf"), device=env.device)
     for step in range(settings.steps + 1):
         with torch.enable_grad():
-            loss = plan_loss(predict_texts(model, inputs, z, texts), z, goals, scene, floor, settings)
+            loss = plan_loss(predict(model, inputs, z, texts), z, goals, scene, floor, settings)
         with torch.no_grad():  # keep each env's best plan (Adam may overshoot)
             better = loss.detach() < kept_loss
             kept = torch.where(better[None, :, None, None], z.detach(), kept)

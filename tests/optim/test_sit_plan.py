@@ -8,7 +8,7 @@ import torch
 from latentrl.envs.sit import SEATED_PELVIS_ABOVE_SEAT_M, SitEnv
 from latentrl.errors import LatentRLError
 from latentrl.motion.skeleton import PELVIS
-from latentrl.optim.refine import inputs_rows
+from latentrl.optim.refine import inputs_rows, predict
 from latentrl.optim.sit_plan import (
     LEAVE_MARGIN_M,
     PlanGoals,
@@ -17,7 +17,6 @@ from latentrl.optim.sit_plan import (
     plan_goals,
     plan_loss,
     plan_sits,
-    predict_texts,
 )
 from latentrl.scenes.scene import SceneBatch
 from tests.envs.test_sit import SEAT, frames, step_hooks
@@ -54,7 +53,7 @@ def test_the_env_executes_the_plan_it_predicted(tiny_model):
     assert z.shape == (4, 2, *tiny_model.latent_shape)
     with torch.no_grad():
         texts = env.text_table.embeddings[env.plan_texts(idx, 4)]
-        predicted = predict_texts(tiny_model, inputs_rows(env.step_inputs(), idx), z, texts)
+        predicted = predict(tiny_model, inputs_rows(env.step_inputs(), idx), z, texts)
     planner = SitPlanner(env, zeros(env), settings)
     for s in range(4):
         env.step(planner(env.observation()))
@@ -70,7 +69,7 @@ def test_the_best_draw_is_kept_and_the_optimizer_only_lowers_its_loss(tiny_model
 
     def loss_of(z, settings):
         with torch.no_grad():
-            joints = predict_texts(tiny_model, inputs_rows(env.step_inputs(), idx), z, texts)
+            joints = predict(tiny_model, inputs_rows(env.step_inputs(), idx), z, texts)
             return float(plan_loss(joints, z, goals, scene, env.floor_height, settings))
 
     drawn = SitPlanSettings(steps=0, samples=6, primitives=3, hold=8)
