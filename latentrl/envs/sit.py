@@ -297,7 +297,7 @@ class SitEnv(LatentMotionVectorEnv):
 
     def seated_height(self) -> torch.Tensor:
         """(N,) the world z of a seated pelvis: each seat's top plus :data:`SEATED_PELVIS_ABOVE_SEAT_M`."""
-        return self._seated_z()
+        return self.floor_height + self._seat[:, 2] + SEATED_PELVIS_ABOVE_SEAT_M
 
     def _facing(self) -> torch.Tensor:
         return torch.stack((torch.cos(self._seat[:, 3]), torch.sin(self._seat[:, 3])), dim=-1)
@@ -316,13 +316,10 @@ class SitEnv(LatentMotionVectorEnv):
         xy = self._seat[:, :2] + self._facing() * distance
         return torch.cat((xy, torch.full_like(xy[:, :1], self.floor_height)), dim=-1)
 
-    def _seated_z(self) -> torch.Tensor:
-        return self.floor_height + self._seat[:, 2] + SEATED_PELVIS_ABOVE_SEAT_M
-
     def _pelvis_target(self) -> torch.Tensor:
         """(N,) the pelvis z the phase asks for: seated in phase 1, standing in phase 2, NaN otherwise."""
         nan = torch.full_like(self._stand_z, float("nan"))
-        target = torch.where(self._phase == 1, self._seated_z(), nan)
+        target = torch.where(self._phase == 1, self.seated_height(), nan)
         return torch.where(self._phase == 2, self.floor_height + self._stand_z, target)
 
     # ------------------------------------------------------------------ task hooks
@@ -367,7 +364,7 @@ class SitEnv(LatentMotionVectorEnv):
         from_seat = torch.linalg.vector_norm(pelvis[..., :2] - self._seat[:, None, :2], dim=-1)
         to_goal = torch.linalg.vector_norm(pelvis[..., :2] - goal[:, None, :2], dim=-1)
         height = pelvis[..., 2] - self.floor_height
-        seated = (from_seat < cfg.sit_radius) & ((pelvis[..., 2] - self._seated_z()[:, None]).abs()
+        seated = (from_seat < cfg.sit_radius) & ((pelvis[..., 2] - self.seated_height()[:, None]).abs()
                                                  <= cfg.height_tolerance)
         hold, held = self._hold.clone(), torch.zeros_like(seated[:, 0])
         for t in range(seated.shape[1]):  # consecutive seated frames, carried over from the last step
