@@ -287,16 +287,17 @@ def evaluate(req: EvalRequest) -> int:
         raise ConfigError("--scene: a joystick policy takes a scene file or name, e.g. maze_a (random obstacles are "
                           "cleared around each goal, and a joystick's goal sweeps ahead of the body)")
     stored = stored_eval_choices(policy_file(req.policy))
-    for name, flag, kind in (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
-                             ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
-                             ("refine_pace", "--refine-pace", float), ("refine_land", "--refine-land", int),
-                             ("avoid", "--avoid", int),
-                             ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
-                             ("avoid_samples", "--avoid-samples", int), ("sit_plan", "--sit-plan", int),
-                             ("sit_plan_samples", "--sit-plan-samples", int),
-                             ("sit_plan_getup", "--sit-plan-getup", int), ("route", "--route", float)):
+    choices = (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
+               ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
+               ("refine_pace", "--refine-pace", float), ("refine_land", "--refine-land", int),
+               ("avoid", "--avoid", int),
+               ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
+               ("avoid_samples", "--avoid-samples", int), ("sit_plan", "--sit-plan", int),
+               ("sit_plan_samples", "--sit-plan-samples", int),
+               ("sit_plan_getup", "--sit-plan-getup", int), ("route", "--route", float))
+    for name, flag, kind in choices:
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
-        head = "sit_plan" if name.startswith("sit_plan") else name.split("_")[0]
+        head = next(h for h, _, _ in choices if name == h or name.startswith(h + "_"))  # the switch it belongs to
         if getattr(req, name) is None and name in stored and not req.physics and (name == head or getattr(req, head)):
             setattr(req, name, kind(stored[name]))
             print(f"{flag} {getattr(req, name)} (the policy's stored evaluation setting; {flag} overrides)", flush=True)
