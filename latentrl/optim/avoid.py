@@ -22,6 +22,7 @@ import torch
 
 from latentrl.errors import LatentRLError
 from latentrl.motion.skeleton import JOINT_NAMES, PELVIS
+from latentrl.optim.descent import descend
 from latentrl.optim.refine import inputs_rows, predict, scene_rows
 from latentrl.rewards.terms import noise_prior
 from latentrl.scenes.contact import collision_cost, skin_radii
@@ -147,30 +148,14 @@ def avoid(env, action: torch.Tensor, settings: AvoidSettings,
     sub_inputs = inputs_rows(inputs, idx)
     sub_scene = scene_rows(scene, idx)
     policy, tail = z[0, idx].clone(), z[1:, idx]
-    first = policy.clone().requires_grad_(True)
-    opt = torch.optim.Adam([first], lr=settings.lr)
-    best, best_loss = policy.clone(), torch.full((idx.numel(),), float("inf"), device=policy.device)
-    for step in range(settings.steps + 1):
-        with torch.enable_grad():
-            joints = predict(model, sub_inputs, torch.cat((first[None], tail), dim=0))
-            loss = settings.weight * collision_cost(joints, sub_scene, keep) \
-                + settings.anchor * (first - policy).flatten(1).square().mean(dim=1) \
-                - settings.prior * noise_prior(first.flatten(1))
-        with torch.no_grad():  # keep each env's best noise (Adam may overshoot)
-            better = loss.detach() < best_loss
-            best = torch.where(better[:, None, None], first.detach(), best)
-            best_loss = torch.where(better, loss.detach(), best_loss)
-        if step == settings.steps:
-            break
-        opt.zero_grad(set_to_none=True)
-        loss.sum().backward()
-        with torch.no_grad():  # DART's unit gradient per env
-            first.grad /= first.grad.flatten(1).norm(dim=1).clamp(min=1e-12)[:, None, None]
-            for group in opt.param_groups:
-                group["lr"] = settings.lr * (1.0 - step / settings.steps)
-        opt.step()
-        with torch.no_grad():
-            first.clamp_(-bound, bound)
+
+    def loss_of(first: torch.Tensor) -> torch.Tensor:
+        joints = predict(model, sub_inputs, torch.cat((first[None], tail), dim=0))
+        return settings.weight * collision_cost(joints, sub_scene, keep) \
+            + settings.anchor * (first - policy).flatten(1).square().mean(dim=1) \
+            - settings.prior * noise_prior(first.flatten(1))
+
+    best = descend(policy, loss_of, settings.steps, settings.lr, bound)[0]
     out[idx] = best
     return out.reshape(n, -1)
 

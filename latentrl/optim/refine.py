@@ -28,6 +28,7 @@ from latentrl.errors import LatentRLError
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.rollout import RolloutState
 from latentrl.motion.skeleton import FOOT_JOINTS, FPS
+from latentrl.optim.descent import descend
 from latentrl.optim.losses import pseudo_huber, regularizers, target_squared
 from latentrl.optim.problems import Targets
 from latentrl.rewards.terms import noise_prior
@@ -241,37 +242,21 @@ def refine(env, action: torch.Tensor, settings: RefineSettings) -> torch.Tensor:
         trained = torch.tensor([JOINTS[j] for j in settings.policy_joints], device=given.device)
         own = (env.current_goal()["joint"][:, None] == trained).any(dim=1)
         start = torch.where(own[:, None, None], given, torch.zeros_like(given))
-    z = torch.zeros(settings.horizon, *start.shape, device=start.device)
-    z[0] = start
-    z.requires_grad_(True)
-    opt = torch.optim.Adam([z], lr=settings.lr)
-    best, best_loss = start.clone(), torch.full((n,), float("inf"), device=start.device)
-    for step in range(settings.steps + 1):
-        with torch.enable_grad():
-            joints = predict(model, inputs, z)
-            # the weighted sum of the goals' distances (constraint_loss's mean divides by an idle env's 0 weights)
-            loss = (pseudo_huber(target_squared(joints, targets)) * targets.weights).sum(dim=1) \
-                + landing_loss(joints, steps, env.floor_height) \
-                - settings.prior * noise_prior(z.flatten(2)).mean(dim=0)
-            if settings.skate > 0:
-                seen = torch.cat((last, joints), dim=1)
-                loss = loss + settings.skate * regularizers(seen, z, float(FPS), ("skate",))["skate"]
-        with torch.no_grad():  # keep each env's best first noise (Adam may overshoot)
-            better = loss.detach() < best_loss
-            best = torch.where(better[:, None, None], z[0].detach(), best)
-            best_loss = torch.where(better, loss.detach(), best_loss)
-        if step == settings.steps:
-            break
-        opt.zero_grad(set_to_none=True)
-        loss.sum().backward()
-        with torch.no_grad():  # DART's unit gradient per env over its whole plan
-            norm = z.grad.flatten(2).norm(dim=(0, 2)).clamp(min=1e-12)
-            z.grad /= norm[None, :, None, None]
-            for group in opt.param_groups:
-                group["lr"] = settings.lr * (1.0 - step / settings.steps)
-        opt.step()
-        with torch.no_grad():
-            z.clamp_(-bound, bound)
+    z0 = torch.zeros(settings.horizon, *start.shape, device=start.device)
+    z0[0] = start
+
+    def loss_of(z: torch.Tensor) -> torch.Tensor:
+        joints = predict(model, inputs, z)
+        # the weighted sum of the goals' distances (constraint_loss's mean divides by an idle env's 0 weights)
+        loss = (pseudo_huber(target_squared(joints, targets)) * targets.weights).sum(dim=1) \
+            + landing_loss(joints, steps, env.floor_height) \
+            - settings.prior * noise_prior(z.flatten(2)).mean(dim=0)
+        if settings.skate > 0:
+            seen = torch.cat((last, joints), dim=1)
+            loss = loss + settings.skate * regularizers(seen, z, float(FPS), ("skate",))["skate"]
+        return loss
+
+    best = descend(z0, loss_of, settings.steps, settings.lr, bound, env_dim=1)[0][0]  # the first primitive executes
     # nothing to refine, or a non-finite policy action (the env's own check must see it): the policy's action
     keep = ~active | ~torch.isfinite(given).flatten(1).all(dim=1)
     refined = torch.where(keep[:, None, None], given, best)

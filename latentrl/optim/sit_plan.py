@@ -30,6 +30,7 @@ from latentrl.errors import LatentRLError
 from latentrl.evaluation.metrics import foot_floor_distance_cm, foot_skate_cm_s
 from latentrl.motion.representation import FUTURE_LENGTH
 from latentrl.motion.skeleton import FPS, PELVIS
+from latentrl.optim.descent import descend
 from latentrl.optim.losses import pseudo_huber
 from latentrl.optim.refine import inputs_rows, predict, scene_rows
 from latentrl.rewards.terms import noise_prior
@@ -192,28 +193,11 @@ def plan_sits(env, idx: torch.Tensor, settings: SitPlanSettings, calls: int = 0,
         best = draws[pick, :, torch.arange(m, device=env.device)].transpose(0, 1).contiguous()  # (S, M, 1, D)
     if not settings.steps:
         return best
-    z = best.clone().requires_grad_(True)
-    opt = torch.optim.Adam([z], lr=settings.lr)
-    kept, kept_loss = best.clone(), torch.full((m,), float("inf"), device=env.device)
-    for step in range(settings.steps + 1):
-        with torch.enable_grad():
-            loss = plan_loss(predict(model, inputs, z, texts), z, goals, scene, floor, settings)
-        with torch.no_grad():  # keep each env's best plan (Adam may overshoot)
-            better = loss.detach() < kept_loss
-            kept = torch.where(better[None, :, None, None], z.detach(), kept)
-            kept_loss = torch.where(better, loss.detach(), kept_loss)
-        if step == settings.steps:
-            break
-        opt.zero_grad(set_to_none=True)
-        loss.sum().backward()
-        with torch.no_grad():  # DART's unit gradient per env over its whole plan
-            z.grad /= z.grad.flatten(2).norm(dim=(0, 2)).clamp(min=1e-12)[None, :, None, None]
-            for group in opt.param_groups:
-                group["lr"] = settings.lr * (1.0 - step / settings.steps)
-        opt.step()
-        with torch.no_grad():
-            z.clamp_(-bound, bound)
-    return kept
+
+    def loss_of(z: torch.Tensor) -> torch.Tensor:
+        return plan_loss(predict(model, inputs, z, texts), z, goals, scene, floor, settings)
+
+    return descend(best, loss_of, settings.steps, settings.lr, bound, env_dim=1)[0]
 
 
 class SitPlanner:
