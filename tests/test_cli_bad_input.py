@@ -1578,3 +1578,11 @@ def test_the_shared_json_reader_names_folders_devices_and_the_exact_size(tmp_pat
         read_json_file(tmp_path / "big.json", "scene file", 1 << 20, DataError)
     with pytest.raises(DataError, match=r"big\.json: 1,048,577 bytes is larger than the 1,000 bytes a report"):
         read_json_file(tmp_path / "big.json", "report", 1000, DataError)
+
+
+def test_a_missing_policy_is_the_only_thing_eval_says(tmp_path, monkeypatch, capsys):
+    """No suite line or stored setting before the not-found error (the suites depend on the policy)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["eval", "missing.pt"]) == 2
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == "latentrl: error: PPO checkpoint file not found: missing.pt\n"

@@ -36,7 +36,7 @@ from latentrl.envs.config import stored_env_config
 from latentrl.envs.path import load_paths
 from latentrl.envs.scene import resolve_scene
 from latentrl.envs.tasks import task_spec
-from latentrl.errors import ConfigError, DataError, LatentRLError
+from latentrl.errors import CheckpointError, ConfigError, DataError, LatentRLError
 from latentrl.evaluation.config import EvalSettings
 from latentrl.evaluation.report import compare_reports
 from latentrl.evaluation.runner import policy_fn
@@ -275,6 +275,8 @@ def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
 
 def evaluate(req: EvalRequest) -> int:
     """``latentrl eval``: run the suites of the policy's task, write the report and motions."""
+    if not policy_file(req.policy).is_file():  # before any line about suites or stored settings
+        raise CheckpointError(f"PPO checkpoint file not found: {req.policy}")
     env = stored_env(policy_file(req.policy))
     if req.motion is None:  # the model the policy was trained with: no flag to repeat
         req.motion = motion_of(env)
