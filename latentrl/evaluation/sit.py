@@ -7,6 +7,8 @@ episode:
 - ``sit_success``: 1 when the pelvis held the seated pose (within ``sit_radius`` of the seat centre and
   ``height_tolerance`` of the seated height) for ``hold_frames`` frames, else 0;
 - ``getup_success``: 1 when it then stood up and walked ``leave_distance`` from the seat, else 0;
+- ``getup_after_sit``: the same, over the episodes that sat (None without a sit): CLoSD's get-up task starts
+  seated, so its get-up rate compares with this one;
 - ``sit_time_s``: seconds from the start to the sit success (None without one);
 - ``scene_penetration_max_cm``: the deepest joint inside its skin radius of the seat (a seated pelvis sits
   0.09 m above the seat top, 1 cm inside its 0.10 m skin);
@@ -32,8 +34,8 @@ from latentrl.evaluation.task_eval import TaskEpisode, TaskResult, episode_clip,
 from latentrl.motion.skeleton import FPS
 from latentrl.scenes.contact import scene_metrics
 
-UNITS = {"sit_success": "share", "getup_success": "share", "sit_time_s": "s", "scene_penetration_max_cm": "cm",
-         "skate_cm_s": "cm/s", "floor_cm": "cm"}
+UNITS = {"sit_success": "share", "getup_success": "share", "getup_after_sit": "share", "sit_time_s": "s",
+         "scene_penetration_max_cm": "cm", "skate_cm_s": "cm/s", "floor_cm": "cm"}
 """Metric -> unit, in report order."""
 
 DEFINITIONS = """\
@@ -41,6 +43,8 @@ DEFINITIONS = """\
   height (seat top + 0.09 m) for hold_frames frames in a row.
 - getup_success: after sitting, the pelvis back at stand_fraction of its standing height and leave_distance (xy)
   from the seat centre (the episode ends there).
+- getup_after_sit: getup_success over the episodes that sat (CLoSD's get-up task starts seated: its rate compares
+  with this one).
 - sit_time_s: seconds from the start to the sit success; scene_penetration_max_cm: the deepest joint inside its
   skin radius of the seat; skate_cm_s, floor_cm: DART's metrics on the terrain.
 - Kinematic: no physics pushes the body out of the seat (CLoSD's numbers are in physics)."""
@@ -95,7 +99,8 @@ def run_seat(act: Callable, motion, seat: SeatSpec, settings: EvalSettings, *, s
         joints = torch.as_tensor(clip.joints)
         quality = M.episode_metrics(joints, FPS, env.floor_height, env.scene.row(i))
         sat = int(sat_step[i]) > 0
-        metrics = {"sit_success": float(sat), "getup_success": float(bool(outcome["complete"][i])),
+        got_up = float(bool(outcome["complete"][i]))
+        metrics = {"sit_success": float(sat), "getup_success": got_up, "getup_after_sit": got_up if sat else None,
                    "sit_time_s": int(sat_step[i]) * 8 / FPS if sat else None,
                    "scene_penetration_max_cm": scene_metrics(joints, env.scene.row(i))["scene_penetration_max_cm"],
                    "skate_cm_s": quality["skate_cm_s"], "floor_cm": quality["floor_cm"]}

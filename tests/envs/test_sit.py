@@ -177,7 +177,10 @@ def test_sit_config_trains_a_few_iterations_and_evaluates(eval_files, tmp_path, 
     assert report["task"] == "sit" and report["criteria"]["hold_frames"] == 15
     entries = report["suites"][0]["entries"]
     assert len(entries) == 2 and all(len(e["episodes"]) == 2 for e in entries)
-    assert {"sit_success", "getup_success", "scene_penetration_max_cm"} <= set(report["overall"])
+    assert {"sit_success", "getup_success", "getup_after_sit", "scene_penetration_max_cm"} <= set(report["overall"])
+    for ep in (ep for e in entries for ep in e["episodes"]):  # the get-up rate of the episodes that sat
+        m = ep["metrics"]
+        assert m["getup_after_sit"] == (m["getup_success"] if m["sit_success"] else None)
     md = (out / "report.md").read_text()
     assert "sit_success (share)" in md and "getup_success (share)" in md
     motions = sorted(Path(out, "motions").glob("*.npz"))
