@@ -526,6 +526,11 @@ def _eval_commands(sub) -> None:
                     help="with --sit-plan: plan the stand-up and the walk away too, PRIMITIVES at a time (the pelvis "
                          "back at standing height, then 0.7 m from the seat centre; 0: the policy stands up and "
                          "walks away; default: the policy's stored eval.sit_plan_getup, else 3)")
+    ev.add_argument("--sit-plan-approach", type=float, default=None, metavar="M",
+                    help="with --sit-plan: plan the approach's end too, once the pelvis is within M metres of the "
+                         "sit-down spot (5 primitives of the walk text at a time, ending at the spot turned to the "
+                         "sitter's facing; 0: the policy approaches; default: the policy's stored "
+                         "eval.sit_plan_approach, else 0)")
     ev.add_argument("--route", type=float, default=None, metavar="M",
                     help="reach, path, timed and joystick policies among objects: plan the shortest route to each goal "
                          "(a joystick's: 3-6 m along its command) keeping M "

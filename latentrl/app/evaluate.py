@@ -129,6 +129,9 @@ class EvalRequest:
     sit_plan_getup: int | None = None
     """With ``sit_plan``: primitives per plan of the stand-up and the walk away (0: the policy's; None: the stored
     ``eval.sit_plan_getup``, else 3)."""
+    sit_plan_approach: float | None = None
+    """With ``sit_plan``: metres from the sit-down spot within which the approach's end is planned too (0: the
+    policy's; None: the stored ``eval.sit_plan_approach``, else 0)."""
     route: float | None = None
     """Evaluations among objects: the policy sees the next point of the shortest route keeping this many metres
     from every object in place of its goal (``latentrl.envs.guide``; 0: off; None: the policy's stored
@@ -151,6 +154,7 @@ class EvalRequest:
                    ("--avoid-horizon", self.avoid_horizon), ("--avoid-margin", self.avoid_margin),
                    ("--avoid-samples", self.avoid_samples), ("--sit-plan", self.sit_plan),
                    ("--sit-plan-samples", self.sit_plan_samples), ("--sit-plan-getup", self.sit_plan_getup),
+                   ("--sit-plan-approach", self.sit_plan_approach),
                    ("--route", self.route))
         for flag, value in options:
             if value is not None:
@@ -296,7 +300,8 @@ def evaluate(req: EvalRequest) -> int:
                ("avoid_horizon", "--avoid-horizon", int), ("avoid_margin", "--avoid-margin", float),
                ("avoid_samples", "--avoid-samples", int), ("sit_plan", "--sit-plan", int),
                ("sit_plan_samples", "--sit-plan-samples", int),
-               ("sit_plan_getup", "--sit-plan-getup", int), ("route", "--route", float))
+               ("sit_plan_getup", "--sit-plan-getup", int), ("sit_plan_approach", "--sit-plan-approach", float),
+               ("route", "--route", float))
     for name, flag, kind in choices:
         # what the policy's card used; not with --physics (its own check names the task), nor the rest when off
         head = next(h for h, _, _ in choices if name == h or name.startswith(h + "_"))  # the switch it belongs to
@@ -442,13 +447,14 @@ def _sit_planner(req: EvalRequest, task: str) -> SitPlanSettings | None:
     if task != "sit":
         raise ConfigError(f"--sit-plan: only sit policies plan their sits; the policy's task is {task}; leave out "
                           "--sit-plan")
-    settings = SitPlanSettings.of(req.sit_plan or 0, req.sit_plan_samples, req.sit_plan_getup)
+    settings = SitPlanSettings.of(req.sit_plan or 0, req.sit_plan_samples, req.sit_plan_getup, req.sit_plan_approach)
     try:
         settings.check()
     except LatentRLError as exc:  # the flags' names, not the settings'
         raise ConfigError(str(exc).replace("sit plan steps:", "--sit-plan:")
                           .replace("sit plan samples:", "--sit-plan-samples:")
-                          .replace("sit plan getup primitives:", "--sit-plan-getup:")) from None
+                          .replace("sit plan getup primitives:", "--sit-plan-getup:")
+                          .replace("sit plan approach:", "--sit-plan-approach:")) from None
     return settings
 
 

@@ -74,6 +74,9 @@ class EvalConfig:
     sit_plan_getup: int | None = None
     """With ``sit_plan``: its ``--sit-plan-getup``, primitives per plan of the stand-up and the walk away (None: 3;
     0: the policy's)."""
+    sit_plan_approach: float | None = None
+    """With ``sit_plan``: its ``--sit-plan-approach``, metres from the sit-down spot within which the approach's end
+    is planned too (None or 0: the policy's approach)."""
     route: float | None = None
     """Reach and path policies among objects: the route guide's clearance, metres, that ``latentrl eval`` applies by
     default (its ``--route``; the card's figures); None: off. The trainer's periodic evaluation does not guide."""
@@ -120,6 +123,8 @@ class EvalConfig:
                 f"must be 0-1024 drawn plans (or null: 32), got {self.sit_plan_samples}")
         require(self.sit_plan_getup is None or 0 <= self.sit_plan_getup <= 32, "sit_plan_getup",
                 f"must be 0-32 primitives (or null: 3), got {self.sit_plan_getup}")
+        require(self.sit_plan_approach is None or 0 <= self.sit_plan_approach <= 5, "sit_plan_approach",
+                f"must be metres in [0, 5] (or null: off), got {self.sit_plan_approach}")
         require(self.route is None or 0 <= self.route <= 2, "route",
                 f"must be metres in [0, 2] (or null: off), got {self.route}")
 

@@ -55,7 +55,7 @@ def stored_step_settings(config) -> StepSettings:
 
 EVAL_CHOICES = ("foot_lock_min_weight", "refine", "refine_horizon", "refine_skate", "refine_start", "refine_pace",
                 "refine_land", "avoid", "avoid_horizon", "avoid_margin", "avoid_samples", "sit_plan",
-                "sit_plan_samples", "sit_plan_getup", "route")
+                "sit_plan_samples", "sit_plan_getup", "sit_plan_approach", "route")
 """The ``eval:`` settings a checkpoint stores that ``latentrl eval`` takes as its defaults (flags override)."""
 
 

@@ -14,8 +14,11 @@ gradient per plan, learning rate decaying to 0). The plan is executed primitive 
 policy's actions; the env's prediction and the plan agree to the bit, so the body ends where the plan does. With
 ``getup_primitives`` > 0 the stand-up and the walk away are planned the same way, ``getup_primitives`` at a time:
 the pelvis at the env's standing height on the plan's last primitive, and in the walk away also ``leave_distance``
-from the seat. A plan is dropped when its env changes phase and made again when it ran out; the approach is the
-policy's.
+from the seat. With ``approach`` > 0 the approach's end is planned too: once the pelvis is within ``approach`` metres
+of the sit-down spot, ``approach_primitives`` of the walk text at a time bring it within ``slack`` of the spot with
+the body turned to the sitter's facing (a policy's own approach to a seat it must sit on with its back may loop
+metres away to turn). A plan is dropped when its env changes phase (or leaves the approach's range) and made again
+when it ran out.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from typing import NamedTuple
 
 import torch
 
+from latentrl.envs.goal import body_forward
 from latentrl.errors import LatentRLError
 from latentrl.evaluation.metrics import foot_floor_distance_cm, foot_skate_cm_s
 from latentrl.motion.representation import FUTURE_LENGTH
@@ -49,6 +53,13 @@ class SitPlanSettings:
     """The sit plan's length (8 frames each: 2.4 s, the motion bench's sit check)."""
     getup_primitives: int = 3
     """The stand-up's and the walk away's plan length (0: the policy stands up and walks away)."""
+    approach: float = 0.0
+    """Metres from the sit-down spot within which the approach's end is planned too (0: the policy approaches)."""
+    approach_primitives: int = 5
+    """The approach plan's length. Why 5: a half turn at the spot takes 4-5 primitives of ``walk``."""
+    facing: float = 0.5
+    """Weight of the approach plan's turn error (1 - the cosine between the body's forward axis and the sitter's
+    facing, on its last primitive)."""
     hold: int = 24
     """The plan's last frames in which the pelvis is asked to be at its seated point. Why more than the env's
     ``hold_frames`` (15): a plan whose loss averages over exactly 15 frames often holds 12-14 of them."""
@@ -72,9 +83,10 @@ class SitPlanSettings:
     """Seed of the drawn plans (each planning call seeds its own generator from it and the number of calls before)."""
 
     @classmethod
-    def of(cls, steps: int, samples: int | None = None, getup: int | None = None) -> SitPlanSettings:
+    def of(cls, steps: int, samples: int | None = None, getup: int | None = None,
+           approach: float | None = None) -> SitPlanSettings:
         """The settings of these, None taking its default (flags, a policy's stored ones)."""
-        chosen = {"samples": samples, "getup_primitives": getup}
+        chosen = {"samples": samples, "getup_primitives": getup, "approach": approach}
         return cls(steps=steps, **{k: v for k, v in chosen.items() if v is not None})
 
     def check(self) -> None:
@@ -87,13 +99,17 @@ class SitPlanSettings:
             raise LatentRLError(f"sit plan primitives: expected 1-32, got {self.primitives}")
         if not 0 <= self.getup_primitives <= 32:
             raise LatentRLError(f"sit plan getup primitives: expected 0-32, got {self.getup_primitives}")
+        if not 0 <= self.approach <= 5:
+            raise LatentRLError(f"sit plan approach: expected metres in [0, 5], got {self.approach}")
+        if not 1 <= self.approach_primitives <= 32:
+            raise LatentRLError(f"sit plan approach primitives: expected 1-32, got {self.approach_primitives}")
         if not 1 <= self.hold <= 8 * self.primitives:
             raise LatentRLError(f"sit plan hold: expected 1-{8 * self.primitives} frames, got {self.hold}")
         if not 0 < self.lr <= 10:
             raise LatentRLError(f"sit plan lr: expected a learning rate in (0, 10], got {self.lr}")
         if not 0 <= self.slack <= 1:
             raise LatentRLError(f"sit plan slack: expected metres in [0, 1], got {self.slack}")
-        for name in ("collision", "floor", "skate", "prior"):
+        for name in ("collision", "floor", "skate", "prior", "facing"):
             value = getattr(self, name)
             if not 0 <= value <= 1000:
                 raise LatentRLError(f"sit plan {name}: expected a weight in [0, 1000], got {value}")
@@ -108,14 +124,16 @@ LEAVE_MARGIN_M = 0.1
 class PlanGoals(NamedTuple):
     """What the plans of M envs aim at.
 
-    (M,) phase (1 sit, 2 stand, 3 leave), (M, 3) seated point, (M,) upright pelvis z and (M,) distance from the seat
-    centre to leave to.
+    (M,) phase (0 approach, 1 sit, 2 stand, 3 leave), (M, 3) seated point, (M,) upright pelvis z, (M,) distance from
+    the seat centre to leave to, (M, 3) sit-down spot and (M, 2) the sitter's facing (xy unit vector).
     """
 
     phase: torch.Tensor
     seated: torch.Tensor
     upright: torch.Tensor
     leave: torch.Tensor
+    spot: torch.Tensor
+    facing: torch.Tensor
 
     def rows(self, idx: torch.Tensor) -> PlanGoals:
         """The goals of rows ``idx``."""
@@ -130,14 +148,19 @@ def seated_points(env) -> torch.Tensor:
 def plan_goals(env, idx: torch.Tensor) -> PlanGoals:
     """The goals of envs ``idx`` in their current phases."""
     leave = torch.full((idx.numel(),), env.cfg.leave_distance + LEAVE_MARGIN_M, device=env.device)
-    return PlanGoals(env.phase[idx], seated_points(env)[idx], env.upright_height()[idx] + UPRIGHT_MARGIN_M, leave)
+    yaw = env.seat[idx, 3]
+    facing = torch.stack((torch.cos(yaw), torch.sin(yaw)), dim=-1)
+    return PlanGoals(env.phase[idx], seated_points(env)[idx], env.upright_height()[idx] + UPRIGHT_MARGIN_M, leave,
+                     env.goal_world[idx], facing)
 
 
 def goal_loss(joints: torch.Tensor, goals: PlanGoals, settings: SitPlanSettings) -> torch.Tensor:
     """(B,) the pseudo-Huber distance of each plan's pelvis from its phase's goal, averaged over its last frames.
 
-    Sit: within ``slack`` (xy) of the seated point and at its height on the last ``hold`` frames. Stand and leave:
-    at least the upright height on the last primitive, and in the walk away at least ``goals.leave`` from the seat.
+    Approach: within ``slack`` (xy) of the sit-down spot on the last primitive, plus ``facing`` times the turn
+    still to make. Sit: within ``slack`` (xy) of the seated point and at its height on the last ``hold`` frames.
+    Stand and leave: at least the upright height on the last primitive, and in the walk away at least
+    ``goals.leave`` from the seat.
     """
     seat = goals.seated[:, None]
     sit = joints[:, -settings.hold:, PELVIS]  # (B, H, 3)
@@ -148,7 +171,16 @@ def goal_loss(joints: torch.Tensor, goals: PlanGoals, settings: SitPlanSettings)
     near = (goals.leave[:, None] - (up[..., :2] - seat[..., :2]).norm(dim=-1)).clamp(min=0.0)
     up_d2 = low.square() + (goals.phase == 3).float()[:, None] * near.square()
     sitting = goals.phase == 1
-    return torch.where(sitting, pseudo_huber(sit_d2).mean(dim=1), pseudo_huber(up_d2).mean(dim=1))
+    loss = torch.where(sitting, pseudo_huber(sit_d2).mean(dim=1), pseudo_huber(up_d2).mean(dim=1))
+    approaching = goals.phase == 0
+    if bool(approaching.any()):  # the turn reads the body's axes: only for approach plans (the planner's batches)
+        last = joints[:, -FUTURE_LENGTH:]
+        off_spot = ((up[..., :2] - goals.spot[:, None, :2]).norm(dim=-1) - settings.slack).clamp(min=0.0)
+        forward = body_forward(last.reshape(-1, *last.shape[2:]))[0][:, :2].reshape(*last.shape[:2], 2)
+        turn = 1.0 - (forward * goals.facing[:, None]).sum(dim=-1)
+        approach = pseudo_huber(off_spot.square()).mean(dim=1) + settings.facing * turn.mean(dim=1)
+        loss = torch.where(approaching, approach, loss)
+    return loss
 
 
 def plan_loss(joints: torch.Tensor, noise: torch.Tensor, goals: PlanGoals, scene, floor: float,
@@ -208,7 +240,8 @@ class SitPlanner:
     """A sit env's policy function with planned sits: ``SitPlanner(env, act, settings)(obs) -> action``.
 
     Keeps each env's plan, its phase and how much of it ran; a plan is dropped when its env changes phase (or is
-    reset), and made again when it ran out with the env still in a planned phase.
+    reset, or walks out of the approach's range), and made again when it ran out with the env still in a planned
+    phase.
     """
 
     def __init__(self, env, act: Callable[[torch.Tensor], torch.Tensor], settings: SitPlanSettings):
@@ -216,7 +249,8 @@ class SitPlanner:
         if not hasattr(env, "plan_texts"):
             raise LatentRLError(f"sit plan: {type(env).__name__} has no sit phase (a sit task env plans its sits)")
         self.env, self.act, self.settings = env, act, settings
-        n, s = env.num_envs, max(settings.primitives, settings.getup_primitives)
+        n = env.num_envs
+        s = max(settings.primitives, settings.getup_primitives, settings.approach_primitives)
         self.plan = torch.zeros(s, n, *env.motion.latent_shape, device=env.device)
         self.cursor = torch.zeros(n, dtype=torch.long, device=env.device)
         self.length = torch.zeros(n, dtype=torch.long, device=env.device)  # cursor >= length: no plan left
@@ -234,11 +268,17 @@ class SitPlanner:
         n = given.shape[0]
         phase = env.phase.to(env.device)
         planned = (phase == 1) | ((phase >= 2) & (settings.getup_primitives > 0))
+        if settings.approach > 0:
+            pelvis = env.history_world()[:, -1, PELVIS, :2]
+            near = (pelvis - env.goal_world[:, :2]).norm(dim=-1) < settings.approach
+            planned |= (phase == 0) & near
         self.ended = (self.ended | env.got_up.to(env.device)) & (phase != 0)  # an evaluation steps ended envs on
         active = planned & ~self.ended & torch.isfinite(given).all(dim=1)  # a NaN action: the env's own check
         self.length = torch.where(active & (phase == self.phase), self.length, torch.zeros_like(self.length))
-        for sitting, length in ((True, settings.primitives), (False, settings.getup_primitives)):
-            need = active & (self.cursor >= self.length) & ((phase == 1) == sitting)
+        kinds = ((phase == 0, settings.approach_primitives), (phase == 1, settings.primitives),
+                 (phase >= 2, settings.getup_primitives))
+        for kind, length in kinds:
+            need = active & (self.cursor >= self.length) & kind
             if not bool(need.any()):
                 continue
             idx = need.nonzero().squeeze(1)

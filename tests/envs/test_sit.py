@@ -188,15 +188,20 @@ def test_sit_config_trains_a_few_iterations_and_evaluates(eval_files, tmp_path, 
     planned = tmp_path / "ev_planned"  # the planned sit: its settings in the report
     assert main(["eval", str(run / "final.pt"), "--paths", str(seats), "--episodes", "1", "--max-steps", "2",
                  "--device", "cpu", "--out", str(planned), "--no-progress", "--sit-plan", "1",
-                 "--sit-plan-samples", "2", "--sit-plan-getup", "1"]) == 0, capsys.readouterr().err
+                 "--sit-plan-samples", "2", "--sit-plan-getup", "1", "--sit-plan-approach", "0.5"]) == 0, \
+        capsys.readouterr().err
     plan = json.loads((planned / "report.json").read_text())["sit_plan"]
     assert plan["steps"] == 1 and plan["samples"] == 2 and plan["primitives"] == 9 and plan["getup_primitives"] == 1
+    assert plan["approach"] == 0.5 and plan["approach_primitives"] == 5
     assert main(["eval", str(run / "final.pt"), "--paths", str(seats), "--sit-plan", "4", "--sit-plan-samples",
                  "5000", "--out", str(tmp_path / "no")]) == 2
     assert "--sit-plan-samples: expected 0-1024, got 5000" in capsys.readouterr().err
     assert main(["eval", str(run / "final.pt"), "--paths", str(seats), "--sit-plan", "4", "--sit-plan-getup", "-1",
                  "--out", str(tmp_path / "no")]) == 2
     assert "--sit-plan-getup: expected 0-32, got -1" in capsys.readouterr().err
+    assert main(["eval", str(run / "final.pt"), "--paths", str(seats), "--sit-plan", "4", "--sit-plan-approach", "9",
+                 "--out", str(tmp_path / "no")]) == 2
+    assert "--sit-plan-approach: expected metres in [0, 5], got 9.0" in capsys.readouterr().err
 
 
 def test_list_shows_the_sit_task_and_its_suite(capsys):

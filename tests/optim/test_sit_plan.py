@@ -2,6 +2,8 @@
 the best draw is kept and the optimizer only improves on it; outside the sit phase the policy acts; the loss's
 known answers; bad settings in one line (tiny model: the default model has no sit)."""
 
+import math
+
 import pytest
 import torch
 
@@ -164,7 +166,7 @@ def test_the_loss_is_zero_at_each_goal_and_pulls_only_beyond_its_slack():
         j[:, :, PELVIS] = torch.tensor(pelvis)
         if early is not None:  # the first frames, before the goal's own frames
             j[:, :4, PELVIS] = torch.tensor(early)
-        goals = PlanGoals(torch.tensor([phase]), seat, torch.tensor([0.8]), torch.tensor([leave]))
+        goals = PlanGoals(torch.tensor([phase]), seat, torch.tensor([0.8]), torch.tensor([leave]), SPOT, FACING)
         return float(plan_loss(j, noise, goals, scene, 0.0, settings))
 
     huber = (0.1**2 + 0.01**2) ** 0.5 - 0.01
@@ -180,11 +182,64 @@ def test_the_loss_is_zero_at_each_goal_and_pulls_only_beyond_its_slack():
     assert loss(3, [0.0, 2.0 + leave - 0.1, 0.85], early=[0.0, 2.0, 0.4]) == pytest.approx(huber, rel=1e-4)
 
 
+SPOT = torch.tensor([[0.0, 1.6, 0.0]])
+"""The sit-down spot of the loss tests: 0.4 m in front of a seat at (0, 2) whose sitter faces -y."""
+FACING = torch.tensor([[0.0, -1.0]])
+
+
+def test_the_approach_loss_is_zero_at_the_spot_turned_to_the_facing_and_counts_the_turn_left():
+    """Known answers: at the spot facing -y 0; 0.1 m beyond the slack the pseudo-Huber distance; a quarter turn
+    off costs ``facing`` x 1, a half turn ``facing`` x 2 (1 - cos)."""
+    settings = SitPlanSettings(hold=4, collision=0.0, floor=0.0, skate=0.0, prior=0.0, slack=0.1, facing=0.5)
+    goals = PlanGoals(torch.tensor([0]), torch.zeros(1, 3), torch.tensor([0.8]), torch.tensor([0.7]), SPOT, FACING)
+    noise, scene = torch.zeros(1, 1, 1, 4), SceneBatch.empty(1, boxes=1)
+
+    def loss(x, y, facing_deg):
+        a = math.radians(facing_deg)
+        j = torch.zeros(1, 16, 22, 3)
+        j[..., 0], j[..., 1], j[..., 2] = x, y, 0.9
+        right = torch.tensor([math.sin(a), -math.cos(a)]) * 0.1
+        j[..., 2, :2] += right  # right hip; the left one mirrored
+        j[..., 1, :2] -= right
+        return float(plan_loss(j, noise, goals, scene, 0.0, settings))
+
+    huber = (0.1**2 + 0.01**2) ** 0.5 - 0.01
+    assert loss(0.0, 1.6, -90.0) == pytest.approx(0.0, abs=1e-6)
+    assert loss(0.05, 1.6, -90.0) == pytest.approx(0.0, abs=1e-6)
+    assert loss(0.2, 1.6, -90.0) == pytest.approx(huber, rel=1e-4)
+    assert loss(0.0, 1.6, 0.0) == pytest.approx(0.5, rel=1e-4)
+    assert loss(0.0, 1.6, 90.0) == pytest.approx(1.0, rel=1e-4)
+
+
+def test_the_approach_is_planned_only_within_its_range_and_executes_its_plan(tiny_model):
+    """Out of range the policy acts; within it a plan of ``approach_primitives`` walk steps replaces its action,
+    and an env that walks out of range drops its plan."""
+    env = SitEnv(1, motion=tiny_model, seats=[SEAT], autoreset_mode="Disabled", record_history=True)
+    obs, _ = env.reset(seed=0)
+    action = torch.full((1, env.single_action_space.shape[0]), 0.3)
+    far = float((env.history_world()[0, -1, PELVIS, :2] - env.goal_world[0, :2]).norm())
+    settings = SitPlanSettings(steps=1, samples=2, primitives=3, hold=4, approach=far - 0.1, approach_primitives=2)
+    planner = SitPlanner(env, lambda o: action, settings)
+    assert torch.equal(planner(obs), action) and planner.planned == 0  # 0.1 m out of range
+    planner.settings = SitPlanSettings(steps=1, samples=2, primitives=3, hold=4, approach=far + 0.1,
+                                       approach_primitives=2)
+    texts = env.text_table.texts
+    assert [texts[int(r)] for r in env.plan_texts(torch.arange(1), 2)[:, 0]] == ["walk"] * 2
+    planned = planner(obs)
+    assert planner.planned == 1 and int(planner.length[0]) == 2 and int(planner.phase[0]) == 0
+    assert not torch.equal(planned, action) and torch.equal(planned[0], planner.plan[0, 0].flatten())
+    planner.settings = settings  # out of range again: the plan is dropped, the policy acts
+    assert torch.equal(planner(obs), action) and int(planner.length[0]) == 0
+
+
 def test_the_settings_refuse_values_out_of_range_in_one_line(tiny_model):
     for field, value, match in (("steps", -1, "sit plan steps: expected 0-1000"),
                                 ("samples", 2000, "sit plan samples: expected 0-1024"),
                                 ("hold", 100, "sit plan hold: expected 1-72 frames"),
                                 ("getup_primitives", 40, "sit plan getup primitives: expected 0-32"),
+                                ("approach", -0.5, r"sit plan approach: expected metres in \[0, 5\]"),
+                                ("approach_primitives", 0, "sit plan approach primitives: expected 1-32"),
+                                ("facing", -1.0, r"sit plan facing: expected a weight in \[0, 1000\]"),
                                 ("slack", 2.0, r"sit plan slack: expected metres in \[0, 1\]"),
                                 ("lr", 0.0, r"sit plan lr: expected a learning rate in \(0, 10\]"),
                                 ("floor", -1.0, r"sit plan floor: expected a weight in \[0, 1000\]")):
