@@ -71,8 +71,12 @@ class SitPlanSettings:
     """Metres from the seat centre within which the pelvis's xy costs nothing (the env's ``sit_radius`` is 0.3; a
     seat is 0.5 m wide). Why: a body that arrives at the edge of its approach disc sits down beside the seat's
     centre, and moving it all the way costs optimizer steps the sit does not need."""
-    collision: float = 0.1
-    """Weight of the seat's collision cost (a seated pelvis is 1 cm inside its skin: kept small)."""
+    collision: float = 1.0
+    """Weight of the seat's collision cost in sit and get-up plans (metres summed over joints: a seated pelvis 1 cm
+    inside its skin costs 0.01, a knee through the seat's front 0.1-0.2; at 0.1 sits from a planned approach put a
+    knee 15-23 cm into the seat)."""
+    approach_collision: float = 10.0
+    """Weight of the seat's collision cost in approach plans (no joint belongs in the seat on the way to it)."""
     floor: float = 1.0
     """Weight of the feet's floor distance (m): the feet stay on the floor in front of the seat."""
     skate: float = 1.0
@@ -109,7 +113,7 @@ class SitPlanSettings:
             raise LatentRLError(f"sit plan lr: expected a learning rate in (0, 10], got {self.lr}")
         if not 0 <= self.slack <= 1:
             raise LatentRLError(f"sit plan slack: expected metres in [0, 1], got {self.slack}")
-        for name in ("collision", "floor", "skate", "prior", "facing"):
+        for name in ("collision", "approach_collision", "floor", "skate", "prior", "facing"):
             value = getattr(self, name)
             if not 0 <= value <= 1000:
                 raise LatentRLError(f"sit plan {name}: expected a weight in [0, 1000], got {value}")
@@ -187,8 +191,9 @@ def plan_loss(joints: torch.Tensor, noise: torch.Tensor, goals: PlanGoals, scene
               settings: SitPlanSettings) -> torch.Tensor:
     """(B,) a plan's loss: joints (B, T, 22, 3), noise (S, B, 1, D), the envs' goals and seats."""
     loss = goal_loss(joints, goals, settings)
-    if settings.collision:
-        loss = loss + settings.collision * collision_cost(joints, scene)
+    if settings.collision or settings.approach_collision:
+        weight = torch.where(goals.phase == 0, settings.approach_collision, settings.collision)
+        loss = loss + weight * collision_cost(joints, scene)
     if settings.floor:
         loss = loss + settings.floor * foot_floor_distance_cm(joints, floor) / 100.0
     if settings.skate:

@@ -211,6 +211,31 @@ def test_the_approach_loss_is_zero_at_the_spot_turned_to_the_facing_and_counts_t
     assert loss(0.0, 1.6, 90.0) == pytest.approx(1.0, rel=1e-4)
 
 
+def test_the_seats_collision_weighs_approach_collision_in_approach_plans_and_collision_in_the_others():
+    """The same joint 0.1 m inside a seat costs ``approach_collision`` / ``collision`` times its depth."""
+    from latentrl.scenes.contact import collision_cost
+    from latentrl.scenes.scene import Box, Scene
+
+    settings = SitPlanSettings(hold=4, floor=0.0, skate=0.0, prior=0.0, collision=1.0, approach_collision=10.0)
+    scene = SceneBatch.from_scenes([Scene([Box(center=(0.0, 2.0), size=(0.5, 0.5, 0.45))])])
+    j = torch.zeros(1, 16, 22, 3)
+    j[..., 1] = 2.0  # every joint over the seat centre, 0.2 m above the floor: inside it
+    j[..., 2] = 0.2
+    j[..., 2, 0] += 0.1  # hips apart: a body axis for the approach's turn term
+    j[..., 1, 0] -= 0.1
+    cost = float(collision_cost(j, scene))
+    noise = torch.zeros(1, 1, 1, 4)
+
+    def loss(phase, **weights):
+        goals = PlanGoals(torch.tensor([phase]), torch.tensor([[0.0, 2.0, 0.2]]), torch.tensor([0.0]),
+                          torch.tensor([0.0]), torch.tensor([[0.0, 2.0, 0.0]]), FACING)
+        return float(plan_loss(j, noise, goals, scene, 0.0, SitPlanSettings(**{**vars(settings), **weights})))
+
+    assert cost > 0.1
+    assert loss(1) - loss(1, collision=0.0) == pytest.approx(cost, rel=1e-4)
+    assert loss(0) - loss(0, approach_collision=0.0) == pytest.approx(10.0 * cost, rel=1e-4)
+
+
 def test_the_approach_is_planned_only_within_its_range_and_executes_its_plan(tiny_model):
     """Out of range the policy acts; within it a plan of ``approach_primitives`` walk steps replaces its action,
     and an env that walks out of range drops its plan."""
@@ -240,6 +265,8 @@ def test_the_settings_refuse_values_out_of_range_in_one_line(tiny_model):
                                 ("approach", -0.5, r"sit plan approach: expected metres in \[0, 5\]"),
                                 ("approach_primitives", 0, "sit plan approach primitives: expected 1-32"),
                                 ("facing", -1.0, r"sit plan facing: expected a weight in \[0, 1000\]"),
+                                ("approach_collision", 2000.0,
+                                 r"sit plan approach_collision: expected a weight in \[0, 1000\]"),
                                 ("slack", 2.0, r"sit plan slack: expected metres in \[0, 1\]"),
                                 ("lr", 0.0, r"sit plan lr: expected a learning rate in \(0, 10\]"),
                                 ("floor", -1.0, r"sit plan floor: expected a weight in \[0, 1000\]")):
