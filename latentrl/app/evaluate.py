@@ -279,9 +279,10 @@ def eval_suites(policy: str, paths: list[str] | None) -> tuple[Any, list[Path]]:
 
 def evaluate(req: EvalRequest) -> int:
     """``latentrl eval``: run the suites of the policy's task, write the report and motions."""
-    if not policy_file(req.policy).is_file():  # before any line about suites or stored settings
+    found = policy_file(req.policy)  # a file, or a shipped policy by name (reach_walk_default)
+    if not found.is_file():  # before any line about suites or stored settings
         raise CheckpointError(f"PPO checkpoint file not found: {req.policy}")
-    env = stored_env(policy_file(req.policy))
+    env = stored_env(found)
     if req.motion is None:  # the model the policy was trained with: no flag to repeat
         req.motion = motion_of(env)
     spec, files = eval_suites(req.policy, req.paths)
@@ -292,7 +293,7 @@ def evaluate(req: EvalRequest) -> int:
     if req.scene == "random_obstacles" and evaluator.suite_kind == "joystick":
         raise ConfigError("--scene: a joystick policy takes a scene file or name, e.g. maze_a (random obstacles are "
                           "cleared around each goal, and a joystick's goal sweeps ahead of the body)")
-    stored = stored_eval_choices(policy_file(req.policy))
+    stored = stored_eval_choices(found)
     choices = (("refine", "--refine", int), ("refine_horizon", "--refine-horizon", int),
                ("refine_skate", "--refine-skate", float), ("refine_start", "--refine-start", str),
                ("refine_pace", "--refine-pace", float), ("refine_land", "--refine-land", int),
@@ -324,7 +325,7 @@ def evaluate(req: EvalRequest) -> int:
     if req.paths is None:
         print(f"evaluating on {', '.join(f.stem for f in files)} (the {spec.name} suites using only the policy's "
               "prompts; --paths chooses others)", flush=True)
-    req.policy = str(policy_file(req.policy))  # a file, or a shipped policy by name (reach_walk_default)
+    req.policy = str(found)
     beside = Path.cwd() if is_packaged(req.policy) else Path(req.policy).resolve().parent
     out_dir = Path(req.out) if req.out else beside / f"eval-{Path(req.policy).stem}"
     check_writable(out_dir, "--out")

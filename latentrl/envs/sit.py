@@ -299,7 +299,8 @@ class SitEnv(LatentMotionVectorEnv):
         """(N,) the world z of a seated pelvis: each seat's top plus :data:`SEATED_PELVIS_ABOVE_SEAT_M`."""
         return self.floor_height + self._seat[:, 2] + SEATED_PELVIS_ABOVE_SEAT_M
 
-    def _facing(self) -> torch.Tensor:
+    def facing(self) -> torch.Tensor:
+        """(N, 2) the sitter's facing, an xy unit vector (the way a body seated on the seat looks)."""
         return torch.stack((torch.cos(self._seat[:, 3]), torch.sin(self._seat[:, 3])), dim=-1)
 
     def _facing_seat(self, future: torch.Tensor) -> torch.Tensor:
@@ -309,11 +310,11 @@ class SitEnv(LatentMotionVectorEnv):
             return torch.ones(future.shape[:2], dtype=torch.bool, device=future.device)
         n, f = future.shape[:2]
         forward, _ = body_forward(future.reshape(n * f, *future.shape[2:]))
-        cos = (forward[:, :2].reshape(n, f, 2) * self._facing()[:, None, :]).sum(dim=-1)
+        cos = (forward[:, :2].reshape(n, f, 2) * self.facing()[:, None, :]).sum(dim=-1)
         return cos >= math.cos(math.radians(limit))
 
     def _point_in_front(self, distance: float) -> torch.Tensor:
-        xy = self._seat[:, :2] + self._facing() * distance
+        xy = self._seat[:, :2] + self.facing() * distance
         return torch.cat((xy, torch.full_like(xy[:, :1], self.floor_height)), dim=-1)
 
     def _pelvis_target(self) -> torch.Tensor:
@@ -348,7 +349,7 @@ class SitEnv(LatentMotionVectorEnv):
 
     def _goal_observation(self, history_world: torch.Tensor) -> torch.Tensor:
         forward, pelvis = body_forward(history_world[:, -1])
-        f = self._facing()
+        f = self.facing()
         facing = torch.stack((f[:, 0] * forward[:, 0] + f[:, 1] * forward[:, 1],
                               -f[:, 0] * forward[:, 1] + f[:, 1] * forward[:, 0]), dim=-1)
         target = torch.nan_to_num(self._pelvis_target() - pelvis[:, 2], nan=0.0)

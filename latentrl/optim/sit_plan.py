@@ -152,10 +152,8 @@ def seated_points(env) -> torch.Tensor:
 def plan_goals(env, idx: torch.Tensor) -> PlanGoals:
     """The goals of envs ``idx`` in their current phases."""
     leave = torch.full((idx.numel(),), env.cfg.leave_distance + LEAVE_MARGIN_M, device=env.device)
-    yaw = env.seat[idx, 3]
-    facing = torch.stack((torch.cos(yaw), torch.sin(yaw)), dim=-1)
     return PlanGoals(env.phase[idx], seated_points(env)[idx], env.upright_height()[idx] + UPRIGHT_MARGIN_M, leave,
-                     env.goal_world[idx], facing)
+                     env.goal_world[idx], env.facing()[idx])
 
 
 def goal_loss(joints: torch.Tensor, goals: PlanGoals, settings: SitPlanSettings) -> torch.Tensor:
